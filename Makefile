@@ -1,0 +1,26 @@
+# The two set-up-and-go targets of README.md. Each creates .venv and installs what it needs when missing.
+PY ?= python3
+VENV := .venv
+BIN := $(VENV)/bin
+STAMP := $(VENV)/.installed
+
+$(STAMP): pyproject.toml
+	test -x $(BIN)/python || $(PY) -m venv $(VENV)
+	$(BIN)/pip install -q --upgrade pip
+	# CPU build of torch first: a bare torch requirement would pull a multi-GB CUDA build.
+	$(BIN)/pip install -q torch==2.13.0
+	$(BIN)/pip install -q -e ".[train,report,dev]"
+	touch $(STAMP)
+
+.PHONY: report test lint bench
+
+report: $(STAMP)
+	$(BIN)/agri report --out reports/baselines
+
+test: $(STAMP)
+	$(BIN)/ruff check .
+	$(BIN)/mypy
+	SDL_VIDEODRIVER=dummy SDL_AUDIODRIVER=dummy $(BIN)/python -m pytest -n 2 -q
+
+bench: $(STAMP)
+	$(BIN)/python benchmarks/bench_greenhouse.py

@@ -1,0 +1,497 @@
+"""GreenhouseNav-v0: waypoint navigation of a LIDAR rover between greenhouse rows (Harik 2018)."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+from gymnasium import spaces
+
+from agri_envs._config import StrictConfig, param
+from agri_envs.rover import robot as rover
+from agri_envs.rover.layout import Layout, LayoutParams, generate_layout
+from agri_envs.rover.task import RewardWeights, WaypointTask
+from agri_envs.sim2d.crowd import Crowd, CrowdSpec
+from agri_envs.sim2d.geometry import Kind
+from agri_envs.sim2d.sensors import Lidar, SonarArray, hc_sr04, tim561
+from agri_envs.sim2d.world import World2D
+
+LOCALIZATION_MODES = ("ground_truth", "odometry", "none")
+
+
+@dataclasses.dataclass(frozen=True)
+class GreenhouseNavConfig(StrictConfig):
+    """Arguments of ``agri_envs/GreenhouseNav-v0`` (each one a ``gym.make`` keyword)."""
+
+    # Scene
+    n_rows: int = param(3, "rows of plants", low=1, high=12)
+    row_length: float = param(6.0, "length of each row", unit="m", low=2.0, high=40.0)
+    corridor_width: float = param(
+        1.2, "free width between rows (and between outer rows and walls)", unit="m", low=0.8, high=3.0
+    )
+    row_width: float = param(0.4, "width of a row bed", unit="m", low=0.2, high=1.5)
+    headland: float = param(1.8, "free space between row ends and the end walls", unit="m", low=1.2, high=5.0)
+    plant_spacing: float = param(0.4, "distance between plants along a row", unit="m", low=0.15, high=2.0)
+    plant_jitter: float = param(0.03, "uniform jitter of plant positions", unit="m", low=0.0, high=0.1)
+    growth: float = param(0.0, "season: plant size and leaves reaching into corridors", low=0.0, high=1.0)
+    post_spacing: float = param(
+        3.0, "distance between structural posts along rows and walls", unit="m", low=1.0, high=20.0
+    )
+    n_trees: int = param(0, "trees placed at random plant positions (Harik Fig. 10)", low=0, high=50)
+    layout_seed: int = param(
+        -1, "seed of the scene layout; -1 draws a new layout every episode", low=-1, high=2**31 - 1
+    )
+    n_people: int = param(2, "people walking the corridors and headlands", low=0, high=20)
+    people_tease_prob: float = param(
+        0.3, "chance that a person stands in the robot's way for a while", low=0.0, high=1.0
+    )
+    # Robot
+    max_speed: float = param(0.6, "forward speed limit (reverse: half of it)", unit="m/s", low=0.1, high=2.0)
+    max_turn_rate: float = param(1.2, "angular speed limit", unit="rad/s", low=0.2, high=4.0)
+    max_accel: float = param(1.0, "linear acceleration limit", unit="m/s^2", low=0.1, high=10.0)
+    max_angular_accel: float = param(3.0, "angular acceleration limit", unit="rad/s^2", low=0.1, high=20.0)
+    control_period: float = param(1 / 15, "time between actions (the LIDAR's 15 Hz)", unit="s", low=0.01, high=0.5)
+    # Sensors
+    lidar_beams: int = param(90, "LIDAR beams in the observation (min-pooled from the full scan)", low=1, high=811)
+    full_scan: bool = param(False, "add the full-resolution 811-beam scan as observation key 'scan'")
+    lidar_noise_std: float = param(
+        0.02, "LIDAR Gaussian range noise (TiM561 statistical error)", unit="m", low=0.0, high=0.5
+    )
+    lidar_dropout: float = param(0.01, "probability that a LIDAR beam returns no echo (max range)", low=0.0, high=0.5)
+    sonar_noise_std: float = param(0.01, "sonar Gaussian range noise", unit="m", low=0.0, high=0.5)
+    # Localization
+    localization: str = param("ground_truth", "pose source for the waypoint observation", choices=LOCALIZATION_MODES)
+    odometry_noise: float = param(0.05, "relative std of wheel-odometry speed errors", low=0.0, high=0.5)
+    odometry_gyro_bias: float = param(
+        0.01, "std of the per-episode turn-rate bias of odometry", unit="rad/s", low=0.0, high=0.2
+    )
+    # Task and reward
+    waypoint_radius: float = param(
+        0.3, "d_min: a waypoint is reached within this distance", unit="m", low=0.05, high=2.0
+    )
+    terminate_on_collision: bool = param(True, "end the episode when the robot touches anything")
+    safety_margin: float = param(
+        0.15, "clearance below which the clearance penalty applies", unit="m", low=0.0, high=1.0
+    )
+    reward_progress: float = param(1.0, "weight of progress toward the waypoint (per metre)", low=0.0, high=100.0)
+    reward_waypoint: float = param(2.0, "bonus per waypoint reached", low=0.0, high=100.0)
+    reward_success: float = param(10.0, "bonus when the mission is complete", low=0.0, high=1000.0)
+    reward_collision: float = param(10.0, "penalty on collision", low=0.0, high=1000.0)
+    reward_clearance: float = param(
+        0.05, "penalty per step at zero clearance (linear in the shortfall)", low=0.0, high=100.0
+    )
+    reward_time: float = param(0.005, "penalty per step", low=0.0, high=10.0)
+    render_width: int = param(800, "width of rendered frames", unit="px", low=100, high=4000)
+
+    def validate(self) -> None:
+        """Check that corridors stay passable at this growth."""
+        free = self.corridor_width - 2 * self.layout_params().max_intrusion()
+        if free < rover.WIDTH + 0.2:
+            raise ValueError(
+                f"GreenhouseNavConfig: at growth={self.growth} the corridors keep only {free:.2f} m free; "
+                f"the {rover.WIDTH} m wide robot needs {rover.WIDTH + 0.2:.2f} m: increase corridor_width "
+                f"or row_width, or lower growth."
+            )
+
+    def layout_params(self) -> LayoutParams:
+        """The scene part of the config."""
+        return LayoutParams(
+            n_rows=self.n_rows,
+            row_length=self.row_length,
+            corridor_width=self.corridor_width,
+            row_width=self.row_width,
+            headland=self.headland,
+            plant_spacing=self.plant_spacing,
+            plant_jitter=self.plant_jitter,
+            growth=self.growth,
+            post_spacing=self.post_spacing,
+            n_trees=self.n_trees,
+        )
+
+    def reward_weights(self) -> RewardWeights:
+        """The reward part of the config."""
+        return RewardWeights(
+            progress=self.reward_progress,
+            waypoint=self.reward_waypoint,
+            success=self.reward_success,
+            collision=self.reward_collision,
+            clearance=self.reward_clearance,
+            time=self.reward_time,
+        )
+
+
+class GreenhouseNavEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
+    """Drive a LIDAR rover through a waypoint loop between greenhouse rows, among walking people.
+
+    ## Description
+
+    The robot of Harik & Korsæth (2018), a 0.6 x 0.5 m four-wheel skid-steer base driven as a unicycle
+    (eq. 1), must visit an ordered list of waypoints in a greenhouse: by default the paper's loop
+    0 -> 1 -> ... -> 7 -> 0, a serpentine through every corridor between three rows of plants. Walls,
+    structural posts, plants (which grow with ``growth`` and reach into the corridors with their leaves),
+    optional trees and walking people are obstacles. The world is a top-view pymunk space; robot motion
+    is substepped near obstacles so that it never tunnels through them.
+
+    ## Action Space
+
+    ``Box(-1, 1, (2,), float32)``: ``[u, r]``, the commanded linear and angular velocity, scaled by
+    ``max_speed`` (forward; half of it backward) and ``max_turn_rate``. The achieved velocities follow
+    within the acceleration limits. Actions outside the box are clipped; NaN or inf raises ``ValueError``.
+
+    ## Observation Space
+
+    A ``Dict`` of float32 boxes (ranges normalised by the sensor's maximum range):
+
+    | key | shape | bounds | meaning |
+    |---|---|---|---|
+    | ``lidar`` | (lidar_beams,) | [0, 1] | LIDAR ranges / 10 m, min-pooled over equal sectors of the 270 deg scan |
+    | ``sonar`` | (6,) | [0, 1] | sonar ranges / 4 m: front, left front, left rear, back, right rear, right front |
+    | ``velocity`` | (2,) | [-1, 1] | achieved ``u / max_speed`` and ``r / max_turn_rate`` |
+    | ``waypoint`` | (3,) | [0, 1] x [-1, 1]^2 | d / diagonal, sin(alpha), cos(alpha) from the estimated pose (1) |
+    | ``target`` | (2,) | [-1, 1] | current waypoint in the robot's start frame / diagonal (2) |
+    | ``scan`` | (811,) | [0, 1] | full-resolution scan / 10 m (only when ``full_scan=True``) |
+
+    (1) absent when ``localization="none"``; (2) only when ``localization="none"``. ``diagonal`` is the
+    greenhouse's inner diagonal (m).
+
+    ## Sensors
+
+    SICK TiM561 LIDAR at the lower front (270 deg, 811 beams at 0.33 deg, 0.05-10 m, 15 Hz, Gaussian
+    noise ``lidar_noise_std``, dropouts ``lidar_dropout`` returning max range); six HC-SR04 sonars (two
+    per side, one front, one back; 0.02-4 m; each reports the nearest echo inside its 15 deg cone).
+    Localization: ``ground_truth`` (the true pose), ``odometry`` (wheel odometry with relative speed
+    noise and a per-episode gyro bias: it drifts), or ``none`` (no pose at all: the policy must estimate it,
+    e.g. with Hector SLAM on the full scan).
+
+    ## Rewards
+
+    ``reward = progress + waypoint + success + collision + clearance + time`` with
+
+    | term | formula |
+    |---|---|
+    | ``reward_progress`` | ``reward_progress * (d_prev - d)``, d the true distance to the current waypoint |
+    | ``reward_waypoint`` | ``+reward_waypoint`` when a waypoint is reached |
+    | ``reward_success`` | ``+reward_success`` when the last one is reached |
+    | ``reward_collision`` | ``-reward_collision`` on contact |
+    | ``reward_clearance`` | ``-reward_clearance * max(0, safety_margin - clearance) / safety_margin`` |
+    | ``reward_time`` | ``-reward_time`` every step |
+
+    Each term is reported in ``info`` under its name.
+
+    ## Starting State
+
+    The robot stands at waypoint 0 facing waypoint 1, with a uniform jitter of +-5 cm and +-0.1 rad; people
+    start on their routes at least 3 m away. With ``layout_seed=-1`` the plant jitter, leaves and trees
+    are drawn anew from the episode seed; otherwise they come from ``layout_seed`` (the same greenhouse
+    every episode). ``reset(options={"growth": g, "n_trees": k, "layout_seed": s})`` overrides these
+    three scene arguments for one episode.
+
+    ## Episode End
+
+    Terminated when the last waypoint is reached (success) or, with ``terminate_on_collision``, when the
+    robot touches an obstacle or a person. Truncated by the ``TimeLimit`` wrapper (``max_episode_steps``,
+    2250 steps = 150 s by default).
+
+    ## Info
+
+    ``is_success``, ``collision``, ``clearance`` (m), ``min_clearance`` (m, over the episode),
+    ``waypoint_index``, ``waypoints_reached``, ``n_waypoints``, ``distance_to_waypoint`` (m),
+    ``bearing_to_waypoint`` (rad), true pose ``x``, ``y``, ``yaw``, estimated pose ``est_x``, ``est_y``,
+    ``est_yaw`` (equal to the true one under ``ground_truth``, NaN under ``none``), ``v``, ``w``,
+    ``path_length`` (m), ``episode_time`` (s) and the reward terms.
+
+    ## Arguments
+
+    Every field of :class:`GreenhouseNavConfig` (name, default, unit, range, meaning; unknown names and
+    values out of range raise ``ValueError``)::
+
+        env = gym.make("agri_envs/GreenhouseNav-v0", n_rows=4, growth=0.6, n_people=3, full_scan=True)
+
+    ## Baselines
+
+    ``harik-apf-gt``: the paper's APF controller (eqs. 12-14) on the ground-truth pose (privileged).
+
+    ## Version History
+
+    * v0: initial release.
+
+    ## References
+
+    E. H. C. Harik and A. Korsæth, "Combining Hector SLAM and Artificial Potential Field for Autonomous
+    Navigation Inside a Greenhouse", Robotics 7(2):22, 2018.
+    """
+
+    metadata = {
+        "render_modes": ["rgb_array", "human"],
+        "render_fps": 15,
+        "episode_metric_keys": (
+            "collision",
+            "path_length",
+            "min_clearance",
+            "episode_time",
+            "waypoints_reached",
+            "n_waypoints",
+        ),
+        "trace_keys": (
+            "x",
+            "y",
+            "yaw",
+            "est_x",
+            "est_y",
+            "est_yaw",
+            "distance_to_waypoint",
+            "bearing_to_waypoint",
+            "waypoint_index",
+            "clearance",
+        ),
+    }
+
+    def __init__(self, render_mode: str | None = None, **kwargs: Any) -> None:
+        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
+            raise ValueError(f"render_mode must be one of {self.metadata['render_modes']} or None, got {render_mode!r}")
+        self.config = GreenhouseNavConfig.from_kwargs(kwargs)
+        self.render_mode = render_mode
+        cfg = self.config
+        self.robot_spec = rover.rover_spec(cfg.max_speed, cfg.max_turn_rate, cfg.max_accel, cfg.max_angular_accel)
+        self.lidar = Lidar(
+            tim561(noise_std=cfg.lidar_noise_std, dropout_prob=cfg.lidar_dropout, mount=rover.LIDAR_MOUNT)
+        )
+        self.sonars = SonarArray(hc_sr04(noise_std=cfg.sonar_noise_std), rover.SONAR_MOUNTS)
+        lp = cfg.layout_params()
+        self.diagonal = math.hypot(lp.width, lp.height)
+        n = self.lidar.spec.n_beams
+        # Equal sectors of the full scan for min-pooling to `lidar_beams` values.
+        self._pool_edges = np.linspace(0, n, cfg.lidar_beams + 1).round().astype(np.int64)[:-1]
+        obs: dict[str, spaces.Space[Any]] = {
+            "lidar": spaces.Box(0.0, 1.0, (cfg.lidar_beams,), np.float32),
+            "sonar": spaces.Box(0.0, 1.0, (len(self.sonars),), np.float32),
+            "velocity": spaces.Box(-1.0, 1.0, (2,), np.float32),
+        }
+        if cfg.localization == "none":
+            obs["target"] = spaces.Box(-1.0, 1.0, (2,), np.float32)
+        else:
+            obs["waypoint"] = spaces.Box(np.array([0, -1, -1], np.float32), np.ones(3, np.float32), dtype=np.float32)
+        if cfg.full_scan:
+            obs["scan"] = spaces.Box(0.0, 1.0, (n,), np.float32)
+        self.observation_space = spaces.Dict(obs)  # type: ignore[assignment]
+        self.action_space = spaces.Box(-1.0, 1.0, (2,), np.float32)
+        self.layout: Layout | None = None
+        self.world: World2D | None = None
+        self._renderer: Any = None
+        self._renderer_layout: Layout | None = None
+        self._trail: list[tuple[float, float]] = []
+
+    # -- episode set-up --------------------------------------------------------------------------------
+    def reset(
+        self, *, seed: int | None = None, options: dict[str, Any] | None = None
+    ) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
+        """Build a new scene and mission, place robot and people (see Starting State)."""
+        super().reset(seed=seed)
+        cfg = self.config
+        overrides = dict(options or {})
+        allowed = {"growth", "n_trees", "layout_seed"}
+        if set(overrides) - allowed:
+            raise ValueError(f"reset options {sorted(set(overrides) - allowed)} unknown; allowed: {sorted(allowed)}")
+        if overrides:
+            cfg = cfg.replace(**overrides)
+        layout_rng = self.np_random if cfg.layout_seed < 0 else np.random.default_rng(cfg.layout_seed)
+        self.layout = generate_layout(cfg.layout_params(), layout_rng)
+        self.world = World2D(self.layout.geometry, n_movers=cfg.n_people)
+        start = self.layout.start_pose + self.np_random.uniform([-0.05, -0.05, -0.1], [0.05, 0.05, 0.1])
+        self.robot = self.world.add_robot(self.robot_spec, start)
+        self.crowd = Crowd(self.world, self.layout.routes, CrowdSpec(tease_prob=cfg.people_tease_prob), cfg.n_people)
+        self.crowd.reset(self.np_random, start)
+        targets = np.vstack([self.layout.waypoints[1:], self.layout.waypoints[:1]])
+        self.task = WaypointTask(targets, cfg.waypoint_radius, cfg.safety_margin, cfg.reward_weights())
+        self.task.reset(start)
+        self._start_pose = start.copy()
+        self._estimate = start.copy()
+        self._gyro_bias = float(self.np_random.normal(0.0, cfg.odometry_gyro_bias)) if cfg.odometry_gyro_bias else 0.0
+        self._steps = 0
+        self._path_length = 0.0
+        clearance = self.world.clearance(self.robot)
+        self._min_clearance = clearance
+        self._trail = [(float(start[0]), float(start[1]))]
+        outcome = self.task.evaluate(self.robot.pose, False, clearance)
+        obs = self._observe()
+        info = self._info(outcome, clearance)
+        if self.render_mode == "human":
+            self.render()
+        return obs, info
+
+    # -- stepping --------------------------------------------------------------------------------------
+    def step(self, action: np.ndarray) -> tuple[dict[str, np.ndarray], float, bool, bool, dict[str, Any]]:
+        """Apply ``[u, r]`` for one control period and return the Gymnasium 5-tuple."""
+        if self.world is None:
+            raise RuntimeError("call reset() before step()")
+        a = np.asarray(action, dtype=np.float64).reshape(-1)
+        if a.shape != (2,):
+            raise ValueError(f"action must have shape (2,), got {np.shape(action)}")
+        if not np.all(np.isfinite(a)):
+            raise ValueError(f"action contains NaN or inf: {action}")
+        u = min(1.0, max(-1.0, a[0]))
+        r = min(1.0, max(-1.0, a[1]))
+        spec = self.robot_spec
+        v_cmd = u * (spec.max_speed if u >= 0 else spec.max_reverse_speed)
+        w_cmd = r * spec.max_turn_rate
+        dt = self.config.control_period
+        robot = self.robot
+        reach = np.array([[robot.pose[0], robot.pose[1], spec.circumradius]])
+        self.crowd.plan(dt, reach, self.np_random)
+        self.world.step(dt)
+        self.crowd.sync_from_world()
+        before = robot.pose
+        collided = self.world.drive(robot, v_cmd, w_cmd, dt)
+        self._path_length += math.hypot(robot.pose[0] - before[0], robot.pose[1] - before[1])
+        self._update_estimate(dt)
+        self._steps += 1
+        clearance = self.world.clearance(robot)
+        self._min_clearance = min(self._min_clearance, clearance)
+        self._trail.append((float(robot.pose[0]), float(robot.pose[1])))
+        outcome = self.task.evaluate(robot.pose, collided, clearance)
+        terminated = bool(outcome["is_success"]) or (collided and self.config.terminate_on_collision)
+        obs = self._observe()
+        info = self._info(outcome, clearance)
+        if self.render_mode == "human":
+            self.render()
+        return obs, float(outcome["reward"]), terminated, False, info
+
+    def _update_estimate(self, dt: float) -> None:
+        cfg = self.config
+        if cfg.localization == "ground_truth":
+            self._estimate = self.robot.pose.copy()
+        elif cfg.localization == "odometry":
+            rng = self.np_random
+            v = self.robot.v * (1.0 + cfg.odometry_noise * rng.standard_normal())
+            w = self.robot.w * (1.0 + cfg.odometry_noise * rng.standard_normal()) + self._gyro_bias
+            x, y, th = self._estimate
+            th_mid = th + 0.5 * w * dt
+            self._estimate = np.array(
+                [
+                    x + v * dt * math.cos(th_mid),
+                    y + v * dt * math.sin(th_mid),
+                    math.atan2(math.sin(th + w * dt), math.cos(th + w * dt)),
+                ]
+            )
+
+    # -- observation and info ---------------------------------------------------------------------------
+    def _observe(self) -> dict[str, np.ndarray]:
+        assert self.world is not None
+        pose = self.robot.pose
+        world = self.world
+        rng = self.np_random
+        scan = self.lidar.scan(pose, world.circles, world.capsules, rng)
+        self._last_scan = scan
+        self._last_sonar = self.sonars.ranges(pose, world.circles, world.capsules, rng)
+        spec = self.robot_spec
+        obs = {
+            "lidar": (np.minimum.reduceat(scan, self._pool_edges) / self.lidar.spec.max_range).astype(np.float32),
+            "sonar": (self._last_sonar / self.sonars.spec.max_range).astype(np.float32),
+            "velocity": np.array([self.robot.v / spec.max_speed, self.robot.w / spec.max_turn_rate], np.float32),
+        }
+        if self.config.localization == "none":
+            obs["target"] = np.clip(self._in_start_frame(self.task.current) / self.diagonal, -1, 1).astype(np.float32)
+        else:
+            d = self.task.distance(self._estimate)
+            alpha = self.task.bearing(self._estimate)
+            obs["waypoint"] = np.array([min(1.0, d / self.diagonal), math.sin(alpha), math.cos(alpha)], np.float32)
+        if self.config.full_scan:
+            obs["scan"] = (scan / self.lidar.spec.max_range).astype(np.float32)
+        return obs
+
+    def _in_start_frame(self, point: np.ndarray) -> np.ndarray:
+        x0, y0, th0 = self._start_pose
+        dx, dy = point[0] - x0, point[1] - y0
+        c, s = math.cos(th0), math.sin(th0)
+        return np.array([c * dx + s * dy, -s * dx + c * dy])
+
+    def _info(self, outcome: dict[str, Any], clearance: float) -> dict[str, Any]:
+        pose = self.robot.pose
+        est = self._estimate if self.config.localization != "none" else np.full(3, np.nan)
+        info = dict(outcome)
+        info.pop("reward")
+        info.update(
+            clearance=float(clearance),
+            min_clearance=float(self._min_clearance),
+            waypoints_reached=int(self.task.index),
+            n_waypoints=len(self.task.targets),
+            x=float(pose[0]),
+            y=float(pose[1]),
+            yaw=float(pose[2]),
+            est_x=float(est[0]),
+            est_y=float(est[1]),
+            est_yaw=float(est[2]),
+            v=float(self.robot.v),
+            w=float(self.robot.w),
+            path_length=float(self._path_length),
+            episode_time=self._steps * self.config.control_period,
+        )
+        info["is_success"] = bool(info["is_success"])
+        info["collision"] = bool(info["collision"])
+        return info
+
+    # -- public helpers for baselines, reports and users -----------------------------------------------
+    def mission_in_start_frame(self) -> np.ndarray:
+        """The mission's targets (waypoint 1, 2, ..., then 0) in the robot's start frame (m).
+
+        This is what a real robot is given: waypoints picked on its own map, whose origin is where it started.
+        """
+        return np.array([self._in_start_frame(t) for t in self.task.targets])
+
+    def occupancy_grid(self, resolution: float = 0.05) -> Any:
+        """Occupancy grid of the current static scene (see :mod:`agri_envs.sim2d.gridmap`)."""
+        from agri_envs.sim2d.gridmap import rasterize
+
+        assert self.layout is not None
+        return rasterize(self.layout.geometry, resolution)
+
+    # -- rendering ---------------------------------------------------------------------------------------
+    def render(self) -> np.ndarray | None:
+        """Top-down frame with rays, sonar cones, waypoints and the path (``rgb_array``) or a window (``human``)."""
+        if self.render_mode is None:
+            gym.logger.warn("render() called with render_mode=None; pass render_mode='rgb_array' to gym.make")
+            return None
+        if self.world is None or self.layout is None:
+            raise RuntimeError("call reset() before render()")
+        from agri_envs.sim2d.render import TopDownRenderer
+
+        if self._renderer is None or self._renderer_layout is not self.layout:
+            self._renderer = TopDownRenderer(self.layout.geometry.bounds, self.config.render_width)
+            self._renderer.draw_geometry(self.layout.geometry)
+            self._renderer_layout = self.layout
+        rd = self._renderer
+        rd.begin()
+        rd.path(np.array(self._trail))
+        rd.waypoints(
+            self.layout.waypoints,
+            (self.task.index + 1) % len(self.layout.waypoints) if not self.task.done else len(self.layout.waypoints),
+        )
+        rd.rays(
+            self.lidar.pose_in_world(self.robot.pose),
+            self.lidar.spec.beam_angles,
+            self._last_scan,
+            self.lidar.spec.max_range,
+        )
+        rd.cones(self.sonars.poses_in_world(self.robot.pose), self._last_sonar, self.sonars.spec.aperture)
+        rd.circles(self.world.mover_circles[: self.crowd.n], Kind.PERSON)
+        rd.robot(self.robot.pose, self.robot_spec.length, self.robot_spec.width)
+        rd.text(
+            [
+                f"t = {self._steps * self.config.control_period:5.1f} s   waypoint {self.task.index}/"
+                f"{len(self.task.targets)}   clearance {self.world.clearance(self.robot):.2f} m"
+            ]
+        )
+        frame = rd.finish()
+        if self.render_mode == "human":
+            rd.show(self.metadata["render_fps"])
+            return None
+        return frame
+
+    def close(self) -> None:
+        """Release the renderer (idempotent)."""
+        if self._renderer is not None:
+            self._renderer.close()
+            self._renderer = None

@@ -1,0 +1,184 @@
+"""Greenhouse layout generator: walls, structural posts, rows of plants that grow, optional trees.
+
+Coordinates: x runs along the rows, y across them; the origin is the inner lower-left corner of the walls.
+Rows are separated by corridors; the first and the last corridor run between a row and a wall. Each
+row is a line of plants (circles) with jittered spacing; structural posts stand in the row lines and
+along the walls every ``post_spacing`` metres (they give a LIDAR-only localizer features along
+otherwise repetitive rows). ``growth`` in [0, 1] enlarges the plants and grows leaves (thin capsules)
+that reach into the corridors (Harik 2018, sec. 3.3: plant development through the season).
+
+The default mission is the paper's loop 0 -> 1 -> ... -> 7 -> 0: a serpentine through every corridor,
+with waypoints in the headlands past the row ends, returning to waypoint 0.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+
+from agri_envs.sim2d.crowd import RouteGraph
+from agri_envs.sim2d.geometry import Geometry, GeometryBuilder, Kind
+
+WALL_THICKNESS = 0.1
+# Plant and leaf sizes across the season (growth 0 -> 1), metres.
+PLANT_RADIUS = (0.06, 0.14)
+LEAF_REACH = 0.18
+LEAF_RADIUS = 0.015
+TREE_RADIUS = (0.18, 0.28)
+
+
+@dataclasses.dataclass(frozen=True)
+class LayoutParams:
+    """Scene parameters of a generated greenhouse (see the env's Arguments table for ranges)."""
+
+    n_rows: int = 3
+    row_length: float = 6.0
+    corridor_width: float = 1.2
+    row_width: float = 0.4
+    headland: float = 1.8
+    plant_spacing: float = 0.4
+    plant_jitter: float = 0.03
+    growth: float = 0.0
+    post_spacing: float = 3.0
+    post_radius: float = 0.05
+    n_trees: int = 0
+    waypoint_offset: float = 0.8
+
+    def max_intrusion(self) -> float:
+        """How far plants or leaves can reach past the edge of a row bed at this growth (m)."""
+        g = self.growth
+        plant = PLANT_RADIUS[0] + g * (PLANT_RADIUS[1] - PLANT_RADIUS[0])
+        reach = max(plant + g * LEAF_REACH + LEAF_RADIUS, TREE_RADIUS[0] + g * (TREE_RADIUS[1] - TREE_RADIUS[0]))
+        return max(0.0, reach + self.plant_jitter - 0.5 * self.row_width)
+
+    @property
+    def width(self) -> float:
+        """Inner length of the greenhouse along the rows (m)."""
+        return 2 * self.headland + self.row_length
+
+    @property
+    def height(self) -> float:
+        """Inner width of the greenhouse across the rows (m)."""
+        return (self.n_rows + 1) * self.corridor_width + self.n_rows * self.row_width
+
+    def corridor_centres(self) -> np.ndarray:
+        """Y of each corridor's centre line (m)."""
+        pitch = self.corridor_width + self.row_width
+        return 0.5 * self.corridor_width + pitch * np.arange(self.n_rows + 1)
+
+    def row_centres(self) -> np.ndarray:
+        """Y of each row's centre line (m)."""
+        pitch = self.corridor_width + self.row_width
+        return self.corridor_width + 0.5 * self.row_width + pitch * np.arange(self.n_rows)
+
+
+@dataclasses.dataclass(frozen=True)
+class Layout:
+    """A generated (or loaded) scene with its mission.
+
+    Attributes:
+        geometry: Static obstacles.
+        waypoints: ``(k, 2)`` mission waypoints (m); the robot starts at the first and must visit the others
+            in order, then return to the first.
+        start_pose: Robot start ``(x, y, yaw)``.
+        routes: Where people walk.
+    """
+
+    geometry: Geometry
+    waypoints: np.ndarray
+    start_pose: np.ndarray
+    routes: RouteGraph
+
+
+def serpentine_waypoints(p: LayoutParams) -> np.ndarray:
+    """Waypoints 0, 1, ...: up and down every corridor in turn, ending where the loop can close."""
+    x_left = p.headland - p.waypoint_offset
+    x_right = p.headland + p.row_length + p.waypoint_offset
+    pts = []
+    for k, y in enumerate(p.corridor_centres()):
+        ends = (x_left, x_right) if k % 2 == 0 else (x_right, x_left)
+        pts.extend([(ends[0], y), (ends[1], y)])
+    if pts[-1][0] == x_right:  # odd number of corridors: come back along the first corridor
+        pts.append((x_right, float(p.corridor_centres()[0])))
+    return np.array(pts, dtype=np.float64)
+
+
+def route_graph(p: LayoutParams) -> RouteGraph:
+    """People walk every corridor and the two headlands between corridor ends."""
+    ys = p.corridor_centres()
+    x_left = p.headland - p.waypoint_offset
+    x_right = p.headland + p.row_length + p.waypoint_offset
+    nodes = [(x_left, y) for y in ys] + [(x_right, y) for y in ys]
+    k = len(ys)
+    edges = [(i, i + k) for i in range(k)]
+    edges += [(i, i + 1) for i in range(k - 1)] + [(k + i, k + i + 1) for i in range(k - 1)]
+    return RouteGraph(nodes=np.array(nodes, dtype=np.float64), edges=np.array(edges, dtype=np.int64))
+
+
+def generate_layout(p: LayoutParams, rng: np.random.Generator) -> Layout:
+    """Build the greenhouse: walls, posts, plants (jittered, grown), leaves and trees.
+
+    Args:
+        p: Scene parameters.
+        rng: Source of the jitter, leaves and tree positions.
+
+    Returns:
+        The layout with its default serpentine mission.
+    """
+    b = GeometryBuilder()
+    w, h = p.width, p.height
+    t = 0.5 * WALL_THICKNESS
+    for x0, y0, x1, y1 in (
+        (-t, -t, w + t, -t),
+        (w + t, -t, w + t, h + t),
+        (w + t, h + t, -t, h + t),
+        (-t, h + t, -t, -t),
+    ):
+        b.capsule(x0, y0, x1, y1, t, Kind.WALL)
+    # Posts along the walls, in line with the row posts.
+    x0 = p.headland
+    x1 = p.headland + p.row_length
+    post_xs = np.arange(x0, x1 + 1e-9, p.post_spacing)
+    if len(post_xs) == 0 or post_xs[-1] < x1 - 1e-9:
+        post_xs = np.append(post_xs, x1)
+    inset = p.post_radius + 0.02
+    for x in post_xs:
+        b.circle(x, inset, p.post_radius, Kind.POST)
+        b.circle(x, h - inset, p.post_radius, Kind.POST)
+    g = p.growth
+    plant_r = PLANT_RADIUS[0] + g * (PLANT_RADIUS[1] - PLANT_RADIUS[0])
+    tree_r = TREE_RADIUS[0] + g * (TREE_RADIUS[1] - TREE_RADIUS[0])
+    n_plants = max(1, int(math.floor(p.row_length / p.plant_spacing)))
+    slots = [(row, j) for row in range(p.n_rows) for j in range(n_plants)]
+    tree_slots = set()
+    if p.n_trees > 0:
+        picks = rng.choice(len(slots), size=min(p.n_trees, len(slots)), replace=False)
+        tree_slots = {slots[int(i)] for i in picks}
+    for row, y in enumerate(p.row_centres()):
+        for x in post_xs:
+            b.circle(x, y, p.post_radius, Kind.POST)
+        for j in range(n_plants):
+            x = x0 + (j + 0.5) * (p.row_length / n_plants)
+            if np.min(np.abs(post_xs - x)) < plant_r + p.post_radius + 0.02:
+                continue  # the post stands here
+            px = x + rng.uniform(-p.plant_jitter, p.plant_jitter)
+            py = y + rng.uniform(-p.plant_jitter, p.plant_jitter)
+            if (row, j) in tree_slots:
+                b.circle(px, py, tree_r, Kind.TREE)
+                continue
+            b.circle(px, py, plant_r, Kind.PLANT)
+            # Leaves: the older the plant, the more (and longer) leaves reach out sideways.
+            for side in (-1.0, 1.0):
+                if rng.random() < g:
+                    angle = side * math.pi / 2 + rng.uniform(-0.6, 0.6)
+                    reach = plant_r + g * LEAF_REACH * rng.uniform(0.5, 1.0)
+                    b.capsule(
+                        px, py, px + reach * math.cos(angle), py + reach * math.sin(angle), LEAF_RADIUS, Kind.LEAF
+                    )
+    geometry = b.build((-WALL_THICKNESS, -WALL_THICKNESS, w + WALL_THICKNESS, h + WALL_THICKNESS))
+    waypoints = serpentine_waypoints(p)
+    heading = math.atan2(waypoints[1, 1] - waypoints[0, 1], waypoints[1, 0] - waypoints[0, 0])
+    start = np.array([waypoints[0, 0], waypoints[0, 1], heading])
+    return Layout(geometry=geometry, waypoints=waypoints, start_pose=start, routes=route_graph(p))

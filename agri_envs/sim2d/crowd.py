@@ -1,0 +1,161 @@
+"""People walking a route graph: along corridors, across row ends, and now and then into a robot's way.
+
+Each person walks from node to node of an undirected graph at their own speed. When a robot is ahead
+of them within ``notice_distance``, they either turn back at once or (with ``tease_prob``) stand still
+in front of it for a while first, like the colleagues who "teased" the robot in Harik 2018, sec. 3.5.
+People never walk into a robot; a robot that drives into a person has collided.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+
+from agri_envs.sim2d.world import World2D
+
+WALK, STAND = 0, 1
+
+
+@dataclasses.dataclass(frozen=True)
+class RouteGraph:
+    """Where people may walk.
+
+    Attributes:
+        nodes: ``(k, 2)`` node positions (m).
+        edges: ``(e, 2)`` node index pairs; people walk straight between connected nodes.
+    """
+
+    nodes: np.ndarray
+    edges: np.ndarray
+
+    def neighbours(self, i: int) -> list[int]:
+        """Nodes connected to node ``i``."""
+        out = [int(b) for a, b in self.edges if a == i] + [int(a) for a, b in self.edges if b == i]
+        return sorted(out)
+
+
+@dataclasses.dataclass(frozen=True)
+class CrowdSpec:
+    """How people look and behave.
+
+    Attributes:
+        radius: Body radius seen by sensors and physics (m).
+        speed_range: Walking speeds are drawn uniformly from this range (m/s).
+        notice_distance: A robot closer than this ahead of a person makes them react (m).
+        tease_prob: Probability that a person stands in the robot's way instead of turning back.
+        stand_range: Standing time when they do, drawn uniformly (s).
+        min_start_distance: People start at least this far from the robot's start (m).
+    """
+
+    radius: float = 0.2
+    speed_range: tuple[float, float] = (0.5, 1.0)
+    notice_distance: float = 1.5
+    tease_prob: float = 0.3
+    stand_range: tuple[float, float] = (2.0, 6.0)
+    min_start_distance: float = 3.0
+
+
+class Crowd:
+    """The people of a scene, stored as arrays (positions, headings, targets, timers)."""
+
+    def __init__(self, world: World2D, graph: RouteGraph, spec: CrowdSpec, n: int) -> None:
+        if n > len(world.movers):
+            raise ValueError(f"the world reserves {len(world.movers)} mover slots, {n} people requested")
+        self.world = world
+        self.graph = graph
+        self.spec = spec
+        self.n = n
+        self._adj = [graph.neighbours(i) for i in range(len(graph.nodes))]
+        self.pos = np.zeros((n, 2))
+        self.prev_node = np.zeros(n, dtype=np.int64)
+        self.next_node = np.zeros(n, dtype=np.int64)
+        self.speed = np.zeros(n)
+        self.mode = np.zeros(n, dtype=np.int64)
+        self.timer = np.zeros(n)
+        self.reacted = np.zeros(n, dtype=bool)
+
+    def reset(self, rng: np.random.Generator, avoid: np.ndarray) -> None:
+        """Place everyone on random edges at least ``min_start_distance`` from ``avoid`` (x, y)."""
+        nodes = self.graph.nodes
+        for i in range(self.n):
+            for _ in range(200):
+                a, b = self.graph.edges[rng.integers(len(self.graph.edges))]
+                if rng.random() < 0.5:
+                    a, b = b, a
+                p = nodes[a] + rng.random() * (nodes[b] - nodes[a])
+                if np.hypot(*(p - avoid[:2])) >= self.spec.min_start_distance:
+                    break
+            self.pos[i] = p
+            self.prev_node[i], self.next_node[i] = a, b
+            self.speed[i] = rng.uniform(*self.spec.speed_range)
+            self.mode[i] = WALK
+            self.timer[i] = 0.0
+            self.reacted[i] = False
+            self.world.place_mover(i, float(p[0]), float(p[1]), self.spec.radius)
+        for i in range(self.n, len(self.world.movers)):  # unused slots far away
+            self.world.place_mover(i, 1e6 + 10.0 * i, 1e6, self.spec.radius)
+
+    def _robot_ahead(self, i: int, heading: np.ndarray, robots: np.ndarray) -> bool:
+        for rx, ry, reach in robots:
+            dx, dy = rx - self.pos[i, 0], ry - self.pos[i, 1]
+            dist = math.hypot(dx, dy) - reach
+            if dist < self.spec.notice_distance and dx * heading[0] + dy * heading[1] > 0.3 * math.hypot(dx, dy):
+                return True
+        return False
+
+    def plan(self, dt: float, robots: np.ndarray, rng: np.random.Generator) -> None:
+        """Decide everyone's velocity for the next ``dt`` (the world's step then moves them).
+
+        Args:
+            dt: Step length (s).
+            robots: ``(k, 3)`` robot centres and circumradii ``x, y, reach`` (m).
+            rng: Generator for the random choices.
+        """
+        nodes = self.graph.nodes
+        for i in range(self.n):
+            vx = vy = 0.0
+            if self.mode[i] == STAND:
+                self.timer[i] -= dt
+                if self.timer[i] <= 0.0:
+                    self.mode[i] = WALK
+                    self.prev_node[i], self.next_node[i] = self.next_node[i], self.prev_node[i]
+            else:
+                target = nodes[self.next_node[i]]
+                delta = target - self.pos[i]
+                dist = math.hypot(delta[0], delta[1])
+                if dist < 1e-9:
+                    heading = np.zeros(2)
+                else:
+                    heading = delta / dist
+                if self._robot_ahead(i, heading, robots):
+                    if not self.reacted[i]:
+                        self.reacted[i] = True
+                        if rng.random() < self.spec.tease_prob:
+                            self.mode[i] = STAND
+                            self.timer[i] = rng.uniform(*self.spec.stand_range)
+                        else:
+                            self.prev_node[i], self.next_node[i] = self.next_node[i], self.prev_node[i]
+                    else:  # already reacted and still facing it: wait for it to leave
+                        self.mode[i] = STAND
+                        self.timer[i] = 1.0
+                else:
+                    self.reacted[i] = False
+                    step = self.speed[i] * dt
+                    if dist <= step:
+                        self.pos[i] = target
+                        options = [j for j in self._adj[self.next_node[i]] if j != self.prev_node[i]]
+                        if not options:
+                            options = [int(self.prev_node[i])]
+                        self.prev_node[i] = self.next_node[i]
+                        self.next_node[i] = options[int(rng.integers(len(options)))]
+                    else:
+                        vx, vy = heading[0] * self.speed[i], heading[1] * self.speed[i]
+            self.world.place_mover(i, float(self.pos[i, 0]), float(self.pos[i, 1]), self.spec.radius, vx, vy)
+
+    def sync_from_world(self) -> None:
+        """Read back positions after the world stepped."""
+        rows = self.world.mover_circles
+        self.pos[:, 0] = rows[: self.n, 0]
+        self.pos[:, 1] = rows[: self.n, 1]

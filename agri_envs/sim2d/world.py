@@ -1,0 +1,183 @@
+"""The shared 2D world: a pymunk space seen from above (no gravity).
+
+Static obstacles come from a :class:`~agri_envs.sim2d.geometry.Geometry`; people (and other moving
+obstacles) are kinematic pymunk bodies that the space integrates; robots are kinematic bodies driven as
+unicycles. Robot motion never tunnels: a step that could reach an obstacle (the clearance kernel says
+so) is split into substeps shorter than half the thinnest obstacle, and pymunk's shape query stops the
+robot at the last pose before contact.
+
+The world also keeps flat arrays of every circle and capsule (static ones followed by the moving ones)
+for the numba sensor kernels.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+import pymunk
+
+from agri_envs.sim2d.diff_drive import DiffDriveSpec, limit_velocity, unicycle_arc
+from agri_envs.sim2d.geometry import Geometry
+from agri_envs.sim2d.raycast import footprint_clearance
+
+# Pymunk collision categories: robots do not sense or hit themselves through these filters.
+_ROBOT_GROUP_BASE = 1000
+
+
+@dataclasses.dataclass
+class RobotBody:
+    """A differential-drive robot living in a :class:`World2D`.
+
+    Attributes:
+        spec: Size and limits.
+        pose: ``(x, y, yaw)`` in the world (m, m, rad).
+        v: Achieved linear velocity (m/s).
+        w: Achieved angular velocity (rad/s).
+        body: The kinematic pymunk body.
+        shape: Its box shape.
+    """
+
+    spec: DiffDriveSpec
+    pose: np.ndarray
+    v: float
+    w: float
+    body: pymunk.Body
+    shape: pymunk.Poly
+
+
+class World2D:
+    """A pymunk space with static geometry, moving circular obstacles (people) and robots.
+
+    Args:
+        geometry: The static scene.
+        n_movers: Number of moving circular obstacles (people) to reserve slots for.
+    """
+
+    def __init__(self, geometry: Geometry, n_movers: int = 0) -> None:
+        self.geometry = geometry
+        self.space = pymunk.Space()
+        self.space.gravity = (0.0, 0.0)
+        static = self.space.static_body
+        shapes: list[pymunk.Shape] = []
+        for x, y, r in geometry.circles:
+            shapes.append(pymunk.Circle(static, float(r), offset=(float(x), float(y))))
+        for x0, y0, x1, y1, r in geometry.capsules:
+            if r > 0:  # zero-radius capsules are polygon edges; the polygon itself is added below
+                shapes.append(pymunk.Segment(static, (float(x0), float(y0)), (float(x1), float(y1)), float(r)))
+        for poly in geometry.polygons:
+            shapes.append(pymunk.Poly(static, [(float(p[0]), float(p[1])) for p in poly]))
+        self.space.add(*shapes)
+        n_static = len(geometry.circles)
+        #: Every circle the sensors see: static ones, then one slot per mover.
+        self.circles = np.vstack([geometry.circles, np.zeros((n_movers, 3))])
+        self.capsules = np.ascontiguousarray(geometry.capsules)
+        self._mover_slice = slice(n_static, n_static + n_movers)
+        self.movers: list[pymunk.Body] = []
+        for i in range(n_movers):
+            body = pymunk.Body(body_type=pymunk.Body.KINEMATIC)
+            shape = pymunk.Circle(body, 0.2)
+            self.space.add(body, shape)
+            self.movers.append(body)
+            self.circles[n_static + i, 2] = 0.2
+        self.robots: list[RobotBody] = []
+        thin = [float(r) for r in geometry.circles[:, 2]] + [float(r) for r in geometry.capsules[:, 4] if r > 0]
+        # Substep length: half the thinnest obstacle's half-thickness, so a substep can never jump over it.
+        self.max_substep = max(0.002, 0.5 * min(thin, default=0.1))
+
+    # -- moving obstacles -------------------------------------------------------------------------------
+    @property
+    def mover_circles(self) -> np.ndarray:
+        """View of the movers' rows in :attr:`circles` (``x, y, r``)."""
+        return self.circles[self._mover_slice]
+
+    def place_mover(self, i: int, x: float, y: float, radius: float, vx: float = 0.0, vy: float = 0.0) -> None:
+        """Put mover ``i`` at ``(x, y)`` with a radius and a velocity the next :meth:`step` integrates."""
+        body = self.movers[i]
+        shape = next(iter(body.shapes))
+        if isinstance(shape, pymunk.Circle) and shape.radius != radius:
+            shape.unsafe_set_radius(radius)
+        body.position = (x, y)
+        body.velocity = (vx, vy)
+        self.space.reindex_shapes_for_body(body)
+        self.mover_circles[i] = (x, y, radius)
+
+    def set_mover_velocity(self, i: int, vx: float, vy: float) -> None:
+        """Set the velocity mover ``i`` keeps during the next :meth:`step`."""
+        self.movers[i].velocity = (vx, vy)
+
+    def step(self, dt: float) -> None:
+        """Advance the space (moves the kinematic movers) and refresh the sensor arrays."""
+        self.space.step(dt)
+        rows = self.mover_circles
+        for i, body in enumerate(self.movers):
+            p = body.position
+            rows[i, 0] = p.x
+            rows[i, 1] = p.y
+
+    # -- robots -----------------------------------------------------------------------------------------
+    def add_robot(self, spec: DiffDriveSpec, pose: np.ndarray) -> RobotBody:
+        """Add a kinematic rectangular robot at ``pose``."""
+        body = pymunk.Body(body_type=pymunk.Body.KINEMATIC)
+        shape = pymunk.Poly.create_box(body, (spec.length, spec.width))
+        shape.filter = pymunk.ShapeFilter(group=_ROBOT_GROUP_BASE + len(self.robots))
+        self.space.add(body, shape)
+        robot = RobotBody(spec=spec, pose=np.array(pose, dtype=np.float64), v=0.0, w=0.0, body=body, shape=shape)
+        self._sync(robot, robot.pose)
+        self.robots.append(robot)
+        return robot
+
+    def _sync(self, robot: RobotBody, pose: np.ndarray) -> None:
+        robot.body.position = (float(pose[0]), float(pose[1]))
+        robot.body.angle = float(pose[2])
+        self.space.reindex_shapes_for_body(robot.body)
+
+    def clearance(self, robot: RobotBody, pose: np.ndarray | None = None) -> float:
+        """Distance (m) between the robot's footprint and the nearest obstacle (<= 0: contact)."""
+        p = robot.pose if pose is None else pose
+        s = robot.spec
+        return float(
+            footprint_clearance(
+                float(p[0]), float(p[1]), float(p[2]), 0.5 * s.length, 0.5 * s.width, self.circles, self.capsules
+            )
+        )
+
+    def _touches(self, robot: RobotBody, pose: np.ndarray) -> bool:
+        self._sync(robot, pose)
+        return bool(self.space.shape_query(robot.shape))
+
+    def drive(self, robot: RobotBody, v_cmd: float, w_cmd: float, dt: float) -> bool:
+        """Drive a robot for ``dt`` seconds toward the commanded velocities; return True on contact.
+
+        On contact the robot stays at the last pose that did not touch anything (or that moved it out of
+        an existing overlap) and its velocities drop to zero.
+        """
+        v, w = limit_velocity(robot.spec, robot.v, robot.w, v_cmd, w_cmd, dt)
+        reach = abs(v) * dt + abs(w) * dt * robot.spec.circumradius
+        pose = robot.pose
+        clear = self.clearance(robot)
+        if clear > reach + 1e-6:
+            robot.pose = unicycle_arc(pose, v, w, dt)
+            robot.v, robot.w = v, w
+            self._sync(robot, robot.pose)
+            return False
+        n_sub = max(1, math.ceil(reach / self.max_substep))
+        h = dt / n_sub
+        inside = clear <= 0.0
+        contact = False
+        for _ in range(n_sub):
+            candidate = unicycle_arc(pose, v, w, h)
+            if self._touches(robot, candidate):
+                new_clear = self.clearance(robot, candidate)
+                if not inside or new_clear <= clear:
+                    contact = True
+                    break
+                clear = new_clear
+            else:
+                inside = False
+            pose = candidate
+        robot.pose = pose
+        robot.v, robot.w = (0.0, 0.0) if contact else (v, w)
+        self._sync(robot, pose)
+        return contact

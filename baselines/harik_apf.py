@@ -1,0 +1,284 @@
+"""Harik & Korsæth (2018) artificial potential field controller, with its passive safety behaviour.
+
+The controller maps the waypoint error (distance d, eq. 2; angle alpha, eqs. 3-4) and the obstacles on
+the robot's sides straight into the unicycle's velocities (eq. 12):
+
+    u = 1/2 k_att d^2                  r = K_a alpha + k_rep / d_obs
+
+with the saturations of eq. 13 (u = 0 once d < d_min, u = u_max beyond d_max) and eq. 14 (r = +-r_max
+and u = 0 when |alpha| > alpha_max). Reading of the printed slips (papers/README.md): the first case of
+eq. 13 is d < d_min, and the saturated cases of eq. 14 are |alpha| > alpha_max. Repulsion comes only from
+obstacles beside the robot closer than d_obs_threshold (eq. 11); with obstacles on both sides the two
+repulsions oppose each other (an obstacle on the left turns the robot right). Anything entering the area
+in front of the robot triggers the passive motion safety (sec. 3.1): stop, step back a few centimetres,
+and wait (no forward motion) until the front is free, still turning toward the waypoint as in the
+corridor experiment (sec. 3.4).
+
+:class:`HarikApfController` is the pure algorithm (no Gymnasium); :class:`HarikApfPolicy` adapts it to
+SB3's ``predict`` on GreenhouseNav-v0 observations.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from typing import Any
+
+import numpy as np
+
+
+@dataclasses.dataclass(frozen=True)
+class HarikApfParams:
+    """Gains and thresholds of the controller ("defined experimentally" in the paper; ours, documented).
+
+    Attributes:
+        u_max: Linear speed saturation (m/s), reached at ``d_max``.
+        d_max: Distance beyond which ``u = u_max`` (m); ``k_att = 2 u_max / d_max^2`` keeps eq. 13 continuous.
+        d_min: Waypoint radius (m): ``u = 0`` below it (the paper's 30 cm).
+        k_a: Angular gain K_a (1/s).
+        r_max: Angular speed saturation (rad/s).
+        alpha_max: Above this |alpha| the robot turns on the spot at ``r_max`` (rad).
+        k_rep: Repulsive gain (rad m / s).
+        d_obs_threshold: Side obstacles farther than this from the robot's side are ignored (m, eq. 11).
+        side_lookahead: The side zone extends this far ahead of the front edge (m).
+        front_stop_distance: An obstacle closer than this ahead of the front edge triggers the safety stop (m).
+        front_margin: The front zone is this much wider than the robot on each side (m).
+        step_back_distance: How far the robot backs off when the safety stop triggers (m).
+        step_back_speed: Backing speed (m/s).
+        rear_clearance: No stepping back when the rear sonar sees something closer than this (m).
+    """
+
+    u_max: float = 0.5
+    d_max: float = 1.0
+    d_min: float = 0.3
+    k_a: float = 1.2
+    r_max: float = 0.8
+    alpha_max: float = 0.6
+    k_rep: float = 0.02
+    d_obs_threshold: float = 0.35
+    side_lookahead: float = 0.3
+    front_stop_distance: float = 0.35
+    front_margin: float = 0.05
+    step_back_distance: float = 0.05
+    step_back_speed: float = 0.1
+    rear_clearance: float = 0.3
+
+    @property
+    def k_att(self) -> float:
+        """Attractive gain of eq. 12, chosen so that eq. 13 is continuous at ``d_max``."""
+        return 2.0 * self.u_max / self.d_max**2
+
+
+@dataclasses.dataclass(frozen=True)
+class RobotGeometry:
+    """What the controller knows of its own robot: footprint, sensor mounts, scan geometry."""
+
+    length: float
+    width: float
+    lidar_mount: tuple[float, float, float]
+    beam_angles: np.ndarray
+    lidar_max_range: float
+    sonar_mounts: np.ndarray
+    sonar_max_range: float
+    control_period: float
+
+
+class HarikApfController:
+    """Eqs. 12-14 plus the passive safety stop, for one robot (keeps the safety state between calls)."""
+
+    def __init__(self, params: HarikApfParams, robot: RobotGeometry) -> None:
+        self.p = params
+        self.robot = robot
+        mx, my, myaw = robot.lidar_mount
+        ang = myaw + robot.beam_angles
+        self._cos = np.cos(ang)
+        self._sin = np.sin(ang)
+        self._mount = (mx, my)
+        self._back_sonars = [i for i, m in enumerate(robot.sonar_mounts) if abs(abs(m[2]) - math.pi) < 1e-6]
+        self._left_sonars = [i for i, m in enumerate(robot.sonar_mounts) if abs(m[2] - math.pi / 2) < 1e-6]
+        self._right_sonars = [i for i, m in enumerate(robot.sonar_mounts) if abs(m[2] + math.pi / 2) < 1e-6]
+        self._front_sonars = [i for i, m in enumerate(robot.sonar_mounts) if abs(m[2]) < 1e-6]
+        self.reset()
+
+    def reset(self) -> None:
+        """Forget the safety state (new episode)."""
+        self.backing_left = 0.0  # metres still to back off
+        self.blocked = False
+        self.stops = 0
+
+    def obstacle_zones(self, ranges: np.ndarray, sonar: np.ndarray) -> tuple[float, float, float]:
+        """Distances (m) to the nearest obstacle in front of, left of and right of the footprint.
+
+        Args:
+            ranges: Full LIDAR scan (m).
+            sonar: Sonar ranges (m), mounts as in :class:`RobotGeometry`.
+
+        Returns:
+            ``(front, left, right)``: gap ahead of the front edge within the front zone, and lateral gaps
+            between each side and obstacles alongside the robot (``inf`` when none).
+        """
+        rb = self.robot
+        valid = ranges < rb.lidar_max_range - 1e-6
+        px = self._mount[0] + ranges * self._cos
+        py = self._mount[1] + ranges * self._sin
+        half_l, half_w = 0.5 * rb.length, 0.5 * rb.width
+        front_zone = valid & (px > half_l) & (np.abs(py) < half_w + self.p.front_margin)
+        front = float(np.min(px[front_zone] - half_l)) if np.any(front_zone) else math.inf
+        side_zone = valid & (px > -half_l) & (px < half_l + self.p.side_lookahead)
+        left_pts = py[side_zone & (py > half_w)]
+        right_pts = py[side_zone & (py < -half_w)]
+        left = float(np.min(left_pts) - half_w) if left_pts.size else math.inf
+        right = float(np.min(-right_pts) - half_w) if right_pts.size else math.inf
+        for i in self._left_sonars:
+            left = min(left, float(sonar[i]) if sonar[i] < rb.sonar_max_range - 1e-6 else math.inf)
+        for i in self._right_sonars:
+            right = min(right, float(sonar[i]) if sonar[i] < rb.sonar_max_range - 1e-6 else math.inf)
+        for i in self._front_sonars:
+            if sonar[i] < rb.sonar_max_range - 1e-6:
+                front = min(front, float(sonar[i]))
+        return front, left, right
+
+    def attractive(self, d: float, alpha: float) -> tuple[float, float]:
+        """Eqs. 13-14 without repulsion: ``(u, r)`` for waypoint distance d (m) and angle alpha (rad)."""
+        p = self.p
+        if d < p.d_min:
+            u = 0.0
+        elif d < p.d_max:
+            u = 0.5 * p.k_att * d * d
+        else:
+            u = p.u_max
+        if abs(alpha) > p.alpha_max:
+            return 0.0, math.copysign(p.r_max, alpha)
+        return u, p.k_a * alpha
+
+    def command(self, d: float, alpha: float, ranges: np.ndarray, sonar: np.ndarray) -> tuple[float, float]:
+        """One control step: ``(u, r)`` in m/s and rad/s.
+
+        Args:
+            d: Distance to the current waypoint (m).
+            alpha: Angle of the waypoint in the robot frame (rad).
+            ranges: Full LIDAR scan (m).
+            sonar: Sonar ranges (m).
+        """
+        p = self.p
+        front, left, right = self.obstacle_zones(ranges, sonar)
+        u, r = self.attractive(d, alpha)
+        if abs(alpha) <= p.alpha_max:
+            # Eq. 12 with eq. 11: each side within the threshold pushes the robot away from it.
+            if right < p.d_obs_threshold:
+                r += p.k_rep / max(right, 1e-3)
+            if left < p.d_obs_threshold:
+                r -= p.k_rep / max(left, 1e-3)
+            r = min(p.r_max, max(-p.r_max, r))
+        # Passive motion safety: something in front -> stop, step back a few cm, wait (turning allowed).
+        if front < p.front_stop_distance and u > 0.0:
+            if not self.blocked:
+                self.blocked = True
+                self.stops += 1
+                self.backing_left = p.step_back_distance
+            u = 0.0
+        else:
+            self.blocked = False
+        if self.backing_left > 0.0:
+            rear = min((float(sonar[i]) for i in self._back_sonars), default=math.inf)
+            if rear > p.rear_clearance:
+                u = -p.step_back_speed
+                self.backing_left -= p.step_back_speed * self.robot.control_period
+            else:
+                self.backing_left = 0.0
+        return u, r
+
+
+class HarikApfPolicy:
+    """SB3-style ``predict`` adapter of :class:`HarikApfController` for GreenhouseNav-v0.
+
+    Reads the ``waypoint`` (d, alpha from the env's localization), ``scan`` and ``sonar`` observation keys,
+    so the env must be made with ``full_scan=True`` and a localization other than ``"none"``. One
+    controller is kept per env of a vectorised batch; ``episode_start`` resets it.
+    """
+
+    def __init__(
+        self,
+        robot: RobotGeometry,
+        diagonal: float,
+        max_speed: float,
+        max_reverse_speed: float,
+        max_turn_rate: float,
+        params: HarikApfParams | None = None,
+    ) -> None:
+        self.params = params or HarikApfParams()
+        self.robot = robot
+        self.diagonal = diagonal
+        self.max_speed = max_speed
+        self.max_reverse_speed = max_reverse_speed
+        self.max_turn_rate = max_turn_rate
+        self.controllers: list[HarikApfController] = []
+
+    def _controller(self, i: int) -> HarikApfController:
+        while len(self.controllers) <= i:
+            self.controllers.append(HarikApfController(self.params, self.robot))
+        return self.controllers[i]
+
+    def to_action(self, u: float, r: float) -> np.ndarray:
+        """Velocities (m/s, rad/s) to the env's normalised action."""
+        a0 = u / self.max_speed if u >= 0 else u / max(self.max_reverse_speed, 1e-9)
+        return np.clip(np.array([a0, r / self.max_turn_rate], dtype=np.float32), -1.0, 1.0)
+
+    def predict(
+        self,
+        observation: dict[str, np.ndarray],
+        state: Any = None,
+        episode_start: np.ndarray | None = None,
+        deterministic: bool = True,
+    ) -> tuple[np.ndarray, Any]:
+        """Batched actions for batched observations (SB3's signature; ``state`` is passed through)."""
+        if "scan" not in observation or "waypoint" not in observation:
+            raise ValueError("harik-apf-gt needs the env made with full_scan=True and localization != 'none'")
+        wp = np.asarray(observation["waypoint"], dtype=np.float64)
+        single = wp.ndim == 1
+        wp = wp.reshape(-1, 3)
+        scans = np.asarray(observation["scan"], dtype=np.float64).reshape(len(wp), -1) * self.robot.lidar_max_range
+        sonars = np.asarray(observation["sonar"], dtype=np.float64).reshape(len(wp), -1) * self.robot.sonar_max_range
+        actions = np.zeros((len(wp), 2), dtype=np.float32)
+        for i in range(len(wp)):
+            ctrl = self._controller(i)
+            if episode_start is not None and bool(np.asarray(episode_start).reshape(-1)[i]):
+                ctrl.reset()
+            d = wp[i, 0] * self.diagonal
+            alpha = math.atan2(wp[i, 1], wp[i, 2])
+            actions[i] = self.to_action(*ctrl.command(d, alpha, scans[i], sonars[i]))
+        return (actions[0] if single else actions), state
+
+    def episode_metrics(self, index: int = 0) -> dict[str, float]:
+        """Per-episode statistics of env ``index``: how often the safety stop triggered."""
+        return {"safety_stops": float(self._controller(index).stops)}
+
+
+def robot_geometry(env: Any) -> RobotGeometry:
+    """The public robot description of a GreenhouseNav env (footprint, mounts, scan geometry, period)."""
+    e = env.unwrapped
+    return RobotGeometry(
+        length=e.robot_spec.length,
+        width=e.robot_spec.width,
+        lidar_mount=e.lidar.spec.mount,
+        beam_angles=e.lidar.spec.beam_angles,
+        lidar_max_range=e.lidar.spec.max_range,
+        sonar_mounts=e.sonars.mounts,
+        sonar_max_range=e.sonars.spec.max_range,
+        control_period=e.config.control_period,
+    )
+
+
+def make_harik_apf_gt(env: Any) -> HarikApfPolicy:
+    """``harik-apf-gt``: the controller on the ground-truth pose (privileged). Env: ``full_scan=True``."""
+    e = env.unwrapped
+    cfg = e.config
+    if not cfg.full_scan or cfg.localization != "ground_truth":
+        raise ValueError("harik-apf-gt needs gym.make(..., full_scan=True, localization='ground_truth')")
+    return HarikApfPolicy(
+        robot_geometry(env),
+        e.diagonal,
+        e.robot_spec.max_speed,
+        e.robot_spec.max_reverse_speed,
+        e.robot_spec.max_turn_rate,
+    )
