@@ -1,0 +1,137 @@
+"""Report section of GreenhouseNav-v0: trajectory on the greenhouse map, d(t) and alpha(t) (Harik Figs. 7-9)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+
+from agri_envs.sim2d.geometry import Geometry, Kind
+
+_KIND_COLOURS = {
+    Kind.WALL: "#5a5a5f",
+    Kind.POST: "#28282d",
+    Kind.PLANT: "#3c963c",
+    Kind.LEAF: "#78be5a",
+    Kind.TREE: "#1e6e2d",
+    Kind.OBSTACLE: "#464646",
+}
+
+
+def draw_geometry(ax: Any, geometry: Geometry) -> None:
+    """Draw the static scene on a matplotlib axis (metres, equal aspect)."""
+    from matplotlib.collections import LineCollection
+    from matplotlib.patches import Circle, Polygon
+
+    for (x, y, r), k in zip(geometry.circles, geometry.circle_kinds, strict=True):
+        ax.add_patch(Circle((x, y), r, color=_KIND_COLOURS.get(Kind(int(k)), "k"), lw=0))
+    for poly, k in zip(geometry.polygons, geometry.polygon_kinds, strict=True):
+        ax.add_patch(Polygon(poly, closed=True, color=_KIND_COLOURS.get(Kind(k), "k"), lw=0))
+    for kind in (Kind.WALL, Kind.LEAF):
+        sel = (geometry.capsule_kinds == kind) & (geometry.capsules[:, 4] > 0)
+        if np.any(sel):
+            caps = geometry.capsules[sel]
+            width_pt = 3.0 if kind == Kind.WALL else 1.2
+            ax.add_collection(
+                LineCollection(caps[:, :4].reshape(-1, 2, 2), colors=_KIND_COLOURS[kind], linewidths=width_pt)
+            )
+    xmin, ymin, xmax, ymax = geometry.bounds
+    ax.set_xlim(xmin - 0.2, xmax + 0.2)
+    ax.set_ylim(ymin - 0.2, ymax + 0.2)
+    ax.set_aspect("equal")
+
+
+def scene_of(result: dict[str, Any], seed: int) -> Any:
+    """Rebuild the env of a result at ``seed`` (same arguments) and return it after reset."""
+    env = gym.make(result["env_id"], **result["env_kwargs"])
+    env.reset(seed=seed)
+    return env
+
+
+def plot_trace(result: dict[str, Any], trace: dict[str, Any], out_dir: Path, stem: str) -> list[str]:
+    """Save the trajectory map and the d(t) / alpha(t) figure of one recorded episode; return file names."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    data = trace["data"]
+    env = scene_of(result, trace["seed"])
+    e = env.unwrapped
+    geometry = e.layout.geometry
+    waypoints = e.layout.waypoints
+    env.close()
+    x, y = np.array(data["x"], float), np.array(data["y"], float)
+    fig, ax = plt.subplots(figsize=(8, 5.5))
+    draw_geometry(ax, geometry)
+    ax.plot(x, y, color="#2859c8", lw=1.6, label="robot (true pose)")
+    est_x = np.array([np.nan if v is None else v for v in data.get("est_x", [])], float)
+    if est_x.size and np.any(np.isfinite(est_x)) and not np.allclose(est_x, x, equal_nan=True):
+        est_y = np.array([np.nan if v is None else v for v in data["est_y"]], float)
+        ax.plot(est_x, est_y, color="#d08020", lw=1.0, ls="--", label="estimated pose")
+    ax.scatter(waypoints[:, 0], waypoints[:, 1], color="#d21e1e", zorder=5, s=30)
+    for i, (wx, wy) in enumerate(waypoints):
+        ax.annotate(str(i), (wx, wy), textcoords="offset points", xytext=(5, 5), color="#a01010", fontsize=10)
+    ax.plot(x[:1], y[:1], marker="o", color="#2859c8", ms=8)
+    ax.set_xlabel("x [m]")
+    ax.set_ylabel("y [m]")
+    ax.set_title(f"{result['policy']}: trajectory, seed {trace['seed']} (Harik Fig. 9)")
+    ax.legend(loc="upper right", fontsize=8)
+    traj_name = f"{stem}_trajectory.png"
+    fig.tight_layout()
+    fig.savefig(out_dir / traj_name, dpi=110)
+    plt.close(fig)
+
+    dt = float(result["env_kwargs"].get("control_period", 1 / 15))
+    t = dt * np.arange(len(x))
+    d = np.array(data["distance_to_waypoint"], float)
+    alpha = np.degrees(np.array(data["bearing_to_waypoint"], float))
+    fig, axes = plt.subplots(2, 1, figsize=(8, 5), sharex=True)
+    axes[0].plot(t, d, color="#2859c8")
+    axes[0].set_ylabel("d [m]")
+    axes[0].set_title("distance to the current waypoint (Fig. 7) and angle alpha (Fig. 8)")
+    axes[1].plot(t, alpha, color="#c83c28")
+    axes[1].set_ylabel("alpha [deg]")
+    axes[1].set_xlabel("time [s]")
+    for a in axes:
+        a.grid(alpha=0.3)
+    curves_name = f"{stem}_d_alpha.png"
+    fig.tight_layout()
+    fig.savefig(out_dir / curves_name, dpi=110)
+    plt.close(fig)
+    return [traj_name, curves_name]
+
+
+def failure_lines(result: dict[str, Any]) -> list[str]:
+    """One line per failed episode: seed and cause (collision, or time limit with waypoints reached)."""
+    lines = []
+    for e in result["episodes"]:
+        if e["is_success"]:
+            continue
+        cause = "collision" if e.get("collision") else "time limit"
+        lines.append(
+            f"- seed {e['seed']}: {cause} after {e.get('episode_time', 0):.1f} s, "
+            f"{e.get('waypoints_reached', '?')}/{e.get('n_waypoints', '?')} waypoints"
+        )
+    return lines
+
+
+def report_section(results: list[dict[str, Any]], out_dir: Path) -> str:
+    """Markdown (with PNG plots written to ``out_dir``) for every GreenhouseNav-v0 result."""
+    parts = []
+    for result in results:
+        stem = f"greenhouse_{result['scenario'] or 'default'}_{result['policy']}"
+        parts.append(f"### {result['policy']} ({result['scenario'] or 'default'} scenario)")
+        s = result["summary"]
+        if "mean_safety_stops" in s:
+            parts.append(f"Passive safety stops per episode (mean): {s['mean_safety_stops']:.2f}.")
+        fails = failure_lines(result)
+        parts.append("Failures:" if fails else "No failures.")
+        parts += fails
+        for trace in result.get("traces", [])[:1]:
+            for name in plot_trace(result, trace, out_dir, stem):
+                parts.append(f"![{name}]({name})")
+        parts.append("")
+    return "\n".join(parts)
