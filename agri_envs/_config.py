@@ -143,7 +143,8 @@ class StrictConfig:
         rows = []
         for f in dataclasses.fields(self):
             m = f.metadata
-            rows.append((f.name, f.default, m.get("unit", ""), _range_text(m), m.get("doc", "")))
+            valid = "True or False" if isinstance(f.default, bool) else _range_text(m)
+            rows.append((f.name, f.default, m.get("unit", ""), valid, m.get("doc", "")))
         return rows
 
     def replace(self: T, **changes: Any) -> T:

@@ -186,14 +186,16 @@ def evaluate(request: EvalRequest, progress: bool = True) -> dict[str, Any]:
         episodes: list[dict[str, Any]] = []
         traces: list[dict[str, Any]] = []
         bar = _progress(request.episodes, f"{request.policy} on {request.env_id}", progress)
-        _print_row(bar, None)
+        if progress:
+            _print_row(bar, None)
         for i in range(request.episodes):
             seed = request.seed + i
             out = run_episode(env, policy, seed, trace_keys if i < request.record_traces else None)
             episodes.append(out["record"])
             if out["trace"] is not None:
                 traces.append({"seed": seed, "data": out["trace"]})
-            _print_row(bar, out["record"])
+            if progress:
+                _print_row(bar, out["record"])
             if bar is not None:
                 rate = np.mean([e["is_success"] for e in episodes])
                 bar.set_postfix(success=f"{rate:.0%}")

@@ -200,7 +200,7 @@ class GreenhouseNavEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
     ``is_success``, ``collision``, ``clearance`` (m), ``min_clearance`` (m, over the episode),
     ``waypoint_index``, ``waypoints_reached``, ``n_waypoints``, ``distance_to_waypoint`` (m),
     ``bearing_to_waypoint`` (rad), true pose ``x``, ``y``, ``yaw``, estimated pose ``est_x``, ``est_y``,
-    ``est_yaw`` (equal to the true one under ``ground_truth``, NaN under ``none``), ``v``, ``w``,
+    ``est_yaw`` (equal to the true one under ``ground_truth``, absent under ``none``), ``v``, ``w``,
     ``path_length`` (m), ``episode_time`` (s) and the reward terms.
 
     ## Arguments
@@ -410,7 +410,6 @@ class GreenhouseNavEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
 
     def _info(self, outcome: dict[str, Any], clearance: float) -> dict[str, Any]:
         pose = self.robot.pose
-        est = self._estimate if self.config.localization != "none" else np.full(3, np.nan)
         info = dict(outcome)
         info.pop("reward")
         info.update(
@@ -421,14 +420,14 @@ class GreenhouseNavEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
             x=float(pose[0]),
             y=float(pose[1]),
             yaw=float(pose[2]),
-            est_x=float(est[0]),
-            est_y=float(est[1]),
-            est_yaw=float(est[2]),
             v=float(self.robot.v),
             w=float(self.robot.w),
             path_length=float(self._path_length),
             episode_time=self._steps * self.config.control_period,
         )
+        if self.config.localization != "none":
+            est = self._estimate
+            info.update(est_x=float(est[0]), est_y=float(est[1]), est_yaw=float(est[2]))
         info["is_success"] = bool(info["is_success"])
         info["collision"] = bool(info["collision"])
         return info

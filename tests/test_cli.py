@@ -1,0 +1,96 @@
+"""The ``agri`` command line: evaluate writes the documented JSON, errors are clear, report is complete."""
+
+import json
+
+from training.cli import main, parse_env_kwargs
+
+
+def test_parse_env_kwargs_types():
+    assert parse_env_kwargs(["n_rows=4", "growth=0.5", "full_scan=true", "localization=odometry"]) == {
+        "n_rows": 4,
+        "growth": 0.5,
+        "full_scan": True,
+        "localization": "odometry",
+    }
+
+
+def test_evaluate_writes_json(tmp_path, capsys):
+    out = tmp_path / "ev.json"
+    rc = main(
+        [
+            "evaluate",
+            "--env",
+            "agri_envs/GreenhouseNav-v0",
+            "--policy",
+            "harik-apf-gt",
+            "--episodes",
+            "2",
+            "--seed",
+            "5",
+            "--env-kwargs",
+            "n_rows=1",
+            "row_length=3",
+            "--out",
+            str(out),
+            "--quiet",
+        ]
+    )
+    assert rc == 0
+    doc = json.loads(out.read_text())
+    s = doc["summary"]
+    for key in ("success_rate", "collision_rate", "mean_time", "mean_path_length", "min_clearance", "success_rate_ci"):
+        assert key in s
+    assert [e["seed"] for e in doc["episodes"]] == [5, 6]
+    assert doc["privileged"] is True and doc["env_kwargs"]["n_rows"] == 1
+    assert len(doc["traces"]) == 1 and len(doc["traces"][0]["data"]["x"]) == doc["episodes"][0]["steps"] + 1
+    assert "success_rate" in capsys.readouterr().out
+
+
+def test_evaluate_errors_are_clear(tmp_path, capsys):
+    rc = main(
+        [
+            "evaluate",
+            "--env",
+            "agri_envs/GreenhouseNav-v0",
+            "--policy",
+            "harik-apf-gt",
+            "--episodes",
+            "1",
+            "--env-kwargs",
+            "n_row=2",
+            "--out",
+            str(tmp_path / "x.json"),
+            "--quiet",
+        ]
+    )
+    assert rc == 2 and "n_row" in capsys.readouterr().err
+    rc = main(
+        [
+            "evaluate",
+            "--env",
+            "agri_envs/GreenhouseNav-v0",
+            "--policy",
+            "harik-apf-gt",
+            "--episodes",
+            "1",
+            "--env-kwargs",
+            "full_scan=false",
+            "--out",
+            str(tmp_path / "x.json"),
+            "--quiet",
+        ]
+    )
+    assert rc == 2 and "needs full_scan=True" in capsys.readouterr().err
+    rc = main(["evaluate", "--env", "agri_envs/GreenhouseNav-v0", "--policy", "nope", "--out", "x.json"])
+    assert rc == 2 and "unknown policy" in capsys.readouterr().err
+
+
+def test_report_has_tables_and_plots(tmp_path):
+    rc = main(["report", "--out", str(tmp_path), "--episodes", "1", "--env", "agri_envs/GreenhouseNav-v0", "--quiet"])
+    assert rc == 0
+    md = (tmp_path / "report.md").read_text()
+    assert "| harik-apf-gt |" in md and "_trajectory.png" in md and "_d_alpha.png" in md
+    for line in md.splitlines():
+        if line.startswith("!["):
+            assert (tmp_path / line.split("(")[1].rstrip(")")).stat().st_size > 10_000
+    assert "<table>" in (tmp_path / "report.html").read_text()

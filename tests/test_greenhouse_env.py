@@ -1,0 +1,227 @@
+"""GreenhouseNav-v0: API checkers, determinism, pickling, config strictness, bad actions, rendering."""
+
+import json
+import math
+import pickle
+import subprocess
+import sys
+
+import gymnasium as gym
+import numpy as np
+import pytest
+from gymnasium.utils.env_checker import check_env
+
+import agri_envs  # noqa: F401
+from agri_envs.rover.greenhouse_nav import GreenhouseNavConfig
+
+ENV_ID = "agri_envs/GreenhouseNav-v0"
+SMALL = {"n_rows": 1, "row_length": 3.0}
+
+
+def rollout(env, seed, n, action_seed=0):
+    rng = np.random.default_rng(action_seed)
+    obs, info = env.reset(seed=seed)
+    out = [(obs, 0.0, info)]
+    for _ in range(n):
+        obs, r, te, tr, info = env.step(rng.uniform(-1, 1, 2).astype(np.float32))
+        out.append((obs, r, info))
+        if te or tr:
+            obs, info = env.reset()
+            out.append((obs, 0.0, info))
+    return out
+
+
+def assert_same(a, b):
+    assert len(a) == len(b)
+    for (o1, r1, i1), (o2, r2, i2) in zip(a, b, strict=True):
+        assert o1.keys() == o2.keys()
+        for k in o1:
+            assert np.array_equal(o1[k], o2[k]), k
+        assert r1 == r2
+        assert json.dumps(i1, sort_keys=True, default=str) == json.dumps(i2, sort_keys=True, default=str)
+
+
+@pytest.mark.parametrize("kwargs", [{}, {"full_scan": True, "localization": "none"}, {"localization": "odometry"}])
+def test_gymnasium_and_sb3_checkers(kwargs):
+    from stable_baselines3.common.env_checker import check_env as sb3_check_env
+
+    env = gym.make(ENV_ID, **kwargs)
+    check_env(env.unwrapped)
+    sb3_check_env(env.unwrapped)
+    env.close()
+
+
+def test_same_seed_same_actions_identical():
+    kw = {"terminate_on_collision": False, "n_people": 3}
+    assert_same(rollout(gym.make(ENV_ID, **kw), 7, 300), rollout(gym.make(ENV_ID, **kw), 7, 300))
+    a = rollout(gym.make(ENV_ID, **kw), 7, 5)
+    b = rollout(gym.make(ENV_ID, **kw), 8, 5)
+    assert not np.array_equal(a[1][0]["lidar"], b[1][0]["lidar"])
+
+
+def test_pickled_env_continues_identically():
+    env = gym.make(ENV_ID, terminate_on_collision=False, n_people=3)
+    rollout(env, 3, 150)
+    clone = pickle.loads(pickle.dumps(env))
+    actions = np.random.default_rng(1).uniform(-1, 1, (150, 2))
+    for a in actions:
+        o1, r1, t1, u1, i1 = env.step(a)
+        o2, r2, t2, u2, i2 = clone.step(a)
+        assert all(np.array_equal(o1[k], o2[k]) for k in o1) and r1 == r2 and i1["x"] == i2["x"]
+
+
+def _digest_in_subprocess():
+    code = (
+        "import gymnasium as gym, numpy as np, hashlib, agri_envs\n"
+        "env = gym.make('agri_envs/GreenhouseNav-v0', terminate_on_collision=False)\n"
+        "obs, _ = env.reset(seed=11); h = hashlib.sha256()\n"
+        "rng = np.random.default_rng(0)\n"
+        "for _ in range(200):\n"
+        "    obs, r, te, tr, info = env.step(rng.uniform(-1, 1, 2))\n"
+        "    h.update(b''.join(v.tobytes() for v in obs.values())); h.update(np.float64(r).tobytes())\n"
+        "print(h.hexdigest())\n"
+    )
+    return subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout.strip()
+
+
+def test_identical_in_another_process():
+    assert _digest_in_subprocess() == _digest_in_subprocess()
+
+
+def test_importing_package_loads_no_physics_engine():
+    engines = "('pymunk', 'pybullet', 'numba', 'pygame', 'torch')"
+    code = f"import sys, agri_envs; print([m for m in {engines} if m in sys.modules])"
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout.strip()
+    assert out == "[]"
+
+
+def test_bad_actions():
+    env = gym.make(ENV_ID)
+    env.reset(seed=0)
+    with pytest.raises(ValueError, match="NaN or inf"):
+        env.step(np.array([np.nan, 0.0]))
+    with pytest.raises(ValueError, match="NaN or inf"):
+        env.step(np.array([0.0, np.inf]))
+    with pytest.raises(ValueError, match="shape"):
+        env.step(np.zeros(3))
+    # Out-of-range actions are clipped: same result as the clipped action.
+    e1, e2 = gym.make(ENV_ID), gym.make(ENV_ID)
+    e1.reset(seed=4)
+    e2.reset(seed=4)
+    for _ in range(10):
+        o1, *_ = e1.step(np.array([7.0, -3.0]))
+        o2, *_ = e2.step(np.array([1.0, -1.0]))
+        assert all(np.array_equal(o1[k], o2[k]) for k in o1)
+
+
+def test_config_strictness():
+    with pytest.raises(ValueError, match="unknown argument.*'n_row'.*did you mean 'n_rows'"):
+        gym.make(ENV_ID, n_row=3)
+    with pytest.raises(ValueError, match=r"growth=1.5 is out of range; expected in \[0.0, 1.0\]"):
+        gym.make(ENV_ID, growth=1.5)
+    with pytest.raises(ValueError, match="n_rows=2.5 must be an integer"):
+        gym.make(ENV_ID, n_rows=2.5)
+    with pytest.raises(ValueError, match="localization='gps' is invalid"):
+        gym.make(ENV_ID, localization="gps")
+    with pytest.raises(ValueError, match="corridors keep only"):
+        gym.make(ENV_ID, corridor_width=0.8, growth=1.0)
+    with pytest.raises(ValueError, match="reset options"):
+        gym.make(ENV_ID).reset(seed=0, options={"n_rows": 4})
+    assert set(GreenhouseNavConfig.field_names()) >= {
+        "n_rows",
+        "row_length",
+        "corridor_width",
+        "plant_spacing",
+        "growth",
+        "n_people",
+    }
+
+
+def test_every_argument_is_documented_with_a_range():
+    for name, _default, _unit, valid, doc in GreenhouseNavConfig().describe():
+        assert doc and valid != "any value", name
+
+
+def test_observations_within_bounds_and_reward_terms_add_up():
+    env = gym.make(ENV_ID, full_scan=True, n_people=4, growth=0.8, n_trees=4, terminate_on_collision=False)
+    obs, info = env.reset(seed=2)
+    space = env.observation_space
+    rng = np.random.default_rng(0)
+    for _ in range(300):
+        obs, reward, term, trunc, info = env.step(rng.uniform(-1, 1, 2))
+        assert space.contains(obs)
+        terms = sum(v for k, v in info.items() if k.startswith("reward_"))
+        assert reward == pytest.approx(terms)
+        assert {"is_success", "collision", "clearance"} <= info.keys()
+        assert 0.05 / 10 - 1e-7 <= obs["scan"].min() and obs["scan"].max() <= 1.0
+
+
+def test_localization_modes():
+    gt = gym.make(ENV_ID, localization="ground_truth", n_people=0)
+    odo = gym.make(ENV_ID, localization="odometry", n_people=0, odometry_noise=0.1, odometry_gyro_bias=0.05)
+    none = gym.make(ENV_ID, localization="none", n_people=0)
+    for env in (gt, odo, none):
+        env.reset(seed=5)
+    for _ in range(150):
+        _, _, _, _, i_gt = gt.step(np.array([0.5, 0.2]))
+        _, _, _, _, i_odo = odo.step(np.array([0.5, 0.2]))
+        o_none, _, _, _, i_none = none.step(np.array([0.5, 0.2]))
+    assert (i_gt["est_x"], i_gt["est_y"]) == (i_gt["x"], i_gt["y"])
+    drift = math.hypot(i_odo["est_x"] - i_odo["x"], i_odo["est_y"] - i_odo["y"])
+    assert 0.01 < drift < 2.0
+    assert "waypoint" not in o_none and "target" in o_none and "est_x" not in i_none
+    mission = none.unwrapped.mission_in_start_frame()
+    np.testing.assert_allclose(
+        o_none["target"], np.clip(mission[i_none["waypoint_index"]] / none.unwrapped.diagonal, -1, 1), atol=1e-6
+    )
+
+
+def test_people_never_walk_into_a_standing_robot():
+    env = gym.make(ENV_ID, n_people=8, people_tease_prob=0.5, terminate_on_collision=False, max_episode_steps=3000)
+    for seed in range(3):
+        env.reset(seed=seed)
+        for _ in range(1500):
+            _, _, _, _, info = env.step(np.zeros(2))
+            assert not info["collision"]
+
+
+def test_collision_ends_episode_and_robot_never_tunnels():
+    env = gym.make(ENV_ID, n_people=0, growth=1.0, corridor_width=1.4)
+    env.reset(seed=0)
+    terminated = False
+    for _ in range(200):  # full speed, turning into the row
+        _, r, terminated, _, info = env.step(np.array([1.0, 0.35]))
+        assert info["clearance"] > -0.01
+        if terminated:
+            break
+    assert terminated and info["collision"] and info["reward_collision"] < 0 and not info["is_success"]
+
+
+def test_time_limit_truncates():
+    env = gym.make(ENV_ID, max_episode_steps=20)
+    env.reset(seed=0)
+    for _ in range(20):
+        _, _, term, trunc, _ = env.step(np.zeros(2))
+    assert trunc and not term
+
+
+def test_rgb_render_headless():
+    env = gym.make(ENV_ID, render_mode="rgb_array", render_width=400, **SMALL)
+    env.reset(seed=0)
+    env.step(np.array([0.5, 0.0]))
+    frame = env.render()
+    assert frame.dtype == np.uint8 and frame.ndim == 3 and frame.shape[1] == 400
+    robot_blue = np.all(frame == (40, 90, 200), axis=-1)
+    assert robot_blue.sum() > 50
+    env.close()
+    env.close()  # idempotent
+
+
+def test_reset_options_change_the_scene():
+    env = gym.make(ENV_ID, n_people=0)
+    env.reset(seed=1)
+    kinds0 = env.unwrapped.layout.geometry.circle_kinds.tolist()
+    env.reset(seed=1, options={"growth": 1.0, "n_trees": 5})
+    g = env.unwrapped.layout.geometry
+    assert 4 in g.circle_kinds.tolist() and 4 not in kinds0  # trees appeared (Kind.TREE)
+    assert (g.capsule_kinds == 3).sum() > 20  # leaves (Kind.LEAF)
