@@ -97,11 +97,13 @@ class Crowd:
         for i in range(self.n, len(self.world.movers)):  # unused slots far away
             self.world.place_mover(i, 1e6 + 10.0 * i, 1e6, self.spec.radius)
 
-    def _robot_ahead(self, i: int, heading: np.ndarray, robots: np.ndarray) -> bool:
+    def _robot_ahead(self, i: int, hx: float, hy: float, robots: np.ndarray) -> bool:
+        """Whether a robot is within ``notice_distance`` ahead of person ``i`` walking along ``(hx, hy)``."""
+        px, py = self.pos[i]
         for rx, ry, reach in robots:
-            dx, dy = rx - self.pos[i, 0], ry - self.pos[i, 1]
-            dist = math.hypot(dx, dy) - reach
-            if dist < self.spec.notice_distance and dx * heading[0] + dy * heading[1] > 0.3 * math.hypot(dx, dy):
+            dx, dy = rx - px, ry - py
+            centre = math.hypot(dx, dy)
+            if centre - reach < self.spec.notice_distance and dx * hx + dy * hy > 0.3 * centre:
                 return True
         return False
 
@@ -122,37 +124,29 @@ class Crowd:
                     self.mode[i] = WALK
                     self.prev_node[i], self.next_node[i] = self.next_node[i], self.prev_node[i]
             else:
-                target = nodes[self.next_node[i]]
-                delta = target - self.pos[i]
+                delta = nodes[self.next_node[i]] - self.pos[i]
                 dist = math.hypot(delta[0], delta[1])
-                if dist < 1e-9:
-                    heading = np.zeros(2)
-                else:
-                    heading = delta / dist
-                if self._robot_ahead(i, heading, robots):
-                    if not self.reacted[i]:
-                        self.reacted[i] = True
-                        if rng.random() < self.spec.tease_prob:
-                            self.mode[i] = STAND
-                            self.timer[i] = rng.uniform(*self.spec.stand_range)
-                        else:
-                            self.prev_node[i], self.next_node[i] = self.next_node[i], self.prev_node[i]
-                    else:  # already reacted and still facing it: wait for it to leave
+                if dist < 1e-6:  # arrived: walk on to a random neighbour, not straight back if possible
+                    options = [j for j in self._adj[self.next_node[i]] if j != self.prev_node[i]]
+                    if not options:
+                        options = [int(self.prev_node[i])]
+                    self.prev_node[i] = self.next_node[i]
+                    self.next_node[i] = options[int(rng.integers(len(options)))]
+                    delta = nodes[self.next_node[i]] - self.pos[i]
+                    dist = math.hypot(delta[0], delta[1])
+                hx, hy = delta[0] / dist, delta[1] / dist
+                if self._robot_ahead(i, hx, hy, robots):
+                    if not self.reacted[i] and rng.random() >= self.spec.tease_prob:
+                        self.prev_node[i], self.next_node[i] = self.next_node[i], self.prev_node[i]
+                    else:  # stand in the robot's way (or keep waiting for it to leave)
                         self.mode[i] = STAND
-                        self.timer[i] = 1.0
+                        self.timer[i] = rng.uniform(*self.spec.stand_range) if not self.reacted[i] else 1.0
+                    self.reacted[i] = True
                 else:
                     self.reacted[i] = False
-                    step = self.speed[i] * dt
-                    if dist <= step:
-                        self.pos[i] = target
-                        options = [j for j in self._adj[self.next_node[i]] if j != self.prev_node[i]]
-                        if not options:
-                            options = [int(self.prev_node[i])]
-                        self.prev_node[i] = self.next_node[i]
-                        self.next_node[i] = options[int(rng.integers(len(options)))]
-                    else:
-                        vx, vy = heading[0] * self.speed[i], heading[1] * self.speed[i]
-            self.world.place_mover(i, float(self.pos[i, 0]), float(self.pos[i, 1]), self.spec.radius, vx, vy)
+                    speed = min(self.speed[i], dist / dt)  # stop exactly on the node
+                    vx, vy = hx * speed, hy * speed
+            self.world.set_mover_velocity(i, vx, vy)
 
     def sync_from_world(self) -> None:
         """Read back positions after the world stepped."""

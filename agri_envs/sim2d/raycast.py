@@ -94,6 +94,7 @@ def cast_scan(
     beam_uy: np.ndarray,
     angle0: float,
     dangle: float,
+    min_range: float,
     max_range: float,
     circles: np.ndarray,
     capsules: np.ndarray,
@@ -109,10 +110,12 @@ def cast_scan(
         beam_uy: Unit beam directions in the sensor frame, y component, ``(n,)``.
         angle0: Angle of beam 0 in the sensor frame (rad); beams are evenly spaced by ``dangle``.
         dangle: Angular step between beams (rad).
+        min_range: Hits closer than this are reported at ``min_range`` (m).
         max_range: Returned where nothing is hit within range (m).
         circles: ``(n_c, 3)`` circles ``x, y, r``.
         capsules: ``(n_s, 5)`` capsules ``x0, y0, x1, y1, r``.
-        out: ``(n,)`` output ranges (m), distance from the sensor origin to the first hit.
+        out: ``(n,)`` output ranges (m), distance from the sensor origin to the first hit, clipped to
+            ``[min_range, max_range]``.
     """
     n = beam_ux.shape[0]
     for k in range(n):
@@ -168,11 +171,17 @@ def cast_scan(
                 t = _ray_capsule(ax, ay, bx, by, r, beam_ux[k], beam_uy[k])
                 if t < out[k]:
                     out[k] = t
+    for k in range(n):
+        if out[k] < min_range:
+            out[k] = min_range
 
 
 @numba.njit(cache=True)
 def sonar_ranges(
-    poses: np.ndarray,
+    body_x: float,
+    body_y: float,
+    body_yaw: float,
+    mounts: np.ndarray,
     half_aperture: float,
     max_range: float,
     circles: np.ndarray,
@@ -186,7 +195,10 @@ def sonar_ranges(
     both are computed exactly, so the result is the true nearest echo within the cone.
 
     Args:
-        poses: ``(k, 3)`` sonar ``x, y, heading`` in the world.
+        body_x: x of the body carrying the sonars (m).
+        body_y: y of the body (m).
+        body_yaw: Heading of the body (rad).
+        mounts: ``(k, 3)`` sonar ``x, y, yaw`` in the body frame.
         half_aperture: Half the cone's opening angle (rad).
         max_range: Returned when nothing lies in the cone within range (m).
         circles: ``(n_c, 3)`` circles.
@@ -195,11 +207,13 @@ def sonar_ranges(
     """
     ex_x = math.cos(half_aperture)
     ex_y = math.sin(half_aperture)
-    for j in range(poses.shape[0]):
-        ox = poses[j, 0]
-        oy = poses[j, 1]
-        ch = math.cos(poses[j, 2])
-        sh = math.sin(poses[j, 2])
+    cb = math.cos(body_yaw)
+    sb = math.sin(body_yaw)
+    for j in range(mounts.shape[0]):
+        ox = body_x + cb * mounts[j, 0] - sb * mounts[j, 1]
+        oy = body_y + sb * mounts[j, 0] + cb * mounts[j, 1]
+        ch = math.cos(body_yaw + mounts[j, 2])
+        sh = math.sin(body_yaw + mounts[j, 2])
         best = max_range
         for i in range(circles.shape[0]):
             wx = circles[i, 0] - ox

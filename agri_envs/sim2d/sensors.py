@@ -107,25 +107,29 @@ class Lidar:
             self._uy,
             self._angle0,
             self.spec.angle_step,
+            self.spec.min_range,
             self.spec.max_range,
             circles,
             capsules,
             out,
         )
-        np.maximum(out, self.spec.min_range, out=out)
         return out
 
     def scan(
         self, body_pose: np.ndarray, circles: np.ndarray, capsules: np.ndarray, rng: np.random.Generator
     ) -> np.ndarray:
         """Ranges (m) with Gaussian noise and dropouts drawn from ``rng`` (a fresh array)."""
-        ranges = self.exact_scan(body_pose, circles, capsules).copy()
         spec = self.spec
-        if spec.noise_std > 0:
-            ranges += spec.noise_std * rng.standard_normal(spec.n_beams)
+        exact = self.exact_scan(body_pose, circles, capsules)
+        if spec.noise_std <= 0 and spec.dropout_prob <= 0:
+            return exact.copy()
+        ranges = rng.standard_normal(spec.n_beams) if spec.noise_std > 0 else np.zeros(spec.n_beams)
+        ranges *= spec.noise_std
+        ranges += exact
         if spec.dropout_prob > 0:
             ranges[rng.random(spec.n_beams) < spec.dropout_prob] = spec.max_range
-        np.clip(ranges, spec.min_range, spec.max_range, out=ranges)
+        np.minimum(ranges, spec.max_range, out=ranges)
+        np.maximum(ranges, spec.min_range, out=ranges)
         return ranges
 
 
@@ -185,7 +189,17 @@ class SonarArray:
     def exact_ranges(self, body_pose: np.ndarray, circles: np.ndarray, capsules: np.ndarray) -> np.ndarray:
         """Noise-free nearest-echo distances (m), clipped to ``[min_range, max_range]`` (reused array)."""
         spec = self.spec
-        sonar_ranges(self.poses_in_world(body_pose), 0.5 * spec.aperture, spec.max_range, circles, capsules, self._out)
+        sonar_ranges(
+            float(body_pose[0]),
+            float(body_pose[1]),
+            float(body_pose[2]),
+            self.mounts,
+            0.5 * spec.aperture,
+            spec.max_range,
+            circles,
+            capsules,
+            self._out,
+        )
         np.maximum(self._out, spec.min_range, out=self._out)
         return self._out
 
