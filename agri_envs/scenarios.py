@@ -22,7 +22,8 @@ class Scenario:
         name: Scenario name (``agri evaluate --scenario NAME``).
         env_kwargs: Arguments passed to ``gym.make``.
         description: What the scenario reproduces (paper section / figure).
-        default_episodes: Episodes the report runs by default.
+        default_episodes: Episodes the report runs by default (per sweep level).
+        sweep: Optional ``(argument, values)``: the scenario is evaluated once per value.
     """
 
     env_id: str
@@ -30,6 +31,14 @@ class Scenario:
     env_kwargs: Mapping[str, Any]
     description: str = ""
     default_episodes: int = 20
+    sweep: tuple[str, tuple[Any, ...]] | None = None
+
+    def levels(self) -> list[tuple[str, dict[str, Any]]]:
+        """``(label, env_kwargs)`` of every evaluation the scenario stands for (one unless it sweeps)."""
+        if self.sweep is None:
+            return [(self.name, dict(self.env_kwargs))]
+        key, values = self.sweep
+        return [(f"{self.name} {key}={v}", {**self.env_kwargs, key: v}) for v in values]
 
 
 _SCENARIOS: dict[tuple[str, str], Scenario] = {}
@@ -58,11 +67,45 @@ def list_scenarios(env_id: str | None = None) -> list[Scenario]:
     return [s for (e, _), s in _SCENARIOS.items() if env_id is None or e == env_id]
 
 
+_NAV = "agri_envs/GreenhouseNav-v0"
+register_scenario(
+    Scenario(_NAV, "default", {}, "The default greenhouse: three rows, two people walking, loop 0->1->...->7->0.")
+)
 register_scenario(
     Scenario(
-        env_id="agri_envs/GreenhouseNav-v0",
-        name="default",
-        env_kwargs={},
-        description="The default greenhouse: three rows, two people walking, loop 0->1->...->7->0.",
+        _NAV,
+        "sim-loop",
+        {"n_rows": 3, "growth": 0.0, "n_trees": 0, "n_people": 2},
+        "Harik sec. 3.2, Figs. 6-9: three rows of small plants inside a wall, waypoints 0->1->...->7->0, "
+        "two people walking.",
+    )
+)
+register_scenario(
+    Scenario(
+        _NAV,
+        "plant-development",
+        {"n_rows": 3, "n_trees": 6, "n_people": 2},
+        "Harik sec. 3.3, Figs. 10-12: the same loop with trees moved into the rows, plants grown through the "
+        "season (swept over growth).",
+        sweep=("growth", (0.0, 0.25, 0.5, 0.75, 1.0)),
+    )
+)
+register_scenario(
+    Scenario(
+        _NAV,
+        "corridor",
+        {"scene": "corridor", "n_people": 1},
+        "Harik sec. 3.4, Figs. 13-16: office corridor, waypoints 0->1->2->3->2->0 forcing 180 deg turns; "
+        "the front safety stop and step-back shape the motion.",
+    )
+)
+register_scenario(
+    Scenario(
+        _NAV,
+        "repeatability",
+        {"n_rows": 3, "n_people": 3, "people_tease_prob": 0.6, "mission_cycles": 10, "max_episode_steps": 30000},
+        "Harik sec. 3.5, Fig. 17: the loop driven 10 times in one episode without re-initialisation, with "
+        "people stepping into the robot's way.",
+        default_episodes=5,
     )
 )

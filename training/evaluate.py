@@ -49,14 +49,20 @@ class EvalRequest:
     record_traces: int = 1
 
 
-def resolve_env_kwargs(request: EvalRequest) -> tuple[dict[str, Any], bool]:
+def resolve_env_kwargs(request: EvalRequest, base: Mapping[str, Any] | None = None) -> tuple[dict[str, Any], bool]:
     """Env arguments = scenario preset + user arguments + what the policy needs; and whether it is privileged.
+
+    Args:
+        request: The evaluation.
+        base: Preset arguments (one level of the scenario); defaults to the scenario's own.
 
     Raises:
         ValueError: When a user argument contradicts what the policy needs, or the policy drives another env.
     """
     kwargs: dict[str, Any] = {}
-    if request.scenario:
+    if base is not None:
+        kwargs.update(base)
+    elif request.scenario:
         kwargs.update(get_scenario(request.env_id, request.scenario).env_kwargs)
     kwargs.update(request.env_kwargs)
     privileged = False
@@ -177,8 +183,30 @@ def summarize(episodes: list[dict[str, Any]]) -> dict[str, Any]:
 
 
 def evaluate(request: EvalRequest, progress: bool = True) -> dict[str, Any]:
-    """Run the request and return the result document (see ``agri evaluate --help`` for its layout)."""
-    kwargs, privileged = resolve_env_kwargs(request)
+    """Run the request and return the result document.
+
+    For a scenario that sweeps an argument the document holds one result per value under ``levels`` (and
+    the ``summary`` of all levels pooled); otherwise it is a single result.
+    """
+    sc = get_scenario(request.env_id, request.scenario) if request.scenario else None
+    if sc is None or sc.sweep is None:
+        return evaluate_level(request, None, progress)
+    levels = [evaluate_level(request, kwargs, progress, label) for label, kwargs in sc.levels()]
+    pooled = [e for level in levels for e in level["episodes"]]
+    doc = {k: v for k, v in levels[0].items() if k not in ("episodes", "traces", "summary", "env_kwargs", "label")}
+    doc.update(
+        sweep={"parameter": sc.sweep[0], "values": list(sc.sweep[1])},
+        levels=levels,
+        summary=_jsonable(summarize(pooled)),
+    )
+    return doc
+
+
+def evaluate_level(
+    request: EvalRequest, base: Mapping[str, Any] | None, progress: bool = True, label: str | None = None
+) -> dict[str, Any]:
+    """Evaluate one set of env arguments (one level of a scenario)."""
+    kwargs, privileged = resolve_env_kwargs(request, base)
     env = gym.make(request.env_id, **kwargs)
     try:
         policy = load_policy(request.policy, env)
@@ -207,6 +235,7 @@ def evaluate(request: EvalRequest, progress: bool = True) -> dict[str, Any]:
     return {
         "env_id": request.env_id,
         "scenario": request.scenario,
+        "label": label or request.scenario,
         "policy": request.policy,
         "privileged": privileged,
         "seed": request.seed,

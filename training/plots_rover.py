@@ -122,8 +122,9 @@ def report_section(results: list[dict[str, Any]], out_dir: Path) -> str:
     """Markdown (with PNG plots written to ``out_dir``) for every GreenhouseNav-v0 result."""
     parts = []
     for result in results:
-        stem = f"greenhouse_{result['scenario'] or 'default'}_{result['policy']}"
-        parts.append(f"### {result['policy']} ({result['scenario'] or 'default'} scenario)")
+        label = result.get("label") or result["scenario"] or "default"
+        stem = f"greenhouse_{label.replace(' ', '_').replace('=', '')}_{result['policy']}"
+        parts.append(f"### {result['policy']} ({label})")
         s = result["summary"]
         if "mean_safety_stops" in s:
             parts.append(f"Passive safety stops per episode (mean): {s['mean_safety_stops']:.2f}.")

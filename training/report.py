@@ -36,7 +36,7 @@ class SuiteEntry:
 
 
 def default_suite(episodes: int | None = None, only_env: str | None = None) -> list[SuiteEntry]:
-    """Every registered baseline on its env's default scenario, plus every scenario registered for it.
+    """Every registered baseline on every scenario registered for its env (the plain env when there is none).
 
     Args:
         episodes: Override of each entry's episode count (None: the scenario's default, else 20).
@@ -46,8 +46,7 @@ def default_suite(episodes: int | None = None, only_env: str | None = None) -> l
     for spec in list_policies():
         if only_env and spec.env_id != only_env:
             continue
-        scenarios: list[Scenario | None] = [s for s in list_scenarios(spec.env_id) if s.name != "default"]
-        scenarios = scenarios or [None]
+        scenarios: list[Scenario | None] = list(list_scenarios(spec.env_id)) or [None]
         for sc in scenarios:
             n = episodes if episodes is not None else (sc.default_episodes if sc else 20)
             entries.append(SuiteEntry(spec.env_id, spec.name, sc.name if sc else None, n))
@@ -73,8 +72,9 @@ def summary_table(results: list[dict[str, Any]]) -> str:
     for r in results:
         s = r["summary"]
         clearance = f"{s['min_clearance']:.3f}" if s.get("min_clearance") is not None else "-"
+        label = r.get("label") or r["scenario"] or "default"
         rows.append(
-            f"| {r['policy']} | {r['scenario'] or 'default'} | {'yes' if r['privileged'] else 'no'} | "
+            f"| {r['policy']} | {label} | {'yes' if r['privileged'] else 'no'} | "
             f"{s['episodes']} | {_fmt_ci(s, 'success_rate')} | {_fmt_ci(s, 'collision_rate')} | "
             f"{_fmt_ci(s, 'mean_episode_time', '{:.1f}')} | {_fmt_ci(s, 'mean_path_length', '{:.1f}')} | "
             f"{clearance} |"
@@ -97,7 +97,7 @@ def build_report(suite: list[SuiteEntry], out_dir: Path, progress: bool = True) 
         )
         name = f"{entry.env_id.split('/')[-1]}__{entry.scenario or 'default'}__{entry.policy}.json"
         (out_dir / "results" / name).write_text(json.dumps(result, indent=1))
-        by_env.setdefault(entry.env_id, []).append(result)
+        by_env.setdefault(entry.env_id, []).extend(result.get("levels", [result]))
     parts = [
         "# agri_envs baseline report",
         "",

@@ -12,7 +12,7 @@ from gymnasium import spaces
 
 from agri_envs._config import StrictConfig, param
 from agri_envs.rover import robot as rover
-from agri_envs.rover.layout import Layout, LayoutParams, generate_layout
+from agri_envs.rover.layout import Layout, LayoutParams, OfficeParams, generate_layout, generate_office_corridor
 from agri_envs.rover.task import RewardWeights, WaypointTask
 from agri_envs.sim2d.crowd import Crowd, CrowdSpec
 from agri_envs.sim2d.geometry import Kind
@@ -27,6 +27,11 @@ class GreenhouseNavConfig(StrictConfig):
     """Arguments of ``agri_envs/GreenhouseNav-v0`` (each one a ``gym.make`` keyword)."""
 
     # Scene
+    scene: str = param(
+        "greenhouse",
+        "scene type: generated greenhouse, or an office corridor (Harik sec. 2.4)",
+        choices=("greenhouse", "corridor"),
+    )
     n_rows: int = param(3, "rows of plants", low=1, high=12)
     row_length: float = param(6.0, "length of each row", unit="m", low=2.0, high=40.0)
     corridor_width: float = param(
@@ -44,6 +49,8 @@ class GreenhouseNavConfig(StrictConfig):
     layout_seed: int = param(
         -1, "seed of the scene layout; -1 draws a new layout every episode", low=-1, high=2**31 - 1
     )
+    office_length: float = param(14.0, "corridor length (scene='corridor')", unit="m", low=6.0, high=60.0)
+    office_width: float = param(1.6, "corridor width (scene='corridor')", unit="m", low=1.0, high=4.0)
     n_people: int = param(2, "people walking the corridors and headlands", low=0, high=20)
     people_tease_prob: float = param(
         0.3, "chance that a person stands in the robot's way for a while", low=0.0, high=1.0
@@ -72,6 +79,7 @@ class GreenhouseNavConfig(StrictConfig):
     waypoint_radius: float = param(
         0.3, "d_min: a waypoint is reached within this distance", unit="m", low=0.05, high=2.0
     )
+    mission_cycles: int = param(1, "times the mission is driven in one episode (Harik sec. 3.5: 10)", low=1, high=100)
     terminate_on_collision: bool = param(True, "end the episode when the robot touches anything")
     safety_margin: float = param(
         0.15, "clearance below which the clearance penalty applies", unit="m", low=0.0, high=1.0
@@ -88,6 +96,8 @@ class GreenhouseNavConfig(StrictConfig):
 
     def validate(self) -> None:
         """Check that corridors stay passable at this growth."""
+        if self.scene != "greenhouse":
+            return
         free = self.corridor_width - 2 * self.layout_params().max_intrusion()
         if free < rover.WIDTH + 0.2:
             raise ValueError(
@@ -110,6 +120,10 @@ class GreenhouseNavConfig(StrictConfig):
             post_spacing=self.post_spacing,
             n_trees=self.n_trees,
         )
+
+    def office_params(self) -> OfficeParams:
+        """The office-corridor scene part of the config."""
+        return OfficeParams(length=self.office_length, width=self.office_width)
 
     def reward_weights(self) -> RewardWeights:
         """The reward part of the config."""
@@ -260,8 +274,11 @@ class GreenhouseNavEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
             tim561(noise_std=cfg.lidar_noise_std, dropout_prob=cfg.lidar_dropout, mount=rover.LIDAR_MOUNT)
         )
         self.sonars = SonarArray(hc_sr04(noise_std=cfg.sonar_noise_std), rover.SONAR_MOUNTS)
-        lp = cfg.layout_params()
-        self.diagonal = math.hypot(lp.width, lp.height)
+        if cfg.scene == "greenhouse":
+            lp = cfg.layout_params()
+            self.diagonal = math.hypot(lp.width, lp.height)
+        else:
+            self.diagonal = math.hypot(cfg.office_length, cfg.office_width)
         n = self.lidar.spec.n_beams
         # Equal sectors of the full scan for min-pooling to `lidar_beams` values.
         self._pool_edges = np.linspace(0, n, cfg.lidar_beams + 1).round().astype(np.int64)[:-1]
@@ -298,13 +315,16 @@ class GreenhouseNavEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
         if overrides:
             cfg = cfg.replace(**overrides)
         layout_rng = self.np_random if cfg.layout_seed < 0 else np.random.default_rng(cfg.layout_seed)
-        self.layout = generate_layout(cfg.layout_params(), layout_rng)
+        if cfg.scene == "greenhouse":
+            self.layout = generate_layout(cfg.layout_params(), layout_rng)
+        else:
+            self.layout = generate_office_corridor(cfg.office_params(), layout_rng)
         self.world = World2D(self.layout.geometry, n_movers=cfg.n_people)
         start = self.layout.start_pose + self.np_random.uniform([-0.05, -0.05, -0.1], [0.05, 0.05, 0.1])
         self.robot = self.world.add_robot(self.robot_spec, start)
         self.crowd = Crowd(self.world, self.layout.routes, CrowdSpec(tease_prob=cfg.people_tease_prob), cfg.n_people)
         self.crowd.reset(self.np_random, start)
-        targets = np.vstack([self.layout.waypoints[1:], self.layout.waypoints[:1]])
+        targets = np.tile(self.layout.targets, (cfg.mission_cycles, 1))
         self.task = WaypointTask(targets, cfg.waypoint_radius, cfg.safety_margin, cfg.reward_weights())
         self.task.reset(start)
         self._start_pose = start.copy()
@@ -464,10 +484,8 @@ class GreenhouseNavEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
         rd = self._renderer
         rd.begin()
         rd.path(np.array(self._trail))
-        rd.waypoints(
-            self.layout.waypoints,
-            (self.task.index + 1) % len(self.layout.waypoints) if not self.task.done else len(self.layout.waypoints),
-        )
+        mission = self.layout.mission
+        rd.waypoints(self.layout.waypoints, -1 if self.task.done else int(mission[self.task.index % len(mission)]))
         rd.rays(
             self.lidar.pose_in_world(self.robot.pose),
             self.lidar.spec.beam_angles,

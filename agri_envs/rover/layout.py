@@ -80,16 +80,22 @@ class Layout:
 
     Attributes:
         geometry: Static obstacles.
-        waypoints: ``(k, 2)`` mission waypoints (m); the robot starts at the first and must visit the others
-            in order, then return to the first.
+        waypoints: ``(k, 2)`` numbered waypoints (m); the robot starts at waypoint 0.
+        mission: Indices of the waypoints to visit, in order (by default 1, 2, ..., k-1, 0: the loop).
         start_pose: Robot start ``(x, y, yaw)``.
         routes: Where people walk.
     """
 
     geometry: Geometry
     waypoints: np.ndarray
+    mission: np.ndarray
     start_pose: np.ndarray
     routes: RouteGraph
+
+    @property
+    def targets(self) -> np.ndarray:
+        """``(len(mission), 2)`` positions to visit, in order."""
+        return self.waypoints[self.mission]
 
 
 def serpentine_waypoints(p: LayoutParams) -> np.ndarray:
@@ -179,6 +185,96 @@ def generate_layout(p: LayoutParams, rng: np.random.Generator) -> Layout:
                     )
     geometry = b.build((-WALL_THICKNESS, -WALL_THICKNESS, w + WALL_THICKNESS, h + WALL_THICKNESS))
     waypoints = serpentine_waypoints(p)
-    heading = math.atan2(waypoints[1, 1] - waypoints[0, 1], waypoints[1, 0] - waypoints[0, 0])
-    start = np.array([waypoints[0, 0], waypoints[0, 1], heading])
-    return Layout(geometry=geometry, waypoints=waypoints, start_pose=start, routes=route_graph(p))
+    mission = np.array([*range(1, len(waypoints)), 0])
+    return Layout(
+        geometry=geometry,
+        waypoints=waypoints,
+        mission=mission,
+        start_pose=_start_facing(waypoints, 1),
+        routes=route_graph(p),
+    )
+
+
+def _start_facing(waypoints: np.ndarray, target: int) -> np.ndarray:
+    """Pose at waypoint 0 facing waypoint ``target``."""
+    d = waypoints[target] - waypoints[0]
+    return np.array([waypoints[0, 0], waypoints[0, 1], math.atan2(d[1], d[0])])
+
+
+@dataclasses.dataclass(frozen=True)
+class OfficeParams:
+    """An office corridor like Harik's experiments (sec. 2.4, Figs. 13-16): walls with door recesses.
+
+    Attributes:
+        length: Corridor length (m).
+        width: Corridor width between the walls (m).
+        door_spacing: Distance between door recesses along each wall (m).
+        door_width: Width of a recess (m).
+        door_depth: Depth of a recess (m).
+    """
+
+    length: float = 14.0
+    width: float = 1.6
+    door_spacing: float = 3.5
+    door_width: float = 0.9
+    door_depth: float = 0.3
+
+
+def generate_office_corridor(p: OfficeParams, rng: np.random.Generator) -> Layout:
+    """A straight office corridor with door recesses and cabinets; waypoints force 180 deg turns.
+
+    The mission is the paper's 0 -> 1 -> 2 -> 3 -> 2 -> 0 along the corridor: waypoint 1 lies at the far end
+    and 3 near the start, so the robot turns around at 1 and at 3 (and again at 2 on the way back).
+    """
+    b = GeometryBuilder()
+    t = 0.5 * WALL_THICKNESS
+    w, h = p.length, p.width
+    b.capsule(-t, -t, -t, h + t, t, Kind.WALL)
+    b.capsule(w + t, -t, w + t, h + t, t, Kind.WALL)
+    yc = 0.5 * h
+    door_nodes: list[tuple[float, float]] = []  # people come out of and go into the doors
+    for y_wall, outward in ((-t, -1.0), (h + t, 1.0)):
+        offset = rng.uniform(0.8, 1.6)
+        x = 0.0
+        doors = np.arange(offset, w - p.door_width - 0.5, p.door_spacing)
+        for d0 in doors:
+            d0 += rng.uniform(-0.3, 0.3)
+            d1 = d0 + p.door_width
+            door_nodes.append((0.5 * (d0 + d1), (0.0 if outward < 0 else h) + outward * 0.5 * p.door_depth))
+            b.capsule(x - t, y_wall, d0, y_wall, t, Kind.WALL)
+            # The recess: a door set back into the wall, with its frame.
+            y_back = y_wall + outward * p.door_depth
+            b.capsule(d0, y_wall, d0, y_back, t, Kind.WALL)
+            b.capsule(d1, y_wall, d1, y_back, t, Kind.WALL)
+            b.capsule(d0, y_back, d1, y_back, t, Kind.WALL)
+            x = d1
+        b.capsule(x - t, y_wall, w + t, y_wall, t, Kind.WALL)
+    # A few cabinets along the walls between doors: features for the LIDAR, obstacles for the sides.
+    for _ in range(3):
+        cx = rng.uniform(2.0, w - 2.0)
+        side = rng.integers(2)
+        depth = 0.25
+        y0, y1 = (0.0, depth) if side == 0 else (h - depth, h)
+        b.box(cx - 0.3, y0, cx + 0.3, y1, Kind.OBSTACLE)
+    bounds = (
+        -WALL_THICKNESS - p.door_depth,
+        -WALL_THICKNESS - p.door_depth,
+        w + WALL_THICKNESS,
+        h + WALL_THICKNESS + p.door_depth,
+    )
+    geometry = b.build(bounds)
+    waypoints = np.array([[1.0, yc], [w - 1.0, yc], [0.55 * w, yc], [0.25 * w, yc]])
+    # People walk the centre line between doors and step into doorways: every dead end is a recess, so
+    # someone who turns back from the robot can always get out of its way.
+    door_nodes.sort()
+    nodes = [(x, yc) for x, _ in door_nodes] + door_nodes
+    k = len(door_nodes)
+    edges = [(i, i + 1) for i in range(k - 1)] + [(i, k + i) for i in range(k)]
+    routes = RouteGraph(nodes=np.array(nodes, dtype=np.float64), edges=np.array(edges, dtype=np.int64))
+    return Layout(
+        geometry=geometry,
+        waypoints=waypoints,
+        mission=np.array([1, 2, 3, 2, 0]),
+        start_pose=_start_facing(waypoints, 1),
+        routes=routes,
+    )

@@ -30,7 +30,6 @@ COLOURS = {
     "lidar": (230, 40, 40),
     "sonar": (250, 200, 60),
     "waypoint": (210, 30, 30),
-    "waypoint_done": (160, 160, 160),
     "path": (40, 90, 200),
     "text": (20, 20, 20),
 }
@@ -155,10 +154,9 @@ class TopDownRenderer:
             self._pg.draw.lines(self.surface, COLOURS["path"], False, [self.to_px(*p[:2]) for p in points], 2)
 
     def waypoints(self, points: np.ndarray, current: int) -> None:
-        """Draw numbered waypoints; those already reached are grey, the current one ringed."""
+        """Draw numbered waypoints with the current target ringed (``current < 0``: none)."""
+        colour = COLOURS["waypoint"]
         for i, (x, y) in enumerate(points):
-            done = i < current
-            colour = COLOURS["waypoint_done"] if done else COLOURS["waypoint"]
             p = self.to_px(x, y)
             self._pg.draw.circle(self.surface, colour, p, 6)
             if i == current:
