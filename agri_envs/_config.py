@@ -25,6 +25,7 @@ def param(
     low: float | None = None,
     high: float | None = None,
     choices: Sequence[Any] | None = None,
+    valid: str | None = None,
 ) -> Any:
     """Declare a config field with its documentation and validated range.
 
@@ -35,15 +36,25 @@ def param(
         low: Inclusive lower bound for numbers (or for every element of a tuple).
         high: Inclusive upper bound for numbers (or for every element of a tuple).
         choices: Allowed values for categorical fields.
+        valid: Description of the valid values when no range or choice list says it (checked in ``validate``).
 
     Returns:
         A ``dataclasses.field`` carrying the metadata.
     """
-    meta = {"doc": doc, "unit": unit, "low": low, "high": high, "choices": tuple(choices) if choices else None}
+    meta = {
+        "doc": doc,
+        "unit": unit,
+        "low": low,
+        "high": high,
+        "choices": tuple(choices) if choices else None,
+        "valid": valid,
+    }
     return dataclasses.field(default=default, metadata=meta)
 
 
 def _range_text(meta: Mapping[str, Any]) -> str:
+    if meta.get("valid"):
+        return str(meta["valid"])
     if meta.get("choices"):
         return "one of " + ", ".join(repr(c) for c in meta["choices"])
     low, high = meta.get("low"), meta.get("high")

@@ -225,3 +225,27 @@ def test_reset_options_change_the_scene():
     g = env.unwrapped.layout.geometry
     assert 4 in g.circle_kinds.tolist() and 4 not in kinds0  # trees appeared (Kind.TREE)
     assert (g.capsule_kinds == 3).sum() > 20  # leaves (Kind.LEAF)
+
+
+def test_map_scene_from_ros_map():
+    from agri_envs.rover.layout import EXAMPLE_MAP
+
+    wps = [[1.0, 0.6], [8.6, 0.6], [8.6, 2.2], [1.0, 2.2]]
+    env = gym.make(ENV_ID, scene="map", map_yaml=str(EXAMPLE_MAP), waypoints=wps, n_people=1)
+    obs, info = env.reset(seed=0)
+    assert info["clearance"] > 0.2 and len(env.unwrapped.layout.geometry.polygons) > 20
+    assert env.observation_space.contains(obs)
+    with pytest.raises(ValueError, match="needs map_yaml"):
+        gym.make(ENV_ID, scene="map", map_yaml="/nonexistent.yaml", waypoints=wps)
+    with pytest.raises(ValueError, match=">= 2"):
+        gym.make(ENV_ID, scene="map", map_yaml=str(EXAMPLE_MAP), waypoints=[[1.0, 1.0]])
+    with pytest.raises(ValueError, match="only to scene='map'"):
+        gym.make(ENV_ID, waypoints=wps)
+
+
+def test_docstring_documents_every_argument():
+    from agri_envs.rover.greenhouse_nav import GreenhouseNavEnv
+
+    doc = GreenhouseNavEnv.__doc__
+    for name in GreenhouseNavConfig.field_names():
+        assert f"| ``{name}`` |" in doc, name

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from pathlib import Path
 from typing import Any
 
 import gymnasium as gym
@@ -12,7 +13,14 @@ from gymnasium import spaces
 
 from agri_envs._config import StrictConfig, param
 from agri_envs.rover import robot as rover
-from agri_envs.rover.layout import Layout, LayoutParams, OfficeParams, generate_layout, generate_office_corridor
+from agri_envs.rover.layout import (
+    Layout,
+    LayoutParams,
+    OfficeParams,
+    generate_layout,
+    generate_office_corridor,
+    layout_from_map,
+)
 from agri_envs.rover.task import RewardWeights, WaypointTask
 from agri_envs.sim2d.crowd import Crowd, CrowdSpec
 from agri_envs.sim2d.geometry import Kind
@@ -29,9 +37,11 @@ class GreenhouseNavConfig(StrictConfig):
     # Scene
     scene: str = param(
         "greenhouse",
-        "scene type: generated greenhouse, or an office corridor (Harik sec. 2.4)",
-        choices=("greenhouse", "corridor"),
+        "kind of scene",
+        choices=("greenhouse", "corridor", "map"),
     )
+    map_yaml: str = param("", "ROS map_server map to load (scene='map')", valid="YAML path, e.g. EXAMPLE_MAP")
+    waypoints: tuple = param((), "loop of waypoints in the map frame (scene='map')", unit="m", valid=">= 2 (x, y)")
     n_rows: int = param(3, "rows of plants", low=1, high=12)
     row_length: float = param(6.0, "length of each row", unit="m", low=2.0, high=40.0)
     corridor_width: float = param(
@@ -70,7 +80,7 @@ class GreenhouseNavConfig(StrictConfig):
     lidar_dropout: float = param(0.01, "probability that a LIDAR beam returns no echo (max range)", low=0.0, high=0.5)
     sonar_noise_std: float = param(0.01, "sonar Gaussian range noise", unit="m", low=0.0, high=0.5)
     # Localization
-    localization: str = param("ground_truth", "pose source for the waypoint observation", choices=LOCALIZATION_MODES)
+    localization: str = param("ground_truth", "pose source", choices=LOCALIZATION_MODES)
     odometry_noise: float = param(0.05, "relative std of wheel-odometry speed errors", low=0.0, high=0.5)
     odometry_gyro_bias: float = param(
         0.01, "std of the per-episode turn-rate bias of odometry", unit="rad/s", low=0.0, high=0.2
@@ -95,7 +105,21 @@ class GreenhouseNavConfig(StrictConfig):
     render_width: int = param(800, "width of rendered frames", unit="px", low=100, high=4000)
 
     def validate(self) -> None:
-        """Check that corridors stay passable at this growth."""
+        """Check the scene arguments fit together and corridors stay passable at this growth."""
+        if self.scene == "map":
+            if not self.map_yaml or not Path(self.map_yaml).is_file():
+                raise ValueError(
+                    f"GreenhouseNavConfig: scene='map' needs map_yaml, an existing ROS map YAML file "
+                    f"(got {self.map_yaml!r}); e.g. map_yaml=str(agri_envs.rover.layout.EXAMPLE_MAP)."
+                )
+            pts = np.asarray(self.waypoints, dtype=np.float64)
+            if pts.ndim != 2 or pts.shape[1] != 2 or len(pts) < 2 or not np.all(np.isfinite(pts)):
+                raise ValueError(
+                    f"GreenhouseNavConfig: scene='map' needs waypoints as >= 2 (x, y) pairs, got {self.waypoints!r}."
+                )
+            return
+        if self.map_yaml or self.waypoints:
+            raise ValueError("GreenhouseNavConfig: map_yaml and waypoints apply only to scene='map'.")
         if self.scene != "greenhouse":
             return
         free = self.corridor_width - 2 * self.layout_params().max_intrusion()
@@ -219,8 +243,55 @@ class GreenhouseNavEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
 
     ## Arguments
 
-    Every field of :class:`GreenhouseNavConfig` (name, default, unit, range, meaning; unknown names and
-    values out of range raise ``ValueError``)::
+    Every argument is a field of :class:`GreenhouseNavConfig`; unknown names and values out of range raise
+    ``ValueError`` naming the argument and its valid range.
+
+    | argument | default | unit | valid | meaning |
+    |---|---|---|---|---|
+    | ``scene`` | 'greenhouse' |  | one of 'greenhouse', 'corridor', 'map' | kind of scene |
+    | ``map_yaml`` | '' |  | YAML path, e.g. EXAMPLE_MAP | ROS map_server map to load (scene='map') |
+    | ``waypoints`` | () | m | >= 2 (x, y) | loop of waypoints in the map frame (scene='map') |
+    | ``n_rows`` | 3 |  | in [1, 12] | rows of plants |
+    | ``row_length`` | 6 | m | in [2.0, 40.0] | length of each row |
+    | ``corridor_width`` | 1.2 | m | in [0.8, 3.0] | free width between rows (and between outer rows and walls) |
+    | ``row_width`` | 0.4 | m | in [0.2, 1.5] | width of a row bed |
+    | ``headland`` | 1.8 | m | in [1.2, 5.0] | free space between row ends and the end walls |
+    | ``plant_spacing`` | 0.4 | m | in [0.15, 2.0] | distance between plants along a row |
+    | ``plant_jitter`` | 0.03 | m | in [0.0, 0.1] | uniform jitter of plant positions |
+    | ``growth`` | 0 |  | in [0.0, 1.0] | season: plant size and leaves reaching into corridors |
+    | ``post_spacing`` | 3 | m | in [1.0, 20.0] | distance between structural posts along rows and walls |
+    | ``n_trees`` | 0 |  | in [0, 50] | trees placed at random plant positions (Harik Fig. 10) |
+    | ``layout_seed`` | -1 |  | in [-1, 2147483647] | seed of the scene layout; -1 draws a new layout every episode |
+    | ``office_length`` | 14 | m | in [6.0, 60.0] | corridor length (scene='corridor') |
+    | ``office_width`` | 1.6 | m | in [1.0, 4.0] | corridor width (scene='corridor') |
+    | ``n_people`` | 2 |  | in [0, 20] | people walking the corridors and headlands |
+    | ``people_tease_prob`` | 0.3 |  | in [0.0, 1.0] | chance that a person stands in the robot's way for a while |
+    | ``max_speed`` | 0.6 | m/s | in [0.1, 2.0] | forward speed limit (reverse: half of it) |
+    | ``max_turn_rate`` | 1.2 | rad/s | in [0.2, 4.0] | angular speed limit |
+    | ``max_accel`` | 1 | m/s^2 | in [0.1, 10.0] | linear acceleration limit |
+    | ``max_angular_accel`` | 3 | rad/s^2 | in [0.1, 20.0] | angular acceleration limit |
+    | ``control_period`` | 0.06667 | s | in [0.01, 0.5] | time between actions (the LIDAR's 15 Hz) |
+    | ``lidar_beams`` | 90 |  | in [1, 811] | LIDAR beams in the observation (min-pooled from the full scan) |
+    | ``full_scan`` | False |  | True or False | add the full-resolution 811-beam scan as observation key 'scan' |
+    | ``lidar_noise_std`` | 0.02 | m | in [0.0, 0.5] | LIDAR Gaussian range noise (TiM561 statistical error) |
+    | ``lidar_dropout`` | 0.01 |  | in [0.0, 0.5] | probability that a LIDAR beam returns no echo (max range) |
+    | ``sonar_noise_std`` | 0.01 | m | in [0.0, 0.5] | sonar Gaussian range noise |
+    | ``localization`` | 'ground_truth' |  | one of 'ground_truth', 'odometry', 'none' | pose source |
+    | ``odometry_noise`` | 0.05 |  | in [0.0, 0.5] | relative std of wheel-odometry speed errors |
+    | ``odometry_gyro_bias`` | 0.01 | rad/s | in [0.0, 0.2] | std of the per-episode turn-rate bias of odometry |
+    | ``waypoint_radius`` | 0.3 | m | in [0.05, 2.0] | d_min: a waypoint is reached within this distance |
+    | ``mission_cycles`` | 1 |  | in [1, 100] | times the mission is driven in one episode (Harik sec. 3.5: 10) |
+    | ``terminate_on_collision`` | True |  | True or False | end the episode when the robot touches anything |
+    | ``safety_margin`` | 0.15 | m | in [0.0, 1.0] | clearance below which the clearance penalty applies |
+    | ``reward_progress`` | 1 |  | in [0.0, 100.0] | weight of progress toward the waypoint (per metre) |
+    | ``reward_waypoint`` | 2 |  | in [0.0, 100.0] | bonus per waypoint reached |
+    | ``reward_success`` | 10 |  | in [0.0, 1000.0] | bonus when the mission is complete |
+    | ``reward_collision`` | 10 |  | in [0.0, 1000.0] | penalty on collision |
+    | ``reward_clearance`` | 0.05 |  | in [0.0, 100.0] | penalty per step at zero clearance (linear in the shortfall) |
+    | ``reward_time`` | 0.005 |  | in [0.0, 10.0] | penalty per step |
+    | ``render_width`` | 800 | px | in [100, 4000] | width of rendered frames |
+
+    Example::
 
         env = gym.make("agri_envs/GreenhouseNav-v0", n_rows=4, growth=0.6, n_people=3, full_scan=True)
 
@@ -277,8 +348,14 @@ class GreenhouseNavEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
         if cfg.scene == "greenhouse":
             lp = cfg.layout_params()
             self.diagonal = math.hypot(lp.width, lp.height)
-        else:
+        elif cfg.scene == "corridor":
             self.diagonal = math.hypot(cfg.office_length, cfg.office_width)
+        else:
+            from agri_envs.sim2d.gridmap import grid_to_geometry, load_ros_map
+
+            self._map_geometry = grid_to_geometry(load_ros_map(cfg.map_yaml))
+            xmin, ymin, xmax, ymax = self._map_geometry.bounds
+            self.diagonal = math.hypot(xmax - xmin, ymax - ymin)
         n = self.lidar.spec.n_beams
         # Equal sectors of the full scan for min-pooling to `lidar_beams` values.
         self._pool_edges = np.linspace(0, n, cfg.lidar_beams + 1).round().astype(np.int64)[:-1]
@@ -317,8 +394,10 @@ class GreenhouseNavEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
         layout_rng = self.np_random if cfg.layout_seed < 0 else np.random.default_rng(cfg.layout_seed)
         if cfg.scene == "greenhouse":
             self.layout = generate_layout(cfg.layout_params(), layout_rng)
-        else:
+        elif cfg.scene == "corridor":
             self.layout = generate_office_corridor(cfg.office_params(), layout_rng)
+        else:
+            self.layout = layout_from_map(self._map_geometry, np.asarray(cfg.waypoints))
         self.world = World2D(self.layout.geometry, n_movers=cfg.n_people)
         start = self.layout.start_pose + self.np_random.uniform([-0.05, -0.05, -0.1], [0.05, 0.05, 0.1])
         self.robot = self.world.add_robot(self.robot_spec, start)

@@ -15,12 +15,15 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from pathlib import Path
 
 import numpy as np
 
 from agri_envs.sim2d.crowd import RouteGraph
 from agri_envs.sim2d.geometry import Geometry, GeometryBuilder, Kind
 
+#: A ROS map_server map of the default greenhouse, shipped as an example for ``scene="map"``.
+EXAMPLE_MAP = Path(__file__).parent / "maps" / "example_greenhouse.yaml"
 WALL_THICKNESS = 0.1
 # Plant and leaf sizes across the season (growth 0 -> 1), metres.
 PLANT_RADIUS = (0.06, 0.14)
@@ -276,5 +279,22 @@ def generate_office_corridor(p: OfficeParams, rng: np.random.Generator) -> Layou
         waypoints=waypoints,
         mission=np.array([1, 2, 3, 2, 0]),
         start_pose=_start_facing(waypoints, 1),
+        routes=routes,
+    )
+
+
+def layout_from_map(geometry: Geometry, waypoints: np.ndarray) -> Layout:
+    """A scene loaded from an occupancy map, with the user's waypoints as the loop mission.
+
+    People walk the waypoint loop (the user picked those points on free floor, as on Harik's Fig. 13).
+    """
+    pts = np.asarray(waypoints, dtype=np.float64).reshape(-1, 2)
+    k = len(pts)
+    routes = RouteGraph(nodes=pts.copy(), edges=np.array([(i, (i + 1) % k) for i in range(k)], dtype=np.int64))
+    return Layout(
+        geometry=geometry,
+        waypoints=pts,
+        mission=np.array([*range(1, k), 0]),
+        start_pose=_start_facing(pts, 1),
         routes=routes,
     )
