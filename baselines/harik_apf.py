@@ -282,3 +282,72 @@ def make_harik_apf_gt(env: Any) -> HarikApfPolicy:
         e.robot_spec.max_reverse_speed,
         e.robot_spec.max_turn_rate,
     )
+
+
+class HarikApfSlamPolicy(HarikApfPolicy):
+    """``harik-apf``: the controller fed by Hector SLAM on the LIDAR alone, as on the paper's robot.
+
+    The map frame is anchored at the start pose (the SLAM starts at the origin); the mission comes as the
+    current target in that frame (observation key ``target``), so the env must be made with
+    ``localization="none"`` and ``full_scan=True``. Nothing privileged is used. One SLAM instance per env of
+    a batch, cleared on ``episode_start``.
+    """
+
+    def __init__(self, *args: Any, slam_config: Any = None, **kwargs: Any) -> None:
+        super().__init__(*args, **kwargs)
+        from baselines.hector_slam import HectorSlam, HectorSlamConfig
+
+        self._slam_config = slam_config or HectorSlamConfig()
+        self._make_slam = lambda: HectorSlam(self._slam_config, self.robot.beam_angles, self.robot.lidar_mount)
+        self.slams: list[Any] = []
+
+    def _slam(self, i: int) -> Any:
+        while len(self.slams) <= i:
+            self.slams.append(self._make_slam())
+        return self.slams[i]
+
+    def predict(
+        self,
+        observation: dict[str, np.ndarray],
+        state: Any = None,
+        episode_start: np.ndarray | None = None,
+        deterministic: bool = True,
+    ) -> tuple[np.ndarray, Any]:
+        """Batched actions: SLAM update on each scan, then eqs. 12-14 toward the target in the map frame."""
+        if "scan" not in observation or "target" not in observation:
+            raise ValueError("harik-apf needs the env made with full_scan=True and localization='none'")
+        targets = np.asarray(observation["target"], dtype=np.float64)
+        single = targets.ndim == 1
+        targets = targets.reshape(-1, 2) * self.diagonal
+        n = len(targets)
+        scans = np.asarray(observation["scan"], dtype=np.float64).reshape(n, -1) * self.robot.lidar_max_range
+        sonars = np.asarray(observation["sonar"], dtype=np.float64).reshape(n, -1) * self.robot.sonar_max_range
+        actions = np.zeros((n, 2), dtype=np.float32)
+        for i in range(n):
+            ctrl = self._controller(i)
+            slam = self._slam(i)
+            if episode_start is not None and bool(np.asarray(episode_start).reshape(-1)[i]):
+                ctrl.reset()
+                slam.reset((0.0, 0.0, 0.0))
+            x, y, yaw = slam.update(scans[i])
+            dx, dy = targets[i, 0] - x, targets[i, 1] - y
+            d = math.hypot(dx, dy)  # eq. 2
+            alpha = math.atan2(math.sin(math.atan2(dy, dx) - yaw), math.cos(math.atan2(dy, dx) - yaw))  # eqs. 3-4
+            actions[i] = self.to_action(*ctrl.command(d, alpha, scans[i], sonars[i]))
+        return (actions[0] if single else actions), state
+
+    def pose_estimate(self, index: int = 0) -> np.ndarray:
+        """Current SLAM pose ``(x, y, yaw)`` of env ``index`` in its start frame."""
+        return np.asarray(self._slam(index).pose, dtype=np.float64)
+
+
+def make_harik_apf_slam(env: Any) -> HarikApfSlamPolicy:
+    """``harik-apf``: the controller on the Hector SLAM pose. Env: ``full_scan=True, localization='none'``."""
+    e = env.unwrapped
+    cfg = e.config
+    if not cfg.full_scan or cfg.localization != "none":
+        raise ValueError("harik-apf needs gym.make(..., full_scan=True, localization='none')")
+    spec = e.robot_spec
+    return HarikApfSlamPolicy(
+        robot_geometry(env), e.diagonal, spec.max_speed, spec.max_reverse_speed, spec.max_turn_rate
+    )

@@ -126,10 +126,16 @@ def run_episode(env: gym.Env[Any, Any], policy: Any, seed: int, trace_keys: tupl
     total = 0.0
     steps = 0
     trace: dict[str, list[Any]] = {k: [info.get(k)] for k in trace_keys} if trace_keys else {}
+    localizes = hasattr(policy, "pose_estimate") and "x" in info
+    truth: list[tuple[float, float, float]] = []
+    estimate: list[np.ndarray] = []
     t0 = time.perf_counter()
     while True:
         action, state = policy.predict(obs, state=state, episode_start=np.array([start]), deterministic=True)
         start = False
+        if localizes:  # the estimate for this observation, paired with the true pose it was taken at
+            truth.append((info["x"], info["y"], info["yaw"]))
+            estimate.append(np.asarray(policy.pose_estimate(0), dtype=np.float64))
         obs, reward, terminated, truncated, info = env.step(action)
         total += float(reward)
         steps += 1
@@ -150,7 +156,43 @@ def run_episode(env: gym.Env[Any, Any], policy: Any, seed: int, trace_keys: tupl
         record[key] = info.get(key)
     if hasattr(policy, "episode_metrics"):
         record.update(policy.episode_metrics(0))
+    if localizes and truth:
+        world_est = start_frame_to_world(np.array(truth[0]), np.array(estimate))
+        record.update(localization_errors(np.array(truth), world_est))
+        if trace:
+            trace.update(
+                slam_x=world_est[:, 0].tolist(), slam_y=world_est[:, 1].tolist(), slam_yaw=world_est[:, 2].tolist()
+            )
     return {"record": _jsonable(record), "trace": _jsonable(trace) if trace else None}
+
+
+def start_frame_to_world(start: np.ndarray, poses: np.ndarray) -> np.ndarray:
+    """Poses ``(n, 3)`` given in the frame of the robot's start pose, expressed in the world frame."""
+    c, s = np.cos(start[2]), np.sin(start[2])
+    out = np.empty_like(poses)
+    out[:, 0] = start[0] + c * poses[:, 0] - s * poses[:, 1]
+    out[:, 1] = start[1] + s * poses[:, 0] + c * poses[:, 1]
+    out[:, 2] = np.arctan2(np.sin(poses[:, 2] + start[2]), np.cos(poses[:, 2] + start[2]))
+    return out
+
+
+def localization_errors(truth: np.ndarray, estimate: np.ndarray) -> dict[str, float]:
+    """Absolute trajectory error and final-pose error of a pose estimate against the ground truth.
+
+    Both trajectories share the start pose (the estimate's map frame is anchored there, as on the robot),
+    so no alignment is fitted: the ATE is what the controller actually drove on.
+
+    Returns:
+        ``ate_rmse`` (m), ``ate_max`` (m), ``final_position_error`` (m), ``final_heading_error`` (rad).
+    """
+    err = np.hypot(estimate[:, 0] - truth[:, 0], estimate[:, 1] - truth[:, 1])
+    dyaw = np.arctan2(np.sin(estimate[-1, 2] - truth[-1, 2]), np.cos(estimate[-1, 2] - truth[-1, 2]))
+    return {
+        "ate_rmse": float(np.sqrt(np.mean(err**2))),
+        "ate_max": float(err.max()),
+        "final_position_error": float(err[-1]),
+        "final_heading_error": float(abs(dyaw)),
+    }
 
 
 def summarize(episodes: list[dict[str, Any]]) -> dict[str, Any]:
@@ -176,6 +218,8 @@ def summarize(episodes: list[dict[str, Any]]) -> dict[str, Any]:
         ok = [e["episode_time"] for e in episodes if e["is_success"]]
         summary["mean_time"] = summary["mean_episode_time"]
         summary["mean_time_successful"] = float(np.mean(ok)) if ok else None
+    if "ate_rmse" in episodes[0]:
+        summary["ate_rmse"] = summary["mean_ate_rmse"]
     if "min_clearance" in episodes[0]:
         clearances = [e["min_clearance"] for e in episodes if e.get("min_clearance") is not None]
         summary["min_clearance"] = float(np.min(clearances)) if clearances else None

@@ -131,14 +131,18 @@ class TopDownRenderer:
         max_range: float,
         every: int = 4,
     ) -> None:
-        """Draw LIDAR beams (every ``every``-th) from the sensor pose, with a dot where they hit."""
+        """Draw LIDAR beams with an echo (every ``every``-th beam) and a dot at each hit.
+
+        Beams without an echo (nothing in range, or a dropout) are not drawn, as in RViz.
+        """
         ox, oy, oth = origin
         start = self.to_px(ox, oy)
         for a, r in zip(angles[::every], ranges[::every], strict=True):
+            if r >= max_range - 1e-6:
+                continue
             end = self.to_px(ox + r * math.cos(oth + a), oy + r * math.sin(oth + a))
             self._pg.draw.line(self._overlay, (*COLOURS["lidar"], 60), start, end, 1)
-            if r < max_range - 1e-6:
-                self._pg.draw.circle(self.surface, COLOURS["lidar"], end, 2)
+            self._pg.draw.circle(self.surface, COLOURS["lidar"], end, 2)
 
     def cones(self, poses: np.ndarray, ranges: np.ndarray, aperture: float) -> None:
         """Draw sonar cones as translucent wedges out to each measured range."""
