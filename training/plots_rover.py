@@ -131,8 +131,111 @@ def report_section(results: list[dict[str, Any]], out_dir: Path) -> str:
         fails = failure_lines(result)
         parts.append("Failures:" if fails else "No failures.")
         parts += fails
-        for trace in result.get("traces", [])[:1]:
-            for name in plot_trace(result, trace, out_dir, stem):
-                parts.append(f"![{name}]({name})")
+        if "ate_rmse" in s:
+            parts.append(
+                f"Localization: ATE RMSE {s['mean_ate_rmse']:.3f} m (95 % CI {s['mean_ate_rmse_ci'][0]:.3f}-"
+                f"{s['mean_ate_rmse_ci'][1]:.3f}), final position error {s['mean_final_position_error']:.3f} m, "
+                f"largest error {s['mean_ate_max']:.3f} m (means over episodes)."
+            )
+        if int(result["env_kwargs"].get("mission_cycles", 1)) > 1:
+            parts += repeatability_section(result, out_dir, stem)
+        else:
+            for trace in result.get("traces", [])[:1]:
+                for name in plot_trace(result, trace, out_dir, stem):
+                    parts.append(f"![{name}]({name})")
         parts.append("")
     return "\n".join(parts)
+
+
+def cycle_ends(waypoint_index: np.ndarray, per_cycle: int) -> list[int]:
+    """Trace indices at which each full mission cycle was completed."""
+    ends = []
+    for c in range(1, int(waypoint_index.max()) // per_cycle + 1):
+        hit = np.flatnonzero(waypoint_index >= c * per_cycle)
+        if hit.size:
+            ends.append(int(hit[0]))
+    return ends
+
+
+def repeatability_stats(result: dict[str, Any], trace: dict[str, Any]) -> dict[str, Any]:
+    """Pose drift at the end of each cycle (estimate vs truth) and the spread of the cycles' trajectories.
+
+    The spread of cycle ``c`` is the mean and the largest distance from its path to the first cycle's path.
+    """
+    data = trace["data"]
+    x, y = np.array(data["x"], float), np.array(data["y"], float)
+    wi = np.array(data["waypoint_index"], float)
+    cycles = int(result["env_kwargs"].get("mission_cycles", 1))
+    n_wp = int(result["episodes"][0]["n_waypoints"]) if result["episodes"] else 0
+    per_cycle = max(1, n_wp // max(cycles, 1))
+    ends = cycle_ends(wi, per_cycle)
+    has_est = "slam_x" in data
+    if has_est:
+        ex, ey = np.array(data["slam_x"], float), np.array(data["slam_y"], float)
+    drift = []
+    for k in ends:
+        if has_est:
+            j = min(k, len(ex) - 1)
+            drift.append(float(np.hypot(ex[j] - x[j], ey[j] - y[j])))
+        else:
+            drift.append(0.0)
+    bounds = [0, *ends]
+    paths = [np.stack([x[a : b + 1], y[a : b + 1]], 1) for a, b in zip(bounds[:-1], bounds[1:], strict=True)]
+    spread = []
+    for p in paths[1:]:
+        d = np.min(np.hypot(p[:, None, 0] - paths[0][None, :, 0], p[:, None, 1] - paths[0][None, :, 1]), axis=1)
+        spread.append((float(d.mean()), float(d.max())))
+    return {"drift": drift, "spread": spread, "paths": paths, "has_estimate": has_est}
+
+
+def plot_repeatability(
+    result: dict[str, Any], trace: dict[str, Any], stats: dict[str, Any], out_dir: Path, stem: str
+) -> str:
+    """Overlay of every cycle's trajectory on the map (Harik Fig. 17); returns the file name."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    env = scene_of(result, trace["seed"])
+    geometry = env.unwrapped.layout.geometry
+    env.close()
+    fig, ax = plt.subplots(figsize=(8, 5.5))
+    draw_geometry(ax, geometry)
+    colours = plt.get_cmap("viridis")(np.linspace(0, 1, max(1, len(stats["paths"]))))
+    for c, (p, col) in enumerate(zip(stats["paths"], colours, strict=True)):
+        ax.plot(
+            p[:, 0], p[:, 1], color=col, lw=1.0, label=f"cycle {c + 1}" if c in (0, len(stats["paths"]) - 1) else None
+        )
+    ax.legend(loc="upper right", fontsize=8)
+    ax.set_title(f"{result['policy']}: {len(stats['paths'])} cycles without re-initialisation (Harik Fig. 17)")
+    name = f"{stem}_cycles.png"
+    fig.tight_layout()
+    fig.savefig(out_dir / name, dpi=110)
+    plt.close(fig)
+    return name
+
+
+def repeatability_section(result: dict[str, Any], out_dir: Path, stem: str) -> list[str]:
+    """Markdown lines: per-cycle drift table, spread, and the overlay plot."""
+    traces = result.get("traces", [])
+    if not traces:
+        return []
+    stats = repeatability_stats(result, traces[0])
+    lines = [f"Cycles completed in the traced episode (seed {traces[0]['seed']}): {len(stats['drift'])}.", ""]
+    if stats["has_estimate"]:
+        lines += ["| cycle | pose drift at the end of the cycle [m] |", "|---|---|"]
+        lines += [f"| {c + 1} | {d:.3f} |" for c, d in enumerate(stats["drift"])]
+        lines.append("")
+    else:
+        lines.append("The pose is ground truth here, so there is no drift; the spread shows the control alone.")
+    if stats["spread"]:
+        means = [m for m, _ in stats["spread"]]
+        worst = max(w for _, w in stats["spread"])
+        lines.append(
+            f"Spread of cycles 2-{len(stats['paths'])} around cycle 1: mean distance "
+            f"{np.mean(means):.3f} m, largest {worst:.3f} m."
+        )
+    name = plot_repeatability(result, traces[0], stats, out_dir, stem)
+    lines += ["", f"![{name}]({name})"]
+    return lines
