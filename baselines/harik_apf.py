@@ -197,6 +197,10 @@ class HarikApfPolicy:
     controller is kept per env of a vectorised batch; ``episode_start`` resets it.
     """
 
+    #: Observation keys the policy reads, and the env arguments that provide them.
+    required_keys: tuple[str, ...] = ("scan", "sonar", "waypoint")
+    requirement = "full_scan=True and localization != 'none'"
+
     def __init__(
         self,
         robot: RobotGeometry,
@@ -224,6 +228,15 @@ class HarikApfPolicy:
         a0 = u / self.max_speed if u >= 0 else u / max(self.max_reverse_speed, 1e-9)
         return np.clip(np.array([a0, r / self.max_turn_rate], dtype=np.float32), -1.0, 1.0)
 
+    def start_episode(self, i: int) -> None:
+        """Clear the per-episode memory of env ``i``."""
+        self._controller(i).reset()
+
+    def waypoint_error(self, i: int, obs: dict[str, np.ndarray], scan: np.ndarray) -> tuple[float, float]:
+        """Distance d (m) and angle alpha (rad) of the current waypoint for env ``i`` (eqs. 2-4)."""
+        wp = obs["waypoint"]
+        return float(wp[0]) * self.diagonal, math.atan2(float(wp[1]), float(wp[2]))
+
     def predict(
         self,
         observation: dict[str, np.ndarray],
@@ -232,21 +245,25 @@ class HarikApfPolicy:
         deterministic: bool = True,
     ) -> tuple[np.ndarray, Any]:
         """Batched actions for batched observations (SB3's signature; ``state`` is passed through)."""
-        if "scan" not in observation or "waypoint" not in observation:
-            raise ValueError("harik-apf-gt needs the env made with full_scan=True and localization != 'none'")
-        wp = np.asarray(observation["waypoint"], dtype=np.float64)
-        single = wp.ndim == 1
-        wp = wp.reshape(-1, 3)
-        scans = np.asarray(observation["scan"], dtype=np.float64).reshape(len(wp), -1) * self.robot.lidar_max_range
-        sonars = np.asarray(observation["sonar"], dtype=np.float64).reshape(len(wp), -1) * self.robot.sonar_max_range
-        actions = np.zeros((len(wp), 2), dtype=np.float32)
-        for i in range(len(wp)):
-            ctrl = self._controller(i)
-            if episode_start is not None and bool(np.asarray(episode_start).reshape(-1)[i]):
-                ctrl.reset()
-            d = wp[i, 0] * self.diagonal
-            alpha = math.atan2(wp[i, 1], wp[i, 2])
-            actions[i] = self.to_action(*ctrl.command(d, alpha, scans[i], sonars[i]))
+        missing = [k for k in self.required_keys if k not in observation]
+        if missing:
+            raise ValueError(f"observation lacks {missing}: make the env with {self.requirement}")
+        single = np.asarray(observation["sonar"]).ndim == 1
+        batch = {k: np.asarray(v, dtype=np.float64) for k, v in observation.items()}
+        if single:
+            batch = {k: v[None] for k, v in batch.items()}
+        n = len(batch["sonar"])
+        starts = np.zeros(n, bool) if episode_start is None else np.asarray(episode_start, bool).reshape(-1)
+        actions = np.zeros((n, 2), dtype=np.float32)
+        for i in range(n):
+            if starts[i]:
+                self.start_episode(i)
+            obs_i = {k: v[i] for k, v in batch.items()}
+            scan = obs_i["scan"] * self.robot.lidar_max_range
+            d, alpha = self.waypoint_error(i, obs_i, scan)
+            actions[i] = self.to_action(
+                *self._controller(i).command(d, alpha, scan, obs_i["sonar"] * self.robot.sonar_max_range)
+            )
         return (actions[0] if single else actions), state
 
     def episode_metrics(self, index: int = 0) -> dict[str, float]:
@@ -293,48 +310,34 @@ class HarikApfSlamPolicy(HarikApfPolicy):
     a batch, cleared on ``episode_start``.
     """
 
+    required_keys = ("scan", "sonar", "target")
+    requirement = "full_scan=True and localization='none'"
+
     def __init__(self, *args: Any, slam_config: Any = None, **kwargs: Any) -> None:
         super().__init__(*args, **kwargs)
-        from baselines.hector_slam import HectorSlam, HectorSlamConfig
+        from baselines.hector_slam import HectorSlamConfig
 
-        self._slam_config = slam_config or HectorSlamConfig()
-        self._make_slam = lambda: HectorSlam(self._slam_config, self.robot.beam_angles, self.robot.lidar_mount)
+        self.slam_config = slam_config or HectorSlamConfig()
         self.slams: list[Any] = []
 
     def _slam(self, i: int) -> Any:
+        from baselines.hector_slam import HectorSlam
+
         while len(self.slams) <= i:
-            self.slams.append(self._make_slam())
+            self.slams.append(HectorSlam(self.slam_config, self.robot.beam_angles, self.robot.lidar_mount))
         return self.slams[i]
 
-    def predict(
-        self,
-        observation: dict[str, np.ndarray],
-        state: Any = None,
-        episode_start: np.ndarray | None = None,
-        deterministic: bool = True,
-    ) -> tuple[np.ndarray, Any]:
-        """Batched actions: SLAM update on each scan, then eqs. 12-14 toward the target in the map frame."""
-        if "scan" not in observation or "target" not in observation:
-            raise ValueError("harik-apf needs the env made with full_scan=True and localization='none'")
-        targets = np.asarray(observation["target"], dtype=np.float64)
-        single = targets.ndim == 1
-        targets = targets.reshape(-1, 2) * self.diagonal
-        n = len(targets)
-        scans = np.asarray(observation["scan"], dtype=np.float64).reshape(n, -1) * self.robot.lidar_max_range
-        sonars = np.asarray(observation["sonar"], dtype=np.float64).reshape(n, -1) * self.robot.sonar_max_range
-        actions = np.zeros((n, 2), dtype=np.float32)
-        for i in range(n):
-            ctrl = self._controller(i)
-            slam = self._slam(i)
-            if episode_start is not None and bool(np.asarray(episode_start).reshape(-1)[i]):
-                ctrl.reset()
-                slam.reset((0.0, 0.0, 0.0))
-            x, y, yaw = slam.update(scans[i])
-            dx, dy = targets[i, 0] - x, targets[i, 1] - y
-            d = math.hypot(dx, dy)  # eq. 2
-            alpha = math.atan2(math.sin(math.atan2(dy, dx) - yaw), math.cos(math.atan2(dy, dx) - yaw))  # eqs. 3-4
-            actions[i] = self.to_action(*ctrl.command(d, alpha, scans[i], sonars[i]))
-        return (actions[0] if single else actions), state
+    def start_episode(self, i: int) -> None:
+        """Clear the controller and the SLAM map of env ``i``; the new map frame is the start pose."""
+        super().start_episode(i)
+        self._slam(i).reset((0.0, 0.0, 0.0))
+
+    def waypoint_error(self, i: int, obs: dict[str, np.ndarray], scan: np.ndarray) -> tuple[float, float]:
+        """SLAM update on this scan, then d and alpha (eqs. 2-4) of the target in the map frame."""
+        x, y, yaw = self._slam(i).update(scan)
+        tx, ty = obs["target"] * self.diagonal
+        theta = math.atan2(ty - y, tx - x)
+        return math.hypot(tx - x, ty - y), math.atan2(math.sin(theta - yaw), math.cos(theta - yaw))
 
     def pose_estimate(self, index: int = 0) -> np.ndarray:
         """Current SLAM pose ``(x, y, yaw)`` of env ``index`` in its start frame."""

@@ -73,6 +73,18 @@ def _ray_capsule(ax: float, ay: float, bx: float, by: float, r: float, ux: float
 
 
 @numba.njit(cache=True, inline="always")
+def _capsule_in_frame(
+    capsules: np.ndarray, i: int, ox: float, oy: float, ch: float, sh: float
+) -> tuple[float, float, float, float]:
+    """End points of capsule ``i`` in a frame at ``(ox, oy)`` rotated by the angle with cosine/sine ``ch, sh``."""
+    wx = capsules[i, 0] - ox
+    wy = capsules[i, 1] - oy
+    vx = capsules[i, 2] - ox
+    vy = capsules[i, 3] - oy
+    return ch * wx + sh * wy, -sh * wx + ch * wy, ch * vx + sh * vy, -sh * vx + ch * vy
+
+
+@numba.njit(cache=True, inline="always")
 def _closest_on_segment(ax: float, ay: float, bx: float, by: float) -> tuple[float, float]:
     """Point of segment ``a-b`` closest to the origin."""
     ex = bx - ax
@@ -142,14 +154,7 @@ def cast_scan(
                 if t < out[k]:
                     out[k] = t
     for i in range(capsules.shape[0]):
-        wx = capsules[i, 0] - ox
-        wy = capsules[i, 1] - oy
-        ax = ch * wx + sh * wy
-        ay = -sh * wx + ch * wy
-        wx = capsules[i, 2] - ox
-        wy = capsules[i, 3] - oy
-        bx = ch * wx + sh * wy
-        by = -sh * wx + ch * wy
+        ax, ay, bx, by = _capsule_in_frame(capsules, i, ox, oy, ch, sh)
         r = capsules[i, 4]
         qx, qy = _closest_on_segment(ax, ay, bx, by)
         dmin = math.sqrt(qx * qx + qy * qy)
@@ -233,14 +238,7 @@ def sonar_ranges(
                 continue
             best = min(best, _ray_circle(lx, ly, r, ex_x, ex_y), _ray_circle(lx, ly, r, ex_x, -ex_y))
         for i in range(capsules.shape[0]):
-            wx = capsules[i, 0] - ox
-            wy = capsules[i, 1] - oy
-            ax = ch * wx + sh * wy
-            ay = -sh * wx + ch * wy
-            wx = capsules[i, 2] - ox
-            wy = capsules[i, 3] - oy
-            bx = ch * wx + sh * wy
-            by = -sh * wx + ch * wy
+            ax, ay, bx, by = _capsule_in_frame(capsules, i, ox, oy, ch, sh)
             r = capsules[i, 4]
             qx, qy = _closest_on_segment(ax, ay, bx, by)
             dq = math.sqrt(qx * qx + qy * qy)
@@ -327,14 +325,7 @@ def footprint_clearance(
         ly = -sh * wx + ch * wy
         best = min(best, _point_box_distance(lx, ly, half_length, half_width) - r)
     for i in range(capsules.shape[0]):
-        wx = capsules[i, 0] - px
-        wy = capsules[i, 1] - py
-        ax = ch * wx + sh * wy
-        ay = -sh * wx + ch * wy
-        wx = capsules[i, 2] - px
-        wy = capsules[i, 3] - py
-        bx = ch * wx + sh * wy
-        by = -sh * wx + ch * wy
+        ax, ay, bx, by = _capsule_in_frame(capsules, i, px, py, ch, sh)
         r = capsules[i, 4]
         qx, qy = _closest_on_segment(ax, ay, bx, by)
         if math.sqrt(qx * qx + qy * qy) - r - circ >= best:
