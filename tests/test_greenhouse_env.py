@@ -249,3 +249,20 @@ def test_docstring_documents_every_argument():
     doc = GreenhouseNavEnv.__doc__
     for name in GreenhouseNavConfig.field_names():
         assert f"| ``{name}`` |" in doc, name
+
+
+def test_human_render_headless():
+    env = gym.make(ENV_ID, render_mode="human", render_width=300, **SMALL)
+    env.reset(seed=0)
+    env.step(np.zeros(2))
+    assert env.render() is None
+    env.close()
+
+
+def test_occupancy_grid_of_the_scene():
+    env = gym.make(ENV_ID, n_people=0)
+    env.reset(seed=0)
+    grid = env.unwrapped.occupancy_grid(0.05)
+    start = env.unwrapped.layout.start_pose
+    i, j = grid.world_to_cell(np.array(start[:2]))
+    assert grid.data[i, j] == 0 and (grid.data == 100).mean() > 0.02
