@@ -15,10 +15,12 @@ from __future__ import annotations
 import dataclasses
 import importlib
 from collections.abc import Mapping
-from typing import Any, Protocol
+from typing import TYPE_CHECKING, Any, Protocol
 
-import gymnasium as gym
 import numpy as np
+
+if TYPE_CHECKING:  # the pure algorithms in this package (SLAM, kinematics) must not pull in Gymnasium
+    import gymnasium as gym
 
 
 class Policy(Protocol):
@@ -99,5 +101,25 @@ register_policy(
         env_kwargs={"localization": "ground_truth", "full_scan": True},
         privileged=True,
         description="Harik 2018 APF controller (eqs. 12-14, passive safety stop) on the ground-truth pose",
+    )
+)
+register_policy(
+    PolicySpec(
+        name="harik-apf",
+        env_id="agri_envs/GreenhouseNav-v0",
+        entry_point="baselines.harik_apf:make_harik_apf_slam",
+        env_kwargs={"localization": "none", "full_scan": True},
+        privileged=False,
+        description="Harik 2018 APF controller on a Hector SLAM pose from the LIDAR alone (no odometry)",
+    )
+)
+register_policy(
+    PolicySpec(
+        name="harik-apf-hector-plain",
+        env_id="agri_envs/GreenhouseNav-v0",
+        entry_point="baselines.harik_apf:make_harik_apf_hector_plain",
+        env_kwargs={"localization": "none", "full_scan": True},
+        privileged=False,
+        description="harik-apf on plain Hector SLAM (as ROS hector_mapping: no free-space guard against people)",
     )
 )

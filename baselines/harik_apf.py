@@ -287,7 +287,10 @@ def robot_geometry(env: Any) -> RobotGeometry:
 
 
 def make_harik_apf_gt(env: Any) -> HarikApfPolicy:
-    """``harik-apf-gt``: the controller on the ground-truth pose (privileged). Env: ``full_scan=True``."""
+    """``harik-apf-gt``: the controller on the ground-truth pose (privileged). Env: ``full_scan=True``.
+
+    The controller's ``d_min`` (eq. 13) is the env's waypoint radius (the paper's 30 cm by default).
+    """
     e = env.unwrapped
     cfg = e.config
     if not cfg.full_scan or cfg.localization != "ground_truth":
@@ -298,6 +301,7 @@ def make_harik_apf_gt(env: Any) -> HarikApfPolicy:
         e.robot_spec.max_speed,
         e.robot_spec.max_reverse_speed,
         e.robot_spec.max_turn_rate,
+        params=HarikApfParams(d_min=cfg.waypoint_radius),
     )
 
 
@@ -344,13 +348,40 @@ class HarikApfSlamPolicy(HarikApfPolicy):
         return np.asarray(self._slam(index).pose, dtype=np.float64)
 
 
-def make_harik_apf_slam(env: Any) -> HarikApfSlamPolicy:
-    """``harik-apf``: the controller on the Hector SLAM pose. Env: ``full_scan=True, localization='none'``."""
+def make_harik_apf_slam(env: Any, localization_margin: float = 0.1, slam_config: Any = None) -> HarikApfSlamPolicy:
+    """``harik-apf``: the controller on the Hector SLAM pose. Env: ``full_scan=True, localization='none'``.
+
+    Args:
+        env: A GreenhouseNav env made with the arguments above.
+        localization_margin: The controller's ``d_min`` is the env's waypoint radius minus this (m).
+        slam_config: A :class:`baselines.hector_slam.HectorSlamConfig`; None takes its defaults.
+
+    On the paper's robot the controller itself declared a waypoint reached (eq. 13, d < d_min) and moved
+    on. Here the env counts a waypoint from the true position, so a controller that stops at d_min of
+    its SLAM estimate would wait forever when the estimate is a centimetre off (it then stands at, say,
+    0.306 m from the waypoint with u = 0). The controller therefore aims ``localization_margin`` inside
+    the radius: the env's count, not the estimate, ends each leg. This is the one change from the
+    ground-truth variant; it is reported with the results.
+    """
     e = env.unwrapped
     cfg = e.config
     if not cfg.full_scan or cfg.localization != "none":
         raise ValueError("harik-apf needs gym.make(..., full_scan=True, localization='none')")
     spec = e.robot_spec
+    d_min = max(0.05, cfg.waypoint_radius - localization_margin)
     return HarikApfSlamPolicy(
-        robot_geometry(env), e.diagonal, spec.max_speed, spec.max_reverse_speed, spec.max_turn_rate
+        robot_geometry(env),
+        e.diagonal,
+        spec.max_speed,
+        spec.max_reverse_speed,
+        spec.max_turn_rate,
+        params=HarikApfParams(d_min=d_min),
+        slam_config=slam_config,
     )
+
+
+def make_harik_apf_hector_plain(env: Any) -> HarikApfSlamPolicy:
+    """``harik-apf-hector-plain``: ``harik-apf`` on plain Hector SLAM, without our free-space guard."""
+    from baselines.hector_slam import HectorSlamConfig
+
+    return make_harik_apf_slam(env, slam_config=HectorSlamConfig(free_space_guard=None))

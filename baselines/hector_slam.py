@@ -1,0 +1,467 @@
+"""Hector-style 2D SLAM from a planar LIDAR alone (Kohlbrecher et al. 2011), as used on Harik's rover.
+
+The map is a stack of occupancy grids in log-odds, each level half the resolution of the previous one.
+For every scan the pose is found by Gauss-Newton matching of the scan endpoints against the map, from
+the coarsest level to the finest, starting at the previous pose (no odometry, no motion model). The
+matcher minimises ``sum_i (1 - M(S_i(xi)))^2`` over ``xi = (x, y, psi)`` (Kohlbrecher eqs. 7-13), where
+``M`` is the occupancy probability interpolated bilinearly between the four cells around a point and
+its gradient is the analytic derivative of that interpolation (eqs. 4-6). Note: the public ROS
+``hector_mapping`` code weights the x and y differences of the gradient with the wrong interpolation
+factors (it uses the x factor for the x derivative); this module implements the paper's formula, and
+``tests/test_hector_slam.py`` checks it against finite differences.
+
+The map is updated only when the pose has moved or turned past a threshold since the last update. Every
+beam is traced with Bresenham's algorithm; each cell is updated at most once per scan (a cell that is
+both crossed by one beam and hit by another counts as hit), which keeps the log-odds a count of scans.
+One addition of ours, on by default and switchable (``free_space_guard=None`` gives plain Hector): a beam
+that ends deep inside space the map knows to be free is taken for a moving object and is not mapped.
+Without it, a person who stands in front of the robot for two map updates becomes part of the map, and
+when they walk away the matcher follows them along a featureless corridor (seen in ``corridor`` and
+``plant-development``; the numbers are in the report, under ``harik-apf-hector-plain``).
+
+Grid conventions: level ``l`` has cells of ``resolution * 2**l`` metres and ``map_size >> l`` cells per
+side; the value of cell ``(i, j)`` (row ``i`` along y, column ``j`` along x) sits at the *integer*
+map coordinate ``(j, i)``, and the start pose (the map frame's origin) is the centre of the grid. This
+module is a pure algorithm: numpy and numba only, no Gymnasium.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from typing import Any
+
+import numba
+import numpy as np
+
+# Cells of unknown occupancy have log-odds 0, i.e. probability 0.5, as in hector_mapping.
+_UNKNOWN_PROBABILITY = 0.5
+
+
+@dataclasses.dataclass(frozen=True)
+class HectorSlamConfig:
+    """Parameters of :class:`HectorSlam` (defaults after ROS ``hector_mapping``, unless noted).
+
+    Attributes:
+        resolution: Cell size of the finest level (m). ROS: ``map_resolution`` 0.05.
+        levels: Number of grid levels, each half the resolution of the previous. ROS: ``map_multi_res_levels`` 2-3.
+        map_size: Cells per side of the finest level; the map covers ``map_size * resolution`` metres,
+            centred on the start pose. ROS: ``map_size`` 1024 (51.2 m at 5 cm).
+        update_free: Occupancy probability of a cell a beam passes through. ROS: ``update_factor_free`` 0.4.
+        update_occupied: Occupancy probability of a cell a beam ends in. ROS: ``update_factor_occupied`` 0.9.
+        update_distance: The map is updated after the pose moved this far since the last update (m).
+            ROS: ``map_update_distance_thresh`` 0.4.
+        update_angle: ... or turned this much (rad). The issue's 0.06 rad (ROS ships 0.9).
+        min_range: Beams shorter than this are ignored (m); the TiM561's minimum is 0.05 m.
+        max_range: Beams at or beyond this are no-echo readings and ignored (m); the TiM561's maximum.
+        iterations_fine: Gauss-Newton iterations on the finest level. ROS: 5.
+        iterations_coarse: Gauss-Newton iterations on each coarser level. ROS: 3.
+        max_angle_step: Largest heading change of one Gauss-Newton step (rad). ROS: 0.2.
+        log_odds_limit: Log-odds are clamped to +-this, so the map can follow changes (people, growth).
+        free_space_guard: Not in hector_mapping (an addition of ours, switchable): a beam ending in a cell
+            that lies, with its eight neighbours, deep in known free space (all log-odds below this value,
+            i.e. seen free about five times more often than hit) is taken for a moving object, such as a
+            person stepping into a corridor the robot has seen empty, and does not mark its cell occupied;
+            it still clears the cells it crosses. ``None`` gives plain Hector, which maps a person who
+            stands still for two map updates and then follows them when they walk away.
+    """
+
+    resolution: float = 0.05
+    levels: int = 3
+    map_size: int = 1024
+    update_free: float = 0.4
+    update_occupied: float = 0.9
+    update_distance: float = 0.4
+    update_angle: float = 0.06
+    min_range: float = 0.05
+    max_range: float = 10.0
+    iterations_fine: int = 5
+    iterations_coarse: int = 3
+    max_angle_step: float = 0.2
+    log_odds_limit: float = 50.0
+    free_space_guard: float | None = -2.0
+
+    def __post_init__(self) -> None:
+        if not (self.resolution > 0 and math.isfinite(self.resolution)):
+            raise ValueError(f"HectorSlamConfig: resolution must be > 0 m, got {self.resolution}")
+        if not 1 <= self.levels <= 6:
+            raise ValueError(f"HectorSlamConfig: levels must be in [1, 6], got {self.levels}")
+        if self.map_size < 16 or self.map_size % (1 << (self.levels - 1)):
+            raise ValueError(
+                f"HectorSlamConfig: map_size must be >= 16 and divisible by 2**(levels-1), got {self.map_size}"
+            )
+        if not 0.0 < self.update_free < 0.5 < self.update_occupied < 1.0:
+            raise ValueError("HectorSlamConfig: need 0 < update_free < 0.5 < update_occupied < 1")
+        if self.update_distance < 0 or self.update_angle < 0:
+            raise ValueError("HectorSlamConfig: update_distance and update_angle must be >= 0")
+        if not 0 <= self.min_range < self.max_range:
+            raise ValueError("HectorSlamConfig: need 0 <= min_range < max_range")
+        if self.iterations_fine < 1 or self.iterations_coarse < 0:
+            raise ValueError("HectorSlamConfig: need iterations_fine >= 1 and iterations_coarse >= 0")
+        if self.max_angle_step <= 0 or self.log_odds_limit <= 0:
+            raise ValueError("HectorSlamConfig: max_angle_step and log_odds_limit must be > 0")
+
+
+def _log_odds(p: float) -> float:
+    return math.log(p / (1.0 - p))
+
+
+# --------------------------------------------------------------------------------------------------
+# Kernels
+# --------------------------------------------------------------------------------------------------
+
+
+@numba.njit(cache=True, inline="always")
+def _interpolate(prob: np.ndarray, mx: float, my: float) -> tuple[float, float, float, bool]:
+    """Bilinear map value and its gradient (per cell) at map coordinates ``(mx, my)`` (eqs. 4-6)."""
+    n_rows, n_cols = prob.shape
+    ix = int(math.floor(mx))
+    iy = int(math.floor(my))
+    if ix < 0 or iy < 0 or ix + 1 >= n_cols or iy + 1 >= n_rows:
+        return 0.0, 0.0, 0.0, False
+    fx = mx - ix
+    fy = my - iy
+    v00 = prob[iy, ix]  # P00: (x0, y0)
+    v10 = prob[iy, ix + 1]  # P10: (x1, y0)
+    v01 = prob[iy + 1, ix]  # P01: (x0, y1)
+    v11 = prob[iy + 1, ix + 1]  # P11: (x1, y1)
+    value = (1.0 - fy) * ((1.0 - fx) * v00 + fx * v10) + fy * ((1.0 - fx) * v01 + fx * v11)
+    # Eq. 5: x-differences weighted by the y factors; eq. 6: y-differences weighted by the x factors.
+    dx = fy * (v11 - v01) + (1.0 - fy) * (v10 - v00)
+    dy = fx * (v11 - v10) + (1.0 - fx) * (v01 - v00)
+    return value, dx, dy, True
+
+
+@numba.njit(cache=True)
+def interpolate_map(prob: np.ndarray, mxy: np.ndarray) -> np.ndarray:
+    """Map value and gradient at many map coordinates: ``(n, 2) -> (n, 3)`` of ``(M, dM/dx, dM/dy)``.
+
+    Points outside the grid get ``nan``. Gradients are per cell (divide by the cell size for metres).
+    """
+    out = np.empty((mxy.shape[0], 3))
+    for k in range(mxy.shape[0]):
+        v, dx, dy, ok = _interpolate(prob, mxy[k, 0], mxy[k, 1])
+        if ok:
+            out[k, 0] = v
+            out[k, 1] = dx
+            out[k, 2] = dy
+        else:
+            out[k, :] = np.nan
+    return out
+
+
+@numba.njit(cache=True)
+def _gauss_newton(
+    prob: np.ndarray,
+    cell: float,
+    origin: float,
+    points: np.ndarray,
+    pose: np.ndarray,
+    iterations: int,
+    max_angle_step: float,
+) -> int:
+    """Refine ``pose`` (in place, world frame) on one level; return the number of points used last.
+
+    Each iteration solves ``H dxi = sum J^T (1 - M)`` with ``J = grad M * dS/dxi`` (Kohlbrecher eqs. 9-13).
+    Translations are handled in map cells so that H is well scaled on every level.
+    """
+    used = 0
+    for _ in range(iterations):
+        c = math.cos(pose[2])
+        s = math.sin(pose[2])
+        tx = (pose[0] - origin) / cell
+        ty = (pose[1] - origin) / cell
+        h00 = h01 = h02 = h11 = h12 = h22 = 0.0
+        b0 = b1 = b2 = 0.0
+        used = 0
+        for k in range(points.shape[0]):
+            px = points[k, 0] / cell
+            py = points[k, 1] / cell
+            mx = tx + c * px - s * py
+            my = ty + s * px + c * py
+            value, gx, gy, ok = _interpolate(prob, mx, my)
+            if not ok:
+                continue
+            used += 1
+            residual = 1.0 - value
+            # dS/dpsi of the rotated point (map cells per radian).
+            j2 = gx * (-s * px - c * py) + gy * (c * px - s * py)
+            b0 += gx * residual
+            b1 += gy * residual
+            b2 += j2 * residual
+            h00 += gx * gx
+            h01 += gx * gy
+            h02 += gx * j2
+            h11 += gy * gy
+            h12 += gy * j2
+            h22 += j2 * j2
+        if h00 == 0.0 or h11 == 0.0:
+            break
+        # Solve the symmetric 3x3 system by its adjugate (no LAPACK in the hot loop).
+        a00 = h11 * h22 - h12 * h12
+        a01 = h02 * h12 - h01 * h22
+        a02 = h01 * h12 - h02 * h11
+        det = h00 * a00 + h01 * a01 + h02 * a02
+        if abs(det) < 1e-12:
+            break
+        a11 = h00 * h22 - h02 * h02
+        a12 = h01 * h02 - h00 * h12
+        a22 = h00 * h11 - h01 * h01
+        dx = (a00 * b0 + a01 * b1 + a02 * b2) / det
+        dy = (a01 * b0 + a11 * b1 + a12 * b2) / det
+        dpsi = (a02 * b0 + a12 * b1 + a22 * b2) / det
+        dpsi = min(max_angle_step, max(-max_angle_step, dpsi))
+        pose[0] += dx * cell
+        pose[1] += dy * cell
+        pose[2] += dpsi
+    return used
+
+
+@numba.njit(cache=True, inline="always")
+def _inside_free_space(log_odds: np.ndarray, x: int, y: int, threshold: float) -> bool:
+    """Whether cell ``(x, y)`` and its eight neighbours all have log-odds below ``threshold``."""
+    n_rows, n_cols = log_odds.shape
+    for yy in range(max(0, y - 1), min(n_rows, y + 2)):
+        for xx in range(max(0, x - 1), min(n_cols, x + 2)):
+            if log_odds[yy, xx] >= threshold:
+                return False
+    return True
+
+
+@numba.njit(cache=True)
+def _update_grid(
+    log_odds: np.ndarray,
+    prob: np.ndarray,
+    mark: np.ndarray,
+    free_index: int,
+    sx: float,
+    sy: float,
+    ends: np.ndarray,
+    l_free: float,
+    l_occupied: float,
+    limit: float,
+    free_space_guard: float,
+) -> None:
+    """Trace every beam from the sensor ``(sx, sy)`` to its endpoint (map cells); update each cell once.
+
+    ``mark`` holds, per cell, the index of the last scan that touched it: ``free_index`` when a beam
+    passed through, ``free_index + 1`` when one ended in it. An endpoint in a cell already freed in this
+    scan takes back the free update, so a cell counts either as free or as hit, once. An endpoint deep in
+    known free space (log-odds of the cell and its neighbours below ``free_space_guard``) marks nothing.
+    """
+    n_rows, n_cols = log_odds.shape
+    occupied_index = free_index + 1
+    x0 = int(math.floor(sx + 0.5))
+    y0 = int(math.floor(sy + 0.5))
+    if x0 < 0 or y0 < 0 or x0 >= n_cols or y0 >= n_rows:
+        return
+    for k in range(ends.shape[0]):
+        x1 = int(math.floor(ends[k, 0] + 0.5))
+        y1 = int(math.floor(ends[k, 1] + 0.5))
+        if x1 < 0 or y1 < 0 or x1 >= n_cols or y1 >= n_rows:
+            continue
+        # Bresenham from (x0, y0) to (x1, y1), endpoint excluded.
+        dx = abs(x1 - x0)
+        dy = -abs(y1 - y0)
+        step_x = 1 if x0 < x1 else -1
+        step_y = 1 if y0 < y1 else -1
+        err = dx + dy
+        x = x0
+        y = y0
+        while x != x1 or y != y1:
+            if mark[y, x] < free_index:
+                mark[y, x] = free_index
+                v = max(-limit, log_odds[y, x] + l_free)
+                log_odds[y, x] = v
+                prob[y, x] = 1.0 / (1.0 + math.exp(-v))
+            e2 = 2 * err
+            if e2 >= dy:
+                err += dy
+                x += step_x
+            if e2 <= dx:
+                err += dx
+                y += step_y
+        if mark[y1, x1] < occupied_index and not _inside_free_space(log_odds, x1, y1, free_space_guard):
+            v = log_odds[y1, x1]
+            if mark[y1, x1] == free_index:
+                v -= l_free
+            mark[y1, x1] = occupied_index
+            v = min(limit, v + l_occupied)
+            log_odds[y1, x1] = v
+            prob[y1, x1] = 1.0 / (1.0 + math.exp(-v))
+
+
+# --------------------------------------------------------------------------------------------------
+# The SLAM
+# --------------------------------------------------------------------------------------------------
+
+
+class HectorSlam:
+    """Multi-resolution occupancy-grid SLAM with Gauss-Newton scan matching (one robot).
+
+    Args:
+        config: Parameters (see :class:`HectorSlamConfig`).
+        beam_angles: Angle of every beam in the sensor frame (rad), as the scan's ranges are ordered.
+        lidar_mount: ``(x, y, yaw)`` of the LIDAR on the robot (m, m, rad); the SLAM estimates the pose of
+            the robot, not of the sensor.
+
+    Example::
+
+        slam = HectorSlam(HectorSlamConfig(), beam_angles, (0.28, 0.0, 0.0))
+        slam.reset()
+        for ranges in scans:
+            x, y, yaw = slam.update(ranges)
+    """
+
+    def __init__(
+        self,
+        config: HectorSlamConfig,
+        beam_angles: np.ndarray,
+        lidar_mount: tuple[float, float, float] = (0.0, 0.0, 0.0),
+    ) -> None:
+        self.config = config
+        angles = np.asarray(beam_angles, dtype=np.float64) + lidar_mount[2]
+        self._cos = np.cos(angles)
+        self._sin = np.sin(angles)
+        self._mount = np.array(lidar_mount, dtype=np.float64)
+        self._l_free = _log_odds(config.update_free)
+        self._l_occupied = _log_odds(config.update_occupied)
+        # Grid origin: map coordinate 0 of every level lies this far from the start pose (m).
+        self._origin = -0.5 * config.map_size * config.resolution
+        self.log_odds = [np.zeros((config.map_size >> lvl,) * 2, np.float32) for lvl in range(config.levels)]
+        self.prob = [np.zeros_like(g) for g in self.log_odds]
+        self._mark = [np.zeros(g.shape, np.int32) for g in self.log_odds]
+        self.reset()
+
+    # -- state ----------------------------------------------------------------------------------------
+    def reset(self, pose: tuple[float, float, float] = (0.0, 0.0, 0.0)) -> None:
+        """Clear the map and start a new one with the robot at ``pose`` (normally the origin)."""
+        for lo, pr, mk in zip(self.log_odds, self.prob, self._mark, strict=True):
+            lo.fill(0.0)
+            pr.fill(_UNKNOWN_PROBABILITY)
+            mk.fill(0)
+        self._pose = np.array(pose, dtype=np.float64)
+        self._last_map_pose: np.ndarray | None = None
+        self._scan_index = 0
+        self.scans = 0
+        self.map_updates = 0
+
+    @property
+    def pose(self) -> np.ndarray:
+        """Current robot pose estimate ``(x, y, yaw)`` in the map frame (m, m, rad); a copy."""
+        return self._pose.copy()
+
+    def cell_size(self, level: int) -> float:
+        """Edge of a cell of ``level`` (m)."""
+        return self.config.resolution * (1 << level)
+
+    def world_to_map(self, xy: np.ndarray, level: int = 0) -> np.ndarray:
+        """Map coordinates (cells, fractional) of points ``(..., 2)`` in the map frame."""
+        return (np.asarray(xy, dtype=np.float64) - self._origin) / self.cell_size(level)
+
+    # -- one scan ---------------------------------------------------------------------------------------
+    def scan_points(self, ranges: np.ndarray) -> np.ndarray:
+        """Endpoints ``(k, 2)`` of the valid beams in the robot frame (m); no-echo and too-short beams dropped."""
+        r = np.asarray(ranges, dtype=np.float64)
+        if r.shape != self._cos.shape:
+            raise ValueError(f"HectorSlam: expected {self._cos.size} ranges, got shape {r.shape}")
+        cfg = self.config
+        valid = (r >= cfg.min_range) & (r < cfg.max_range - 1e-6)
+        rv = r[valid]
+        pts = np.empty((rv.size, 2))
+        pts[:, 0] = self._mount[0] + rv * self._cos[valid]
+        pts[:, 1] = self._mount[1] + rv * self._sin[valid]
+        return pts
+
+    def match(self, points: np.ndarray, initial: np.ndarray) -> np.ndarray:
+        """Scan-to-map matching, coarse to fine, from ``initial``; returns the refined pose (a new array)."""
+        cfg = self.config
+        pose = np.array(initial, dtype=np.float64)
+        for level in range(cfg.levels - 1, -1, -1):
+            iterations = cfg.iterations_fine if level == 0 else cfg.iterations_coarse
+            if iterations:
+                _gauss_newton(
+                    self.prob[level],
+                    self.cell_size(level),
+                    self._origin,
+                    points,
+                    pose,
+                    iterations,
+                    cfg.max_angle_step,
+                )
+        pose[2] = math.atan2(math.sin(pose[2]), math.cos(pose[2]))
+        return pose
+
+    def update_map(self, points: np.ndarray, pose: np.ndarray) -> None:
+        """Integrate a scan (robot-frame endpoints) taken at ``pose`` into every level of the map."""
+        c, s = math.cos(pose[2]), math.sin(pose[2])
+        world = np.empty_like(points)
+        world[:, 0] = pose[0] + c * points[:, 0] - s * points[:, 1]
+        world[:, 1] = pose[1] + s * points[:, 0] + c * points[:, 1]
+        sensor = pose[:2] + np.array([c * self._mount[0] - s * self._mount[1], s * self._mount[0] + c * self._mount[1]])
+        self._scan_index += 2
+        cfg = self.config
+        for level in range(cfg.levels):
+            cell = self.cell_size(level)
+            ends = (world - self._origin) / cell
+            sx, sy = (sensor - self._origin) / cell
+            _update_grid(
+                self.log_odds[level],
+                self.prob[level],
+                self._mark[level],
+                self._scan_index,
+                float(sx),
+                float(sy),
+                ends,
+                self._l_free,
+                self._l_occupied,
+                cfg.log_odds_limit,
+                -math.inf if cfg.free_space_guard is None else cfg.free_space_guard,
+            )
+        self._last_map_pose = pose.copy()
+        self.map_updates += 1
+
+    def update(self, ranges: np.ndarray) -> np.ndarray:
+        """Process one scan: match it against the map (after the first), update the map when due.
+
+        Args:
+            ranges: One range per beam (m), ordered like ``beam_angles``.
+
+        Returns:
+            The new pose estimate ``(x, y, yaw)`` (a copy).
+        """
+        points = self.scan_points(ranges)
+        self.scans += 1
+        if self._last_map_pose is None:
+            if len(points):
+                self.update_map(points, self._pose)
+            return self.pose
+        if len(points) >= 3:
+            self._pose = self.match(points, self._pose)
+        moved = self._pose - self._last_map_pose
+        turned = abs(math.atan2(math.sin(moved[2]), math.cos(moved[2])))
+        if math.hypot(moved[0], moved[1]) > self.config.update_distance or turned > self.config.update_angle:
+            self.update_map(points, self._pose)
+        return self.pose
+
+    # -- export ------------------------------------------------------------------------------------------
+    def occupancy_grid(self, level: int = 0, start_pose: tuple[float, float, float] = (0.0, 0.0, 0.0)) -> Any:
+        """The map of ``level`` as an :class:`agri_envs.sim2d.gridmap.OccupancyGrid` (ROS semantics).
+
+        Args:
+            level: Grid level (0 = finest).
+            start_pose: World pose of the map frame's origin (the robot's start pose), so the grid can be
+                compared with the scene; the default keeps the map frame.
+        """
+        from agri_envs.sim2d.gridmap import UNKNOWN, OccupancyGrid
+
+        lo = self.log_odds[level]
+        data = np.rint(100.0 * self.prob[level]).astype(np.int8)
+        data[lo == 0.0] = UNKNOWN
+        cell = self.cell_size(level)
+        x0, y0, th = start_pose
+        # Cell values sit at integer map coordinates, so cell (0, 0) spans [-0.5, 0.5) cells around the origin.
+        corner = self._origin - 0.5 * cell
+        c, s = math.cos(th), math.sin(th)
+        origin = (x0 + c * corner - s * corner, y0 + s * corner + c * corner, th)
+        return OccupancyGrid(data, cell, origin)

@@ -1,0 +1,193 @@
+"""Hector SLAM: interpolation and gradient oracles, once-per-scan updates, scan matching, recorded drives."""
+
+import math
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+import agri_envs  # noqa: F401
+from agri_envs.sim2d.gridmap import rasterize
+from baselines import make_policy, policy_spec
+from baselines.hector_slam import HectorSlam, HectorSlamConfig, interpolate_map
+from training.evaluate import localization_errors, run_episode, start_frame_to_world
+
+ENV_ID = "agri_envs/GreenhouseNav-v0"
+
+
+def compose(a, b):
+    """Pose ``a`` followed by the relative pose ``b`` (SE(2))."""
+    c, s = math.cos(a[2]), math.sin(a[2])
+    return np.array([a[0] + c * b[0] - s * b[1], a[1] + s * b[0] + c * b[1], a[2] + b[2]])
+
+
+@pytest.fixture(scope="module")
+def scene():
+    """A greenhouse without people; returns the env (reset) to scan its geometry without noise."""
+    env = gym.make(ENV_ID, n_people=0)
+    env.reset(seed=3)
+    yield env.unwrapped
+    env.close()
+
+
+def exact_scan(e, pose):
+    return e.lidar.exact_scan(np.asarray(pose, float), e.world.circles, e.world.capsules).copy()
+
+
+def make_slam(e, **kw):
+    return HectorSlam(HectorSlamConfig(**kw), e.lidar.spec.beam_angles, e.lidar.spec.mount)
+
+
+def test_interpolation_hits_cell_values_and_gradient_matches_finite_differences():
+    rng = np.random.default_rng(0)
+    grid = rng.uniform(0, 1, (12, 15)).astype(np.float32)
+    ij = np.array([[3, 4], [7, 11], [0, 0]])
+    at_cells = interpolate_map(grid, ij[:, ::-1].astype(float))  # map coordinates are (x=j, y=i)
+    assert np.allclose(at_cells[:, 0], grid[ij[:, 0], ij[:, 1]])
+    # Analytic gradient of the bilinear patch (the paper's eqs. 5-6) against central differences.
+    pts = rng.uniform(1.05, 10.95, (200, 2))
+    pts = pts[(np.abs(pts - np.rint(pts)) > 0.02).all(axis=1)]  # stay off cell borders (kinks)
+    h = 1e-6
+    fx = (interpolate_map(grid, pts + [h, 0])[:, 0] - interpolate_map(grid, pts - [h, 0])[:, 0]) / (2 * h)
+    fy = (interpolate_map(grid, pts + [0, h])[:, 0] - interpolate_map(grid, pts - [0, h])[:, 0]) / (2 * h)
+    got = interpolate_map(grid, pts)
+    assert np.allclose(got[:, 1], fx, atol=1e-5) and np.allclose(got[:, 2], fy, atol=1e-5)
+    # The swapped weights of the ROS code would differ from the true derivative somewhere.
+    i0 = np.floor(pts).astype(int)
+    f = pts - i0
+    v00, v10 = grid[i0[:, 1], i0[:, 0]], grid[i0[:, 1], i0[:, 0] + 1]
+    v01, v11 = grid[i0[:, 1] + 1, i0[:, 0]], grid[i0[:, 1] + 1, i0[:, 0] + 1]
+    swapped = (1 - f[:, 0]) * (v10 - v00) + f[:, 0] * (v11 - v01)
+    assert not np.allclose(swapped, fx, atol=1e-3)
+    assert np.isnan(interpolate_map(grid, np.array([[-0.5, 3.0], [14.5, 3.0]]))).all()
+
+
+def test_each_cell_updated_once_per_scan():
+    angles = np.array([0.0, 0.0, 0.3])
+    slam = HectorSlam(HectorSlamConfig(levels=1, map_size=64), angles)
+    twice = HectorSlam(HectorSlamConfig(levels=1, map_size=64), np.array([0.0, 0.3]))
+    slam.update(np.array([1.0, 1.0, 1.0]))  # the first beam twice: its cells must count once
+    twice.update(np.array([1.0, 1.0]))
+    assert np.array_equal(slam.log_odds[0], twice.log_odds[0])
+    l_occ = math.log(0.9 / 0.1)
+    l_free = math.log(0.4 / 0.6)
+    lo = slam.log_odds[0]
+    assert lo.max() == pytest.approx(l_occ) and lo.min() == pytest.approx(l_free)
+    # A cell crossed by one beam and hit by another counts as hit, once.
+    cross = HectorSlam(HectorSlamConfig(levels=1, map_size=64), np.array([0.0, 0.0]))
+    cross.update(np.array([2.0, 1.0]))
+    end = cross.world_to_map(np.array([1.0, 0.0]))
+    assert cross.log_odds[0][int(round(end[1])), int(round(end[0]))] == pytest.approx(l_occ)
+
+
+def test_config_and_input_validation():
+    with pytest.raises(ValueError, match="map_size"):
+        HectorSlamConfig(map_size=1000, levels=5)
+    with pytest.raises(ValueError, match="update_free"):
+        HectorSlamConfig(update_free=0.6)
+    slam = HectorSlam(HectorSlamConfig(map_size=64), np.zeros(5))
+    with pytest.raises(ValueError, match="expected 5 ranges"):
+        slam.update(np.ones(4))
+
+
+def test_matcher_recovers_rigid_offsets_against_its_own_map(scene):
+    start = scene.robot.pose.copy()
+    scan = exact_scan(scene, start)
+    slam = make_slam(scene)
+    slam.update(scan)
+    points = slam.scan_points(scan)
+    rng = np.random.default_rng(1)
+    for _ in range(10):
+        offset = rng.uniform([-0.15, -0.15, -0.12], [0.15, 0.15, 0.12])
+        found = slam.match(points, offset)
+        assert np.hypot(*found[:2]) < 0.01 and abs(found[2]) < math.radians(0.5), (offset, found)
+
+
+def test_matcher_recovers_a_known_motion(scene):
+    start = scene.robot.pose.copy()
+    slam = make_slam(scene)
+    slam.update(exact_scan(scene, start))
+    rng = np.random.default_rng(2)
+    for _ in range(5):
+        motion = rng.uniform([-0.12, -0.08, -0.1], [0.12, 0.08, 0.1])
+        second = exact_scan(scene, compose(start, motion))
+        found = slam.match(slam.scan_points(second), np.zeros(3))
+        assert np.hypot(*(found[:2] - motion[:2])) < 0.02 and abs(found[2] - motion[2]) < math.radians(0.5)
+
+
+def test_recorded_drive_stays_near_the_ground_truth_and_maps_the_scene():
+    kw = {"n_rows": 1, "row_length": 4.0, "n_people": 1, "full_scan": True, "localization": "ground_truth"}
+    env = gym.make(ENV_ID, **kw)
+    policy = make_policy("harik-apf-gt", env)
+    e = env.unwrapped
+    slam = make_slam(e)
+    obs, info = env.reset(seed=5)
+    truth, estimate, start = [], [], True
+    while True:
+        estimate.append(slam.update(obs["scan"].astype(np.float64) * e.lidar.spec.max_range))
+        truth.append((info["x"], info["y"], info["yaw"]))
+        action, _ = policy.predict(obs, episode_start=np.array([start]))
+        start = False
+        obs, _, terminated, truncated, info = env.step(action)
+        if terminated or truncated:
+            break
+    assert info["is_success"]
+    truth = np.array(truth)
+    errors = localization_errors(truth, start_frame_to_world(truth[0], np.array(estimate)))
+    assert errors["ate_rmse"] < 0.05 and errors["final_position_error"] < 0.05, errors
+    assert slam.map_updates < slam.scans  # updates only past the motion thresholds
+    # The exported map agrees with the scene: its occupied cells lie on or next to true geometry.
+    grid = slam.occupancy_grid(0, start_pose=tuple(truth[0]))
+    occupied = grid.cell_to_world(np.argwhere(grid.occupied_mask(65)))
+    truth_grid = rasterize(e.layout.geometry, 0.05)
+    cells = truth_grid.world_to_cell(occupied)
+    inside = truth_grid.in_grid(cells)
+    near = np.zeros(len(cells), bool)
+    occ = truth_grid.occupied_mask()
+    for di in (-2, -1, 0, 1, 2):
+        for dj in (-2, -1, 0, 1, 2):
+            i = np.clip(cells[:, 0] + di, 0, truth_grid.height - 1)
+            j = np.clip(cells[:, 1] + dj, 0, truth_grid.width - 1)
+            near |= inside & occ[i, j]
+    assert len(occupied) > 200 and near.mean() > 0.9
+    env.close()
+
+
+def test_harik_apf_is_not_privileged_and_solves_the_easy_preset():
+    spec = policy_spec("harik-apf")
+    assert not spec.privileged and spec.env_kwargs == {"localization": "none", "full_scan": True}
+    with pytest.raises(ValueError, match="localization='none'"):
+        make_policy("harik-apf", gym.make(ENV_ID, full_scan=True))
+    env = gym.make(ENV_ID, n_rows=1, row_length=4.0, n_people=0, full_scan=True, localization="none")
+    policy = make_policy("harik-apf", env)
+    for seed in range(3):
+        record = run_episode(env, policy, seed, None)["record"]
+        assert record["is_success"] and not record["collision"], record
+        assert record["ate_rmse"] < 0.05, record
+    env.close()
+
+
+@pytest.mark.parametrize("guard, mapped", [(-2.0, False), (None, True)])
+def test_free_space_guard_keeps_a_person_out_of_the_map(scene, guard, mapped):
+    start = scene.robot.pose.copy()
+    slam = make_slam(scene, free_space_guard=guard)
+    slam.update(exact_scan(scene, start))
+    for k in range(1, 8):  # look around a little so the space ahead is known free
+        slam.update_map(slam.scan_points(exact_scan(scene, compose(start, (0.0, 0.0, 0.07 * k)))), slam.pose)
+    person = compose(start, (1.2, 0.0, 0.0))
+    circles = np.vstack([scene.world.circles, [[person[0], person[1], 0.2]]])
+    with_person = scene.lidar.exact_scan(start, circles, scene.world.capsules).copy()
+    for _ in range(3):
+        slam.update_map(slam.scan_points(with_person), slam.pose)
+    near_side = slam.world_to_map(np.array([1.0, 0.0]))  # the person's surface, in the map frame
+    cell = slam.log_odds[0][int(round(near_side[1])), int(round(near_side[0]))]
+    assert (cell > 0) == mapped
+
+
+def test_the_slam_module_imports_no_gymnasium():
+    import subprocess
+    import sys
+
+    code = "import sys, baselines.hector_slam; print('gymnasium' in sys.modules)"
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == "False"
