@@ -120,6 +120,6 @@ register_policy(
         entry_point="baselines.harik_apf:make_harik_apf_hector_plain",
         env_kwargs={"localization": "none", "full_scan": True},
         privileged=False,
-        description="harik-apf on plain Hector SLAM (as ROS hector_mapping: no free-space guard against people)",
+        description="harik-apf on plain Hector SLAM, as ROS hector_mapping (no guard against people, no step check)",
     )
 )

@@ -381,7 +381,11 @@ def make_harik_apf_slam(env: Any, localization_margin: float = 0.1, slam_config:
 
 
 def make_harik_apf_hector_plain(env: Any) -> HarikApfSlamPolicy:
-    """``harik-apf-hector-plain``: ``harik-apf`` on plain Hector SLAM, without our free-space guard."""
+    """``harik-apf-hector-plain``: ``harik-apf`` on plain Hector SLAM, without our two safeguards.
+
+    No free-space guard against moving people and no cost check of Gauss-Newton steps, as in ROS
+    ``hector_mapping`` (see :mod:`baselines.hector_slam`).
+    """
     from baselines.hector_slam import HectorSlamConfig
 
-    return make_harik_apf_slam(env, slam_config=HectorSlamConfig(free_space_guard=None))
+    return make_harik_apf_slam(env, slam_config=HectorSlamConfig(free_space_guard=None, max_step_halvings=0))

@@ -167,7 +167,7 @@ def test_harik_apf_is_not_privileged_and_solves_the_easy_preset():
     env.close()
 
 
-@pytest.mark.parametrize("guard, mapped", [(-2.0, False), (None, True)])
+@pytest.mark.parametrize("guard, mapped", [(-0.5, False), (None, True)])
 def test_free_space_guard_keeps_a_person_out_of_the_map(scene, guard, mapped):
     start = scene.robot.pose.copy()
     slam = make_slam(scene, free_space_guard=guard)
@@ -191,3 +191,21 @@ def test_the_slam_module_imports_no_gymnasium():
     code = "import sys, baselines.hector_slam; print('gymnasium' in sys.modules)"
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.strip() == "False"
+
+
+def test_checked_gauss_newton_never_raises_the_matching_cost(scene):
+    from baselines.hector_slam import _gauss_newton, _matching_cost
+
+    start = scene.robot.pose.copy()
+    slam = make_slam(scene)
+    slam.update(exact_scan(scene, start))
+    rng = np.random.default_rng(4)
+    for _ in range(20):
+        motion = rng.uniform([-0.6, -0.6, -0.5], [0.6, 0.6, 0.5])
+        points = slam.scan_points(exact_scan(scene, compose(start, motion)))
+        for level in range(slam.config.levels):
+            args = (slam.prob[level], slam.cell_size(level), slam._origin, points)
+            pose = rng.uniform([-0.5, -0.5, -0.4], [0.5, 0.5, 0.4])
+            before = _matching_cost(*args, *pose)
+            after = _gauss_newton(*args, pose, 5, 0.2, 3)
+            assert after <= before and after == pytest.approx(_matching_cost(*args, *pose))
