@@ -101,3 +101,12 @@ register_policy(
         description="Harik 2018 APF controller (eqs. 12-14, passive safety stop) on the ground-truth pose",
     )
 )
+register_policy(
+    PolicySpec(
+        name="luo-apf",
+        env_id="agri_envs/GrapeHarvest-v0",
+        entry_point="baselines.luo_apf:make_luo_apf",
+        env_kwargs={"control": "joint"},
+        description="Luo 2018: energy-optimal harvesting order (eq. 11) and APF sampling path points (Alg. 1)",
+    )
+)

@@ -45,9 +45,12 @@ class ArmCollisionModel:
         q = np.asarray(q, dtype=np.float64).reshape(-1, 6)
         if len(self.lo) == 0:
             return np.zeros(len(q), dtype=np.int64)
-        pts = self.points.world(link_frames(q))[:, :, None, :]  # (N, m, 1, 3)
-        grow = (self.points.radius + self.margin)[None, :, None, None]
-        inside = np.all((pts >= self.lo - grow) & (pts <= self.hi + grow), axis=-1)  # (N, m, B)
+        pts = self.points.world(link_frames(q))  # (N, m, 3)
+        grow = (self.points.radius + self.margin)[None, :, None]
+        inside = np.ones((len(q), len(grow[0]), len(self.lo)), dtype=bool)  # (N, m, B)
+        for k in range(3):
+            c = pts[:, :, k, None]
+            inside &= (c >= self.lo[:, k] - grow) & (c <= self.hi[:, k] + grow)
         return inside.reshape(len(q), -1).sum(axis=1)
 
     def collides(self, q: np.ndarray) -> np.ndarray:

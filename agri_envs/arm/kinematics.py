@@ -163,7 +163,7 @@ def ik_branches(poses: np.ndarray, q_ref: np.ndarray | None = None) -> tuple[np.
     r03[..., 0, 0], r03[..., 0, 1], r03[..., 0, 2] = c1b * c23, -c1b * s23, -s1b
     r03[..., 1, 0], r03[..., 1, 1], r03[..., 1, 2] = s1b * c23, -s1b * s23, c1b
     r03[..., 2, 0], r03[..., 2, 1], r03[..., 2, 2] = -s23, -c23, 0.0
-    m = np.einsum("nabji,njk->nabik", r03, rot)  # R_03^T R_06
+    m = np.swapaxes(r03, -1, -2) @ rot[:, None, None]  # R_03^T R_06
     # Left-multiplying by RotX(90) maps the rows (r1, r2, r3) of M to (r1, -r3, r2).
     n11, n13, n21, n23 = m[..., 0, 0], m[..., 0, 2], -m[..., 2, 0], -m[..., 2, 2]
     n31, n32, n33 = m[..., 1, 0], m[..., 1, 1], m[..., 1, 2]

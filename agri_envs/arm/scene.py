@@ -21,7 +21,7 @@ import math
 import numpy as np
 
 from agri_envs.arm.collision import ArmCollisionModel
-from agri_envs.arm.kinematics import nearest_ik
+from agri_envs.arm.kinematics import nearest_ik, within_limits
 from agri_envs.arm.robot_model import TOOL_HALF_X, TOOL_HALF_Y, TOOL_LENGTH, TOOL_OVERHANG, flange_pose_for_tip
 
 #: Height of the shoulder (frame 0) above the ground (m): the column on the mobile platform.
@@ -40,6 +40,8 @@ PRE_CUT = 0.10
 #: Home configuration (rad): the arm tucked in, the clamp 0.45 m in front of the base, pointing down.
 HOME_Q = np.radians(np.array([0.0, -60.0, 70.0, 0.0, -40.0, 180.0]))
 _YAW_JITTER = math.radians(12.0)
+_BRANCH_REACH = math.radians(90.0)
+_LIMIT_MARGIN = math.radians(10.0)
 _MAX_ATTEMPTS = 200
 
 
@@ -167,12 +169,21 @@ def _overlap(lo1: np.ndarray, hi1: np.ndarray, lo2: np.ndarray, hi2: np.ndarray)
 
 
 def harvest_configurations(cluster: Cluster, q_ref: np.ndarray = HOME_Q) -> tuple[np.ndarray, np.ndarray] | None:
-    """Joint values at the pre-cut and the cut pose (IK nearest ``q_ref``), or None when out of reach."""
+    """Joint values at the pre-cut and the cut pose (IK nearest ``q_ref``), or None when out of reach.
+
+    Out of reach also means: only reachable by a shoulder or elbow more than 90 deg from home, or within
+    10 deg of a joint limit.
+    """
     pre = nearest_ik(flange_pose_for_tip(cluster.tip_pose(PRE_CUT)), q_ref)
-    if pre is None:
+    # The arm works in its home branch (shoulder facing the row, elbow up): a cluster that only a turned-
+    # around arm could reach is not in the workspace of Fig. 3.
+    if pre is None or np.max(np.abs(pre[:3] - HOME_Q[:3])) > _BRANCH_REACH:
         return None
     cut = nearest_ik(flange_pose_for_tip(cluster.tip_pose()), pre)
     if cut is None or np.max(np.abs(cut - pre)) > 0.8:  # the approach must not switch IK branch
+        return None
+    # Keep clear of the joint limits, so that the arm can still move away from the cut.
+    if not (within_limits(pre, -_LIMIT_MARGIN) and within_limits(cut, -_LIMIT_MARGIN)):
         return None
     return pre, cut
 
