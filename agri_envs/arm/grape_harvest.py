@@ -238,7 +238,7 @@ class GrapeHarvestEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
         )
         self.sim = ArmSim(show_boxes=cfg.show_boxes)
         self._window: Any = None
-        self.home_goal = _goal_of(tip_pose(HOME_Q))
+        self.home_goal = _goal_of(tip_pose(HOME_Q)).astype(np.float32).astype(np.float64)
         self.scene: Scene | None = None
         self.q = HOME_Q.copy()
 
@@ -361,8 +361,9 @@ class GrapeHarvestEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
         return q, False
 
     def _achieved(self) -> np.ndarray:
+        """The achieved goal, rounded to the observation's float32 so that rewards match ``compute_reward``."""
         pos, rot = self.sim.tip_pose()
-        return np.concatenate([pos, rot[:, 2], rot[:, 0]])
+        return np.concatenate([pos, rot[:, 2], rot[:, 0]]).astype(np.float32).astype(np.float64)
 
     def _observe(self, achieved: np.ndarray) -> dict[str, np.ndarray]:
         assert self.scene is not None

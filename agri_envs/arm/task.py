@@ -71,7 +71,9 @@ class HarvestTask:
 
     def reset(self, scene: Scene, home_goal: np.ndarray, achieved: np.ndarray) -> None:
         """Start an episode in ``scene`` with the clamp at ``achieved``."""
-        self.goals = np.array([c.goal() for c in scene.clusters]).reshape(-1, GOAL_DIM)
+        # Goals are kept at the observation's float32 precision, so rewards equal compute_reward(obs goals).
+        self.goals = np.array([c.goal() for c in scene.clusters]).reshape(-1, GOAL_DIM).astype(np.float32)
+        self.goals = self.goals.astype(np.float64)
         self.home_goal = np.asarray(home_goal, dtype=np.float64)
         self.harvested = np.zeros(len(self.goals), dtype=bool)
         self._switch = False
