@@ -222,7 +222,8 @@ class GrapeHarvestEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
         self.action_space = spaces.Box(-1.0, 1.0, (6,), np.float32)
         low, high = _segment_bounds()
         goal_low = np.array([-2.0] * 3 + [-1.0] * 6, dtype=np.float32)
-        self.observation_space = spaces.Dict(
+        self._obs_low, self._obs_high = low, high
+        self.observation_space = spaces.Dict(  # type: ignore[assignment]
             {
                 "observation": spaces.Box(low, high, dtype=np.float32),
                 "achieved_goal": spaces.Box(goal_low, -goal_low, dtype=np.float32),
@@ -382,9 +383,8 @@ class GrapeHarvestEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
         for o in self.scene.obstacles[:MAX_OBSTACLES]:
             obs[k], obs[k + 1 : k + 4], obs[k + 4 : k + 7] = 1.0, o.lo, o.hi
             k += _OBSTACLE_FEATURES
-        low, high = self.observation_space["observation"].low, self.observation_space["observation"].high
         return {
-            "observation": np.clip(obs, low, high).astype(np.float32),
+            "observation": np.clip(obs, self._obs_low, self._obs_high).astype(np.float32),
             "achieved_goal": achieved.astype(np.float32),
             "desired_goal": self.task.desired_goal.astype(np.float32),
         }

@@ -180,10 +180,9 @@ def ik_branches(poses: np.ndarray, q_ref: np.ndarray | None = None) -> tuple[np.
     q[..., 2] = t3[..., None]
     q[..., 0, 3], q[..., 0, 4], q[..., 0, 5] = t4, t5, t6
     q[..., 1, 3], q[..., 1, 4], q[..., 1, 5] = t4 + np.pi, -t5, t6 + np.pi
-    q = q.reshape(n, 8, 6)
-    q = _representative(q, ref[:, None, :])
-    valid = np.repeat(reach_ok, 4, axis=1) & within_limits(q)
-    return q, valid
+    sols = _representative(q.reshape(n, 8, 6), ref[:, None, :])
+    valid = np.repeat(reach_ok, 4, axis=1) & within_limits(sols)
+    return sols, valid
 
 
 def inverse_kinematics(pose: np.ndarray, q_ref: np.ndarray | None = None, tol: float = 1e-9) -> np.ndarray:
