@@ -33,7 +33,7 @@ import numpy as np
 from agri_envs.arm.collision import ArmCollisionModel, box_distance
 from agri_envs.arm.kinematics import JOINT_LIMITS, ik_branches
 from agri_envs.arm.robot_model import flange_pose_for_tip, tip_pose
-from agri_envs.arm.scene import PRE_CUT, tool_rotation
+from agri_envs.arm.scene import PRE_CUT, cut_pose
 
 #: Weights omega_i of eq. 11. The paper weighs each joint by its motor's power without giving numbers; we
 #: take the rated powers of a 6-axis arm of this size (400, 400, 200, 100, 100, 50 W) as shares of the total.
@@ -86,10 +86,7 @@ class ClusterTarget:
 
     def tip_pose(self, offset: float = 0.0) -> np.ndarray:
         """Clamp pose at the cut, or ``offset`` metres back along the approach."""
-        t = np.eye(4)
-        t[:3, :3] = tool_rotation(self.approach, self.down)
-        t[:3, 3] = self.cut_point - offset * self.approach
-        return t
+        return cut_pose(self.cut_point, self.approach, self.down, offset)
 
 
 @dataclasses.dataclass

@@ -11,38 +11,16 @@ with the plan's success rate.
 from __future__ import annotations
 
 import argparse
-import statistics
-import time
 
 import gymnasium as gym
 import numpy as np
+from bench_greenhouse import steps_per_second  # the same measurement: median steps/s of random actions
 
 import agri_envs  # noqa: F401
 from agri_envs.scenarios import scenario
 from baselines.luo_apf import joints_from_observation, plan_harvest, targets_from_observation
 
 ENV_ID = "agri_envs/GrapeHarvest-v0"
-
-
-def steps_per_second(env_id: str, steps: int, runs: int, **kwargs: object) -> float:
-    """Median steps/s of random actions over ``runs`` runs of ``steps`` steps (resets included)."""
-    env = gym.make(env_id, **kwargs)
-    env.action_space.seed(0)
-    env.reset(seed=0)
-    for _ in range(100):
-        env.step(env.action_space.sample())
-    rates = []
-    for run in range(runs):
-        env.reset(seed=run)
-        actions = [env.action_space.sample() for _ in range(steps)]
-        t0 = time.perf_counter()
-        for a in actions:
-            _, _, term, trunc, _ = env.step(a)
-            if term or trunc:
-                env.reset()
-        rates.append(steps / (time.perf_counter() - t0))
-    env.close()
-    return statistics.median(rates)
 
 
 def planning_times(n: int) -> tuple[np.ndarray, float]:

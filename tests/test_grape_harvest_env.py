@@ -171,32 +171,28 @@ def test_several_envs_have_separate_clients_and_close_is_idempotent():
         e.close()
 
 
-def test_make_close_cycles_do_not_grow_memory():
+def peak_rss_growth_kb(warmup, cycles):
+    """Growth of the process's peak RSS over ``cycles`` make/reset/close cycles, after ``warmup`` of them."""
+
     def cycle(n):
         for _ in range(n):
             env = gym.make(ENV_ID)
             env.reset(seed=0)
             env.close()
 
-    cycle(20)
+    cycle(warmup)
     before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
-    cycle(60)
-    grown_kb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss - before
-    assert grown_kb < 20_000, grown_kb
+    cycle(cycles)
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss - before
+
+
+def test_make_close_cycles_do_not_grow_memory():
+    assert peak_rss_growth_kb(20, 60) < 20_000
 
 
 @pytest.mark.slow
 def test_thousand_make_close_cycles_do_not_grow_memory():
-    def cycle(n):
-        for _ in range(n):
-            env = gym.make(ENV_ID)
-            env.reset(seed=0)
-            env.close()
-
-    cycle(50)
-    before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
-    cycle(1000)
-    assert resource.getrusage(resource.RUSAGE_SELF).ru_maxrss - before < 20_000
+    assert peak_rss_growth_kb(50, 1000) < 20_000
 
 
 def test_touching_a_box_is_a_collision_that_ends_the_episode():

@@ -70,8 +70,9 @@ def plot_planned_path(result: dict[str, Any], seed: int, out_dir: Path, stem: st
     policy = make_policy(result["policy"], env)
     policy.predict(obs, episode_start=np.array([True]))
     plan = policy.plans[0]
-    scene = env.unwrapped.scene
-    frame = env.render()
+    unwrapped: Any = env.unwrapped
+    scene = unwrapped.scene
+    frame = np.asarray(env.render())
     env.close()
     fig = plt.figure(figsize=(8, 6.5))
     ax = fig.add_subplot(projection="3d")

@@ -45,6 +45,14 @@ _LIMIT_MARGIN = math.radians(10.0)
 _MAX_ATTEMPTS = 200
 
 
+def cut_pose(cut_point: np.ndarray, approach: np.ndarray, down: np.ndarray, offset: float = 0.0) -> np.ndarray:
+    """Clamp-centre pose at a cutting point (``offset`` = 0) or ``offset`` metres back along the approach."""
+    t = np.eye(4)
+    t[:3, :3] = tool_rotation(approach, down)
+    t[:3, 3] = cut_point - offset * approach
+    return t
+
+
 def tool_rotation(approach: np.ndarray, down: np.ndarray) -> np.ndarray:
     """Rotation whose z axis is the approach direction and x axis the (orthogonalised) pallet-side axis."""
     z = approach / np.linalg.norm(approach)
@@ -75,10 +83,7 @@ class Cluster:
 
     def tip_pose(self, offset: float = 0.0) -> np.ndarray:
         """Clamp-centre pose at the cut (``offset`` = 0) or ``offset`` metres back along the approach."""
-        t = np.eye(4)
-        t[:3, :3] = tool_rotation(self.approach, self.down)
-        t[:3, 3] = self.cut_point - offset * self.approach
-        return t
+        return cut_pose(self.cut_point, self.approach, self.down, offset)
 
     def goal(self) -> np.ndarray:
         """The goal vector of the cut: position (3), approach axis (3), pallet axis (3)."""
