@@ -26,3 +26,4 @@ bench: $(STAMP)
 	$(BIN)/pip install -q -e ".[bench]"
 	$(BIN)/python benchmarks/bench_greenhouse.py
 	$(BIN)/python benchmarks/bench_slam.py
+	$(BIN)/python benchmarks/bench_grape.py

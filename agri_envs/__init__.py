@@ -30,7 +30,7 @@ def register_envs() -> None:
         register(
             id="agri_envs/GrapeHarvest-v0",
             entry_point="agri_envs.arm.grape_harvest:GrapeHarvestEnv",
-            max_episode_steps=500,
+            max_episode_steps=1000,
         )
 
 

@@ -109,3 +109,24 @@ register_scenario(
         default_episodes=5,
     )
 )
+
+_GRAPE = "agri_envs/GrapeHarvest-v0"
+register_scenario(
+    Scenario(
+        _GRAPE,
+        "table2",
+        {"min_clusters": 2, "max_clusters": 5},
+        "Luo sec. 4.2, Table 2: 10 trials with 2-5 clusters at random in the workspace, stems and leaves; "
+        "order, path length, path points, collision and planning time per trial.",
+        default_episodes=10,
+    )
+)
+register_scenario(
+    Scenario(
+        _GRAPE,
+        "table2-success",
+        {"min_clusters": 2, "max_clusters": 5},
+        "The Table 2 protocol over 100 seeds: the success rate with its confidence interval.",
+        default_episodes=100,
+    )
+)

@@ -123,3 +123,12 @@ register_policy(
         description="harik-apf on plain Hector SLAM, as ROS hector_mapping (no guard against people, no step check)",
     )
 )
+register_policy(
+    PolicySpec(
+        name="luo-apf",
+        env_id="agri_envs/GrapeHarvest-v0",
+        entry_point="baselines.luo_apf:make_luo_apf",
+        env_kwargs={"control": "joint"},
+        description="Luo 2018: energy-optimal harvesting order (eq. 11) and APF sampling path points (Alg. 1)",
+    )
+)

@@ -1,0 +1,420 @@
+"""GrapeHarvest-v0: a 6-DOF arm cuts grape clusters without touching their anti-collision boxes (Luo 2018)."""
+
+from __future__ import annotations
+
+import dataclasses
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+from gymnasium import spaces
+
+from agri_envs._config import StrictConfig, param
+from agri_envs.arm.kinematics import JOINT_LIMITS, nearest_ik
+from agri_envs.arm.robot_model import flange_pose_for_tip, tip_pose
+from agri_envs.arm.scene import HOME_Q, Scene, SceneParams, sample_scene
+from agri_envs.arm.sim import ArmSim
+from agri_envs.arm.task import HarvestTask, goal_errors
+
+MAX_CLUSTERS = 5
+MAX_OBSTACLES = 14  # cordon, trunk, up to 4 canes, up to 8 leaves
+_CLUSTER_FEATURES = 17  # present, harvested, cut point (3), approach (3), pallet axis (3), box lo (3), hi (3)
+_OBSTACLE_FEATURES = 7  # present, lo (3), hi (3)
+_ARM_FEATURES = 15  # joints normalised (6), clamp position (3), approach axis (3), pallet axis (3)
+OBS_DIM = _ARM_FEATURES + MAX_CLUSTERS * _CLUSTER_FEATURES + MAX_OBSTACLES * _OBSTACLE_FEATURES
+
+
+@dataclasses.dataclass(frozen=True)
+class GrapeHarvestConfig(StrictConfig):
+    """Arguments of ``agri_envs/GrapeHarvest-v0`` (each one a ``gym.make`` keyword)."""
+
+    min_clusters: int = param(2, "fewest grape clusters in an episode (the count is drawn uniformly)", low=1, high=5)
+    max_clusters: int = param(5, "most grape clusters in an episode", low=1, high=5)
+    n_leaves: int = param(4, "leaves placed around the clusters (fewer when no free place is found)", low=0, high=8)
+    n_canes: int = param(2, "vertical canes in the row plane, besides trunk and cordon", low=0, high=4)
+    cluster_tilt: float = param(0.17, "largest lean of a cluster's hanging axis", unit="rad", low=0.0, high=0.5)
+    position_tolerance: float = param(
+        0.01,
+        "a cutting point (or home) is reached within this distance of the clamp centre",
+        unit="m",
+        low=0.001,
+        high=0.1,
+    )
+    orientation_tolerance: float = param(
+        0.2,
+        "largest angle between the clamp's and the goal's approach and pallet axes",
+        unit="rad",
+        low=0.01,
+        high=3.15,
+    )
+    control: str = param("joint", "action type: joint-position deltas or end-effector deltas", choices=("joint", "ee"))
+    max_joint_step: float = param(
+        0.05, "joint change per step at action 1 (control='joint')", unit="rad", low=0.001, high=0.5
+    )
+    max_ee_step: float = param(
+        0.02, "clamp translation per step at action 1 (control='ee')", unit="m", low=0.001, high=0.1
+    )
+    max_ee_rotation: float = param(
+        0.1, "clamp rotation per step at action 1 (control='ee')", unit="rad", low=0.001, high=0.5
+    )
+    reward_type: str = param("sparse", "sparse (0 / -1) or dense (minus the goal error)", choices=("sparse", "dense"))
+    orientation_weight: float = param(
+        0.1, "dense reward: metres of penalty per radian of axis error", low=0.0, high=10.0
+    )
+    collision_penalty: float = param(1.0, "penalty on a step where the arm touches a box", low=0.0, high=100.0)
+    terminate_on_collision: bool = param(True, "end the episode when any link touches a box")
+    show_boxes: bool = param(True, "draw the clusters' anti-collision boxes in rendered frames")
+    render_width: int = param(480, "width of rendered frames", unit="px", low=64, high=4000)
+    render_height: int = param(360, "height of rendered frames", unit="px", low=64, high=4000)
+
+    def validate(self) -> None:
+        """Check the cluster counts fit together."""
+        if self.min_clusters > self.max_clusters:
+            raise ValueError(
+                f"GrapeHarvestConfig: min_clusters={self.min_clusters} exceeds max_clusters={self.max_clusters}; "
+                "expected min_clusters <= max_clusters."
+            )
+
+    def scene_params(self) -> SceneParams:
+        """The scene part of the config."""
+        return SceneParams(self.min_clusters, self.max_clusters, self.n_leaves, self.n_canes, self.cluster_tilt)
+
+
+def _segment_bounds() -> tuple[np.ndarray, np.ndarray]:
+    """Observation bounds: joints in [-1, 1], positions in [-2, 2] m, axes in [-1, 1], flags in [0, 1]."""
+    arm = ([-1.0] * 6 + [-2.0] * 3 + [-1.0] * 6, [1.0] * 15)
+    arm_high = [1.0] * 6 + [2.0] * 3 + [1.0] * 6
+    cluster = ([0.0, 0.0] + [-2.0] * 3 + [-1.0] * 6 + [-2.0] * 6, [1.0, 1.0] + [2.0] * 3 + [1.0] * 6 + [2.0] * 6)
+    obstacle = ([0.0] + [-2.0] * 6, [1.0] + [2.0] * 6)
+    low = arm[0] + cluster[0] * MAX_CLUSTERS + obstacle[0] * MAX_OBSTACLES
+    high = arm_high + cluster[1] * MAX_CLUSTERS + obstacle[1] * MAX_OBSTACLES
+    return np.array(low, dtype=np.float32), np.array(high, dtype=np.float32)
+
+
+class GrapeHarvestEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
+    """Cut every grape cluster with a 6-DOF arm, never touching a bounding box, then return home.
+
+    ## Description
+
+    The harvesting arm of Luo et al. (2018), built in pybullet from the paper's modified D-H table
+    (Table 1, with a_3 = 100 mm so that the worked example eq. 5 holds), stands on a platform in front
+    of a vine row. Each episode hangs 2-5 grape clusters at random inside the arm's workspace (Fig. 3),
+    each with a cutting point on its peduncle above the berries and an axis-aligned anti-collision box
+    around them (Fig. 2); trunk, cordon, canes and leaves are further boxes. The clamp centre of the
+    end-effector (clamp, pallet and scissor as one tool) must reach each cutting point coming in from the
+    open side of the row with the pallet along the cluster (the orientation that fits the cluster), in
+    any order, and return to its home pose; no link may touch a box. The arm is kinematic: an action sets
+    the joint values directly, within the joint ranges.
+
+    ## Action Space
+
+    ``Box(-1, 1, (6,), float32)``. ``control="joint"`` (default): joint-position deltas, scaled by
+    ``max_joint_step`` and clipped to the joint ranges. ``control="ee"``: clamp translation (3, base
+    frame, scaled by ``max_ee_step``) and rotation vector (3, scaled by ``max_ee_rotation``), solved by the
+    analytic IK (the solution nearest the current joints; the arm stays put when the pose is out of reach,
+    ``info["ik_failed"]``). Actions outside the box are clipped; NaN or inf raises ``ValueError``.
+
+    ## Observation Space
+
+    A goal-conditioned ``Dict`` (like panda-gym's), float32, coordinates in the arm's base frame (m):
+
+    | key | shape | meaning |
+    |---|---|---|
+    | ``observation`` | (198,) | arm (15), then 5 cluster slots (17 each), then 14 obstacle slots (7 each) |
+    | ``achieved_goal`` | (9,) | clamp position, approach axis (tool z), pallet axis (tool x) |
+    | ``desired_goal`` | (9,) | the same for the designated target (1) |
+
+    Arm: joints mapped to [-1, 1] over their ranges, clamp position, approach axis, pallet axis. Cluster
+    slot: present, harvested, cutting point, approach axis, pallet axis, box min, box max. Obstacle slot:
+    present, box min, box max. (1) The unharvested cluster nearest the clamp when the last target was cut;
+    home once all are. Bounds: positions in [-2, 2] m, axes in [-1, 1], flags in [0, 1]. Empty slots are zeros.
+
+    ## Rewards
+
+    ``reward = compute_reward(achieved_goal, desired_goal, info)``, batched over leading axes (HER):
+
+    | ``reward_type`` | formula |
+    |---|---|
+    | ``sparse`` | ``0`` if the goal is reached, else ``-1`` |
+    | ``dense`` | ``-(position error [m] + orientation_weight * axis error [rad])`` |
+
+    minus ``collision_penalty`` when ``info["collision"]``. A goal is reached within
+    ``position_tolerance`` and ``orientation_tolerance``.
+
+    ## Starting State
+
+    The arm at its home configuration (the clamp tucked in 0.45 m in front of the base). The scene is
+    drawn from the episode seed; ``reset(options={"scene": scene})`` places a given
+    :class:`~agri_envs.arm.scene.Scene` instead.
+
+    ## Episode End
+
+    Terminated with success when every cluster is harvested and the clamp is back at its home pose;
+    terminated on contact between any link and a box when ``terminate_on_collision``. Truncated by the
+    ``TimeLimit`` wrapper (``max_episode_steps``, 1000 by default).
+
+    ## Info
+
+    ``is_success``, ``collision``, ``harvested`` (clusters cut so far), ``n_clusters``, ``target_index``
+    (-1: home), ``distance`` (m) and ``angle_error`` (rad) to the designated goal, ``tip_x``, ``tip_y``,
+    ``tip_z`` (m), ``path_length`` (m, of the clamp centre), ``ik_failed``.
+
+    ## Arguments
+
+    Every argument is a field of :class:`GrapeHarvestConfig`; unknown names and values out of range raise
+    ``ValueError`` naming the argument and its valid range.
+
+    | argument | default | unit | valid | meaning |
+    |---|---|---|---|---|
+    | ``min_clusters`` | 2 |  | in [1, 5] | fewest grape clusters in an episode (the count is drawn uniformly) |
+    | ``max_clusters`` | 5 |  | in [1, 5] | most grape clusters in an episode |
+    | ``n_leaves`` | 4 |  | in [0, 8] | leaves placed around the clusters (fewer when no free place is found) |
+    | ``n_canes`` | 2 |  | in [0, 4] | vertical canes in the row plane, besides trunk and cordon |
+    | ``cluster_tilt`` | 0.17 | rad | in [0.0, 0.5] | largest lean of a cluster's hanging axis |
+    | ``position_tolerance`` | 0.01 | m | in [0.001, 0.1] | a cutting point (or home) is reached within this distance |
+    | ``orientation_tolerance`` | 0.2 | rad | in [0.01, 3.15] | largest angle between the clamp's and the goal's axes |
+    | ``control`` | 'joint' |  | one of 'joint', 'ee' | action type: joint-position deltas or end-effector deltas |
+    | ``max_joint_step`` | 0.05 | rad | in [0.001, 0.5] | joint change per step at action 1 (control='joint') |
+    | ``max_ee_step`` | 0.02 | m | in [0.001, 0.1] | clamp translation per step at action 1 (control='ee') |
+    | ``max_ee_rotation`` | 0.1 | rad | in [0.001, 0.5] | clamp rotation per step at action 1 (control='ee') |
+    | ``reward_type`` | 'sparse' |  | one of 'sparse', 'dense' | sparse (0 / -1) or dense (minus the goal error) |
+    | ``orientation_weight`` | 0.1 |  | in [0.0, 10.0] | dense reward: metres of penalty per radian of axis error |
+    | ``collision_penalty`` | 1 |  | in [0.0, 100.0] | penalty on a step where the arm touches a box |
+    | ``terminate_on_collision`` | True |  | True or False | end the episode when any link touches a box |
+    | ``show_boxes`` | True |  | True or False | draw the clusters' anti-collision boxes in rendered frames |
+    | ``render_width`` | 480 | px | in [64, 4000] | width of rendered frames |
+    | ``render_height`` | 360 | px | in [64, 4000] | height of rendered frames |
+
+    Example::
+
+        env = gym.make("agri_envs/GrapeHarvest-v0", min_clusters=3, max_clusters=3, reward_type="dense")
+
+    ## Baselines
+
+    ``luo-apf``: the paper's energy-optimal harvesting order (eq. 11) and APF sampling path points (Alg. 1,
+    eqs. 12-16) with the analytic IK and the point-set collision test (eqs. 6-9). It reads the cutting
+    points and boxes from the observation, as the paper's vision system supplies them; not privileged.
+
+    ## Version History
+
+    * v0: initial release.
+
+    ## References
+
+    L. Luo, H. Wen, Q. Lu, H. Huang, W. Chen, X. Zou and C. Wang, "Collision-Free Path-Planning for
+    Six-DOF Serial Harvesting Robot Based on Energy Optimal and Artificial Potential Field", Complexity
+    2018, 3563846.
+    """
+
+    metadata = {
+        "render_modes": ["rgb_array", "human"],
+        "render_fps": 20,
+        "episode_metric_keys": ("collision", "harvested", "n_clusters", "path_length"),
+        "trace_keys": ("tip_x", "tip_y", "tip_z", "harvested"),
+    }
+
+    def __init__(self, render_mode: str | None = None, **kwargs: Any) -> None:
+        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
+            raise ValueError(f"render_mode must be one of {self.metadata['render_modes']} or None, got {render_mode!r}")
+        self.config = GrapeHarvestConfig.from_kwargs(kwargs)
+        self.render_mode = render_mode
+        cfg = self.config
+        self.action_space = spaces.Box(-1.0, 1.0, (6,), np.float32)
+        low, high = _segment_bounds()
+        goal_low = np.array([-2.0] * 3 + [-1.0] * 6, dtype=np.float32)
+        self._obs_low, self._obs_high = low, high
+        self.observation_space = spaces.Dict(  # type: ignore[assignment]
+            {
+                "observation": spaces.Box(low, high, dtype=np.float32),
+                "achieved_goal": spaces.Box(goal_low, -goal_low, dtype=np.float32),
+                "desired_goal": spaces.Box(goal_low, -goal_low, dtype=np.float32),
+            }
+        )
+        self.task = HarvestTask(
+            cfg.position_tolerance,
+            cfg.orientation_tolerance,
+            cfg.reward_type,
+            cfg.collision_penalty,
+            cfg.orientation_weight,
+        )
+        self.sim = ArmSim(show_boxes=cfg.show_boxes)
+        self._window: Any = None
+        self.home_goal = _goal_of(tip_pose(HOME_Q)).astype(np.float32).astype(np.float64)
+        self.scene: Scene | None = None
+        self.q = HOME_Q.copy()
+
+    # ------------------------------------------------------------------------------------------- API
+
+    def reset(
+        self, *, seed: int | None = None, options: dict[str, Any] | None = None
+    ) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
+        """Draw a new scene (or place ``options["scene"]``) and put the arm home."""
+        super().reset(seed=seed)
+        options = dict(options or {})
+        scene = options.pop("scene", None)
+        if options:
+            raise ValueError(f"reset options {sorted(options)} unknown; allowed: ['scene']")
+        self.scene = scene if scene is not None else sample_scene(self.np_random, self.config.scene_params())
+        self.sim.load_scene(self.scene)
+        self.q = HOME_Q.copy()
+        self.sim.set_joints(self.q)
+        achieved = self._achieved()
+        self.task.reset(self.scene, self.home_goal, achieved)
+        self._path_length = 0.0
+        self._tip = achieved[:3].copy()
+        pos, ang = goal_errors(achieved, self.task.desired_goal)
+        info = self._info({"collision": False, "is_success": False, "distance": pos, "angle_error": ang}, False)
+        if self.render_mode == "human":
+            self.render()
+        return self._observe(achieved), info
+
+    def step(self, action: np.ndarray) -> tuple[dict[str, np.ndarray], float, bool, bool, dict[str, Any]]:
+        """Move the arm by one action, check collisions and harvests, and score the step."""
+        if self.scene is None:
+            raise RuntimeError("call reset() before step()")
+        a = np.asarray(action, dtype=np.float64)
+        if a.shape != (6,):
+            raise ValueError(f"action must have shape (6,), got {np.shape(action)}")
+        if not np.all(np.isfinite(a)):
+            raise ValueError(f"action contains NaN or inf: {action}")
+        a = np.clip(a, -1.0, 1.0)
+        self.task.begin_step(self._achieved())
+        ik_failed = False
+        if self.config.control == "joint":
+            q_new = np.clip(self.q + a * self.config.max_joint_step, JOINT_LIMITS[:, 0], JOINT_LIMITS[:, 1])
+        else:
+            q_new, ik_failed = self._ee_target(a)
+        self.q = q_new
+        self.sim.set_joints(self.q)
+        collision = bool(self.sim.collisions())
+        achieved = self._achieved()
+        self._path_length += float(np.linalg.norm(achieved[:3] - self._tip))
+        self._tip = achieved[:3].copy()
+        outcome = self.task.evaluate(achieved, collision)
+        for i in outcome["harvested_now"]:
+            self.sim.remove_cluster(i)
+        terminated = bool(outcome["is_success"] or (collision and self.config.terminate_on_collision))
+        info = self._info(outcome, ik_failed)
+        if self.render_mode == "human":
+            self.render()
+        return self._observe(achieved), float(outcome["reward"]), terminated, False, info
+
+    def compute_reward(self, achieved_goal: np.ndarray, desired_goal: np.ndarray, info: Any) -> Any:
+        """Reward for (batches of) goals, as in the Rewards section; what HER relabels with."""
+        return self.task.compute_reward(achieved_goal, desired_goal, info)
+
+    def render(self) -> np.ndarray | None:  # type: ignore[override]
+        """An RGB frame from the fixed camera (``rgb_array``), or that frame in a pygame window (``human``)."""
+        if self.render_mode is None:
+            return None
+        frame = self.sim.render(self.config.render_width, self.config.render_height)
+        if self.render_mode == "rgb_array":
+            return frame
+        import pygame  # only the human mode needs a window
+
+        if self._window is None:
+            pygame.display.init()
+            self._window = pygame.display.set_mode((frame.shape[1], frame.shape[0]))
+        pygame.event.pump()
+        self._window.blit(pygame.surfarray.make_surface(np.transpose(frame, (1, 0, 2))), (0, 0))
+        pygame.display.flip()
+        return None
+
+    def close(self) -> None:
+        """Disconnect this env's pybullet client and close the window (idempotent)."""
+        self.sim.close()
+        if self._window is not None:
+            import pygame
+
+            pygame.display.quit()
+            self._window = None
+
+    # ------------------------------------------------------------------------------------- pickling
+
+    def __getstate__(self) -> dict[str, Any]:
+        state = {k: v for k, v in self.__dict__.items() if k not in ("sim", "_window")}
+        state["_harvested_bodies"] = self.task.harvested.copy()
+        return state
+
+    def __setstate__(self, state: dict[str, Any]) -> None:
+        harvested = state.pop("_harvested_bodies")
+        self.__dict__.update(state)
+        self._window = None
+        self.sim = ArmSim(show_boxes=self.config.show_boxes)
+        if self.scene is not None:
+            self.sim.load_scene(self.scene)
+            for i in np.flatnonzero(harvested):
+                self.sim.remove_cluster(int(i))
+        self.sim.set_joints(self.q)
+
+    # -------------------------------------------------------------------------------------- helpers
+
+    def _ee_target(self, a: np.ndarray) -> tuple[np.ndarray, bool]:
+        """Joint values for a clamp-pose delta (analytic IK nearest the current joints)."""
+        cfg = self.config
+        tip = tip_pose(self.q)
+        target = tip.copy()
+        target[:3, 3] += a[:3] * cfg.max_ee_step
+        target[:3, :3] = _rotation(a[3:] * cfg.max_ee_rotation) @ tip[:3, :3]
+        q = nearest_ik(flange_pose_for_tip(target), self.q)
+        if q is None or np.max(np.abs(q - self.q)) > 0.5:  # out of reach, or a jump to another IK branch
+            return self.q.copy(), True
+        return q, False
+
+    def _achieved(self) -> np.ndarray:
+        """The achieved goal, rounded to the observation's float32 so that rewards match ``compute_reward``."""
+        pos, rot = self.sim.tip_pose()
+        return np.concatenate([pos, rot[:, 2], rot[:, 0]]).astype(np.float32).astype(np.float64)
+
+    def _observe(self, achieved: np.ndarray) -> dict[str, np.ndarray]:
+        assert self.scene is not None
+        obs = np.zeros(OBS_DIM, dtype=np.float64)
+        lo, hi = JOINT_LIMITS[:, 0], JOINT_LIMITS[:, 1]
+        obs[:6] = 2.0 * (self.q - lo) / (hi - lo) - 1.0
+        obs[6:15] = achieved
+        k = _ARM_FEATURES
+        for i, c in enumerate(self.scene.clusters):
+            obs[k] = 1.0
+            obs[k + 1] = float(self.task.harvested[i])
+            obs[k + 2 : k + 11] = self.task.goals[i]
+            obs[k + 11 : k + 14], obs[k + 14 : k + 17] = c.box_lo, c.box_hi
+            k += _CLUSTER_FEATURES
+        k = _ARM_FEATURES + MAX_CLUSTERS * _CLUSTER_FEATURES
+        for o in self.scene.obstacles[:MAX_OBSTACLES]:
+            obs[k], obs[k + 1 : k + 4], obs[k + 4 : k + 7] = 1.0, o.lo, o.hi
+            k += _OBSTACLE_FEATURES
+        return {
+            "observation": np.clip(obs, self._obs_low, self._obs_high).astype(np.float32),
+            "achieved_goal": achieved.astype(np.float32),
+            "desired_goal": self.task.desired_goal.astype(np.float32),
+        }
+
+    def _info(self, outcome: dict[str, Any], ik_failed: bool) -> dict[str, Any]:
+        return {
+            "is_success": bool(outcome["is_success"]),
+            "collision": bool(outcome["collision"]),
+            "harvested": int(self.task.harvested.sum()),
+            "n_clusters": len(self.task.goals),
+            "target_index": self.task.target,
+            "distance": float(outcome["distance"]),
+            "angle_error": float(outcome["angle_error"]),
+            "tip_x": float(self._tip[0]),
+            "tip_y": float(self._tip[1]),
+            "tip_z": float(self._tip[2]),
+            "path_length": self._path_length,
+            "ik_failed": ik_failed,
+        }
+
+
+def _goal_of(pose: np.ndarray) -> np.ndarray:
+    return np.concatenate([pose[:3, 3], pose[:3, 2], pose[:3, 0]])
+
+
+def _rotation(rotvec: np.ndarray) -> np.ndarray:
+    """Rotation matrix of a rotation vector (Rodrigues)."""
+    angle = float(np.linalg.norm(rotvec))
+    if angle < 1e-12:
+        return np.eye(3)
+    k = rotvec / angle
+    kx = np.array([[0.0, -k[2], k[1]], [k[2], 0.0, -k[0]], [-k[1], k[0], 0.0]])
+    return np.eye(3) + np.sin(angle) * kx + (1.0 - np.cos(angle)) * kx @ kx

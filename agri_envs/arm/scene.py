@@ -1,0 +1,285 @@
+"""The vine row in front of the arm: grape clusters with cutting points and anti-collision boxes, stems, leaves.
+
+Pure numpy; coordinates are the arm's base frame (frame 0, at the shoulder, z up, x toward the row), in
+metres. A cluster (Luo Fig. 2) is a cone of berries hanging from its peduncle; the cutting point sits on
+the peduncle :data:`PEDUNCLE_GAP` above the berries, and the axis-aligned box around the berries (grown
+by :data:`BOX_MARGIN`) is what the arm must not touch. The clamp reaches the cutting point from the open
+side of the row (the cluster's *approach* axis, horizontal) with the pallet under the berries (the tool's
+x axis along the cluster's hanging axis), which is the orientation that "fits the cluster".
+
+Clusters are drawn inside the arm's reachable workspace (Luo Fig. 3): every cutting pose and its pre-cut
+pose (:data:`PRE_CUT` back along the approach) has an IK solution whose whole arm clears every box, and no
+leaf or stem blocks the clamp's straight approach corridor. Stems (trunk, cordon, canes) stand in the row
+plane behind the clusters; leaves fill the canopy around them.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+
+from agri_envs.arm.collision import ArmCollisionModel
+from agri_envs.arm.kinematics import nearest_ik, within_limits
+from agri_envs.arm.robot_model import TOOL_HALF_X, TOOL_HALF_Y, TOOL_LENGTH, TOOL_OVERHANG, flange_pose_for_tip
+
+#: Height of the shoulder (frame 0) above the ground (m): the column on the mobile platform.
+BASE_HEIGHT = 1.55
+#: Distance of the row plane (trunk, cordon, canes) from the arm's base axis (m).
+ROW_X = 0.86
+#: Region of the cutting points in frame 0 (m): the part of the workspace (Fig. 3) in front of the row.
+CUT_LOW = np.array([0.60, -0.30, -0.34])
+CUT_HIGH = np.array([0.77, 0.30, -0.06])
+#: Distance from the cutting point to the top of the berries along the cluster axis (m).
+PEDUNCLE_GAP = 0.06
+#: Growth of the berries' bounding box into the anti-collision box (m).
+BOX_MARGIN = 0.01
+#: Pre-cut distance: the clamp comes in along the approach axis over the last PRE_CUT metres (m).
+PRE_CUT = 0.10
+#: Home configuration (rad): the arm tucked in, the clamp 0.45 m in front of the base, pointing down.
+HOME_Q = np.radians(np.array([0.0, -60.0, 70.0, 0.0, -40.0, 180.0]))
+_YAW_JITTER = math.radians(12.0)
+_BRANCH_REACH = math.radians(90.0)
+_LIMIT_MARGIN = math.radians(10.0)
+_MAX_ATTEMPTS = 200
+
+
+def cut_pose(cut_point: np.ndarray, approach: np.ndarray, down: np.ndarray, offset: float = 0.0) -> np.ndarray:
+    """Clamp-centre pose at a cutting point (``offset`` = 0) or ``offset`` metres back along the approach."""
+    t = np.eye(4)
+    t[:3, :3] = tool_rotation(approach, down)
+    t[:3, 3] = cut_point - offset * approach
+    return t
+
+
+def tool_rotation(approach: np.ndarray, down: np.ndarray) -> np.ndarray:
+    """Rotation whose z axis is the approach direction and x axis the (orthogonalised) pallet-side axis."""
+    z = approach / np.linalg.norm(approach)
+    x = down - np.dot(down, z) * z
+    x /= np.linalg.norm(x)
+    return np.stack([x, np.cross(z, x), z], axis=1)
+
+
+@dataclasses.dataclass(frozen=True)
+class Cluster:
+    """One grape cluster.
+
+    Attributes:
+        cut_point: Cutting point on the peduncle (m).
+        approach: Unit approach direction of the clamp (its z axis at the cut).
+        down: Unit hanging axis of the cluster (the tool's x axis, pallet side, at the cut).
+        berries: Berry spheres, shape (k, 4): centre (m) and radius (m).
+        box_lo: Anti-collision box minimum ``P_min`` (m).
+        box_hi: Anti-collision box maximum ``P_max`` (m).
+    """
+
+    cut_point: np.ndarray
+    approach: np.ndarray
+    down: np.ndarray
+    berries: np.ndarray
+    box_lo: np.ndarray
+    box_hi: np.ndarray
+
+    def tip_pose(self, offset: float = 0.0) -> np.ndarray:
+        """Clamp-centre pose at the cut (``offset`` = 0) or ``offset`` metres back along the approach."""
+        return cut_pose(self.cut_point, self.approach, self.down, offset)
+
+    def goal(self) -> np.ndarray:
+        """The goal vector of the cut: position (3), approach axis (3), pallet axis (3)."""
+        r = self.tip_pose()[:3, :3]
+        return np.concatenate([self.cut_point, r[:, 2], r[:, 0]])
+
+
+@dataclasses.dataclass(frozen=True)
+class Obstacle:
+    """A stem or a leaf, modelled by its AABB (sec. 2.2)."""
+
+    kind: str  # "trunk", "cordon", "cane" or "leaf"
+    lo: np.ndarray
+    hi: np.ndarray
+
+
+@dataclasses.dataclass(frozen=True)
+class Scene:
+    """Clusters and further obstacles of one episode."""
+
+    clusters: tuple[Cluster, ...]
+    obstacles: tuple[Obstacle, ...]
+
+    def boxes(self, harvested: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """``(lo, hi)`` of every box still in the scene (harvested clusters' boxes leave with them)."""
+        keep = [c for i, c in enumerate(self.clusters) if harvested is None or not harvested[i]]
+        lo = [c.box_lo for c in keep] + [o.lo for o in self.obstacles]
+        hi = [c.box_hi for c in keep] + [o.hi for o in self.obstacles]
+        return np.array(lo).reshape(-1, 3), np.array(hi).reshape(-1, 3)
+
+
+@dataclasses.dataclass(frozen=True)
+class SceneParams:
+    """What varies between episodes (see the env's Arguments)."""
+
+    min_clusters: int = 2
+    max_clusters: int = 5
+    n_leaves: int = 4
+    n_canes: int = 2
+    cluster_tilt: float = 0.17
+
+
+def _rotate(v: np.ndarray, axis: np.ndarray, angle: float) -> np.ndarray:
+    """Rodrigues' rotation of ``v`` about the unit ``axis``."""
+    c, s = math.cos(angle), math.sin(angle)
+    return v * c + np.cross(axis, v) * s + axis * np.dot(axis, v) * (1 - c)
+
+
+def make_cluster(rng: np.random.Generator, cut: np.ndarray, tilt_max: float) -> Cluster:
+    """A cluster with its cutting point at ``cut``, approached from the base side with a random lean."""
+    yaw = math.atan2(cut[1], cut[0]) + rng.uniform(-_YAW_JITTER, _YAW_JITTER)
+    approach = np.array([math.cos(yaw), math.sin(yaw), 0.0])
+    down = _rotate(np.array([0.0, 0.0, -1.0]), approach, rng.uniform(-tilt_max, tilt_max))
+    length, radius = rng.uniform(0.10, 0.16), rng.uniform(0.035, 0.05)
+    side = np.cross(down, approach)
+    berries = []
+    berry = 0.013
+    for level in np.linspace(0.0, 1.0, 5):  # rings of 5, 4, 3, 2, 1 berries: 15 spheres
+        ring_r = (radius - berry) * (1.0 - 0.7 * level)
+        centre = cut + (PEDUNCLE_GAP + berry + level * (length - 2 * berry)) * down
+        n = 5 - int(round(4 * level))
+        phase = rng.uniform(0, 2 * math.pi)
+        for k in range(n):
+            a = phase + 2 * math.pi * k / n
+            offset = ring_r * (math.cos(a) * approach + math.sin(a) * side)
+            berries.append(np.concatenate([centre + offset, [berry]]))
+    b = np.array(berries)
+    lo = np.min(b[:, :3] - b[:, 3:], axis=0) - BOX_MARGIN
+    hi = np.max(b[:, :3] + b[:, 3:], axis=0) + BOX_MARGIN
+    return Cluster(cut.copy(), approach, down, b, lo, hi)
+
+
+def corridor(cluster: Cluster, grow: float = 0.02) -> tuple[np.ndarray, np.ndarray]:
+    """AABB swept by the tool coming in from the pre-cut pose to the cut (grown by ``grow``)."""
+    corners = []
+    for offset in (0.0, PRE_CUT):
+        t = cluster.tip_pose(offset)
+        for sx in (-1, 1):
+            for sy in (-1, 1):
+                for z in (TOOL_OVERHANG, -TOOL_LENGTH):
+                    corners.append(t[:3, :3] @ np.array([sx * TOOL_HALF_X, sy * TOOL_HALF_Y, z]) + t[:3, 3])
+    c = np.array(corners)
+    return c.min(axis=0) - grow, c.max(axis=0) + grow
+
+
+def _overlap(lo1: np.ndarray, hi1: np.ndarray, lo2: np.ndarray, hi2: np.ndarray) -> bool:
+    return bool(np.all(lo1 <= hi2) and np.all(lo2 <= hi1))
+
+
+def harvest_configurations(cluster: Cluster, q_ref: np.ndarray = HOME_Q) -> tuple[np.ndarray, np.ndarray] | None:
+    """Joint values at the pre-cut and the cut pose (IK nearest ``q_ref``), or None when out of reach.
+
+    Out of reach also means: only reachable by a shoulder or elbow more than 90 deg from home, or within
+    10 deg of a joint limit.
+    """
+    pre = nearest_ik(flange_pose_for_tip(cluster.tip_pose(PRE_CUT)), q_ref)
+    # The arm works in its home branch (shoulder facing the row, elbow up): a cluster that only a turned-
+    # around arm could reach is not in the workspace of Fig. 3.
+    if pre is None or np.max(np.abs(pre[:3] - HOME_Q[:3])) > _BRANCH_REACH:
+        return None
+    cut = nearest_ik(flange_pose_for_tip(cluster.tip_pose()), pre)
+    if cut is None or np.max(np.abs(cut - pre)) > 0.8:  # the approach must not switch IK branch
+        return None
+    # Keep clear of the joint limits, so that the arm can still move away from the cut.
+    if not (within_limits(pre, -_LIMIT_MARGIN) and within_limits(cut, -_LIMIT_MARGIN)):
+        return None
+    return pre, cut
+
+
+class _Checker:
+    """Validity of a scene under construction: harvest configurations and corridors stay free."""
+
+    def __init__(self) -> None:
+        self.model = ArmCollisionModel(np.zeros((0, 3)), np.zeros((0, 3)), margin=0.005)
+        self.lo: list[np.ndarray] = []
+        self.hi: list[np.ndarray] = []
+        self.configs: list[np.ndarray] = [HOME_Q]
+        self.corridors: list[tuple[np.ndarray, np.ndarray]] = []
+
+    def free_with(self, lo: np.ndarray, hi: np.ndarray, configs: list[np.ndarray]) -> bool:
+        """Would every configuration stay free with the extra box, and the extra configs with every box?"""
+        if any(_overlap(lo, hi, clo, chi) for clo, chi in self.corridors):
+            return False
+        self.model.set_boxes(lo[None], hi[None])
+        if self.model.collides(np.array(self.configs + configs)).any():
+            return False
+        if configs and self.lo:
+            self.model.set_boxes(np.array(self.lo), np.array(self.hi))
+            if self.model.collides(np.array(configs)).any():
+                return False
+        return True
+
+    def add(self, lo: np.ndarray, hi: np.ndarray, configs: list[np.ndarray], corridor_box: tuple | None) -> None:
+        self.lo.append(lo)
+        self.hi.append(hi)
+        self.configs += configs
+        if corridor_box is not None:
+            self.corridors.append(corridor_box)
+
+
+def sample_scene(rng: np.random.Generator, params: SceneParams) -> Scene:
+    """Draw the clusters, stems and leaves of one episode (see the module docstring for the guarantees)."""
+    n = int(rng.integers(params.min_clusters, params.max_clusters + 1))
+    while True:
+        scene = _try_scene(rng, params, n)
+        if scene is not None:
+            return scene
+
+
+def _try_scene(rng: np.random.Generator, params: SceneParams, n: int) -> Scene | None:
+    check = _Checker()
+    clusters: list[Cluster] = []
+    for _ in range(_MAX_ATTEMPTS):
+        if len(clusters) == n:
+            break
+        c = make_cluster(rng, rng.uniform(CUT_LOW, CUT_HIGH), params.cluster_tilt)
+        if any(np.linalg.norm(c.cut_point - o.cut_point) < 0.12 for o in clusters):
+            continue
+        cor = corridor(c)
+        if any(_overlap(cor[0], cor[1], lo, hi) for lo, hi in zip(check.lo, check.hi, strict=True)):
+            continue
+        configs = harvest_configurations(c)
+        if configs is None or not check.free_with(c.box_lo, c.box_hi, list(configs)):
+            continue
+        check.add(c.box_lo, c.box_hi, list(configs), cor)
+        clusters.append(c)
+    if len(clusters) < n:
+        return None
+    top = max(c.cut_point[2] for c in clusters) + 0.14
+    obstacles = [
+        Obstacle("cordon", np.array([ROW_X - 0.02, -0.7, top - 0.02]), np.array([ROW_X + 0.02, 0.7, top + 0.02])),
+    ]
+    trunk_y = rng.uniform(-0.4, 0.4)
+    obstacles.append(
+        Obstacle(
+            "trunk",
+            np.array([ROW_X - 0.03, trunk_y - 0.03, -BASE_HEIGHT]),
+            np.array([ROW_X + 0.03, trunk_y + 0.03, top - 0.02]),
+        )
+    )
+    for _ in range(params.n_canes):
+        y = rng.uniform(-0.6, 0.6)
+        obstacles.append(
+            Obstacle("cane", np.array([ROW_X - 0.01, y - 0.01, top - 0.55]), np.array([ROW_X + 0.01, y + 0.01, top]))
+        )
+    for o in obstacles:
+        if not check.free_with(o.lo, o.hi, []):
+            return None
+        check.add(o.lo, o.hi, [], None)
+    for _ in range(params.n_leaves):
+        for _attempt in range(30):
+            centre = rng.uniform([0.60, -0.45, -0.42], [ROW_X, 0.45, top])
+            half = rng.uniform([0.03, 0.04, 0.015], [0.06, 0.07, 0.04])
+            if check.free_with(centre - half, centre + half, []):
+                leaf = Obstacle("leaf", centre - half, centre + half)
+                obstacles.append(leaf)
+                check.add(leaf.lo, leaf.hi, [], None)
+                break
+    return Scene(tuple(clusters), tuple(obstacles))

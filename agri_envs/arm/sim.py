@@ -1,0 +1,210 @@
+"""The pybullet side of GrapeHarvest: one physics client per instance, the arm, the vine row, the camera.
+
+Like panda-gym's ``PyBullet`` wrapper, :class:`ArmSim` owns its client (DIRECT by default, so several
+sims live in one process) and closes it in :meth:`close`. The arm is driven kinematically (joint values
+set directly, no dynamics), and collisions are pybullet's closest-point queries between the arm and the
+anti-collision boxes only.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pybullet as pb
+
+from agri_envs.arm.robot_model import URDF_PATH
+from agri_envs.arm.scene import BASE_HEIGHT, PEDUNCLE_GAP, ROW_X, Cluster, Scene
+
+_GREEN = (0.28, 0.55, 0.22, 1.0)
+_BROWN = (0.45, 0.32, 0.2, 1.0)
+_GRAPE = (0.35, 0.12, 0.45, 1.0)
+_BOX = (0.9, 0.15, 0.15, 1.0)
+
+
+class ArmSim:
+    """The arm on its platform in front of the vine row, in one pybullet client.
+
+    Args:
+        gui: Open pybullet's own window (needs a display) instead of a DIRECT client.
+        show_boxes: Draw the anti-collision boxes (translucent) in rendered images.
+    """
+
+    N_JOINTS = 6
+    TIP_LINK = 7  # the clamp_centre link of the URDF
+
+    def __init__(self, gui: bool = False, show_boxes: bool = True) -> None:
+        self.client: int | None = pb.connect(pb.GUI if gui else pb.DIRECT)
+        self.show_boxes = show_boxes
+        if gui:
+            pb.configureDebugVisualizer(pb.COV_ENABLE_GUI, 0, physicsClientId=self.client)
+        self.robot = pb.loadURDF(str(URDF_PATH), useFixedBase=True, physicsClientId=self.client)
+        self._static_visuals()
+        self._box_bodies: list[int] = []
+        self._cluster_bodies: list[int] = []
+
+    def _static_visuals(self) -> None:
+        """Ground, mobile platform and the row's posts: visual only (they take no part in collisions)."""
+        self._visual_box((0.0, 0.0, -BASE_HEIGHT - 0.01), (2.0, 2.0, 0.01), (0.55, 0.5, 0.4, 1))
+        self._visual_box((-0.15, 0.0, -BASE_HEIGHT + 0.3), (0.45, 0.35, 0.3), (0.3, 0.35, 0.45, 1))
+        self._visual_box((0.0, 0.0, -BASE_HEIGHT / 2 - 0.2), (0.07, 0.07, BASE_HEIGHT / 2 - 0.05), (0.4, 0.4, 0.42, 1))
+        for y in (-1.2, 1.2):
+            self._visual_box((ROW_X, y, -BASE_HEIGHT / 2 + 0.15), (0.03, 0.03, BASE_HEIGHT / 2 + 0.15), _BROWN)
+
+    @property
+    def _c(self) -> int:
+        if self.client is None:
+            raise RuntimeError("ArmSim is closed")
+        return self.client
+
+    def _visual_box(self, centre: tuple[float, ...], half: tuple[float, ...], rgba: tuple[float, ...]) -> int:
+        c = self._c
+        vis = pb.createVisualShape(pb.GEOM_BOX, halfExtents=list(half), rgbaColor=list(rgba), physicsClientId=c)
+        return pb.createMultiBody(baseMass=0, baseVisualShapeIndex=vis, basePosition=list(centre), physicsClientId=c)
+
+    def _box_body(self, lo: np.ndarray, hi: np.ndarray, rgba: tuple[float, ...] | None, wire: bool = False) -> int:
+        """A static box with a collision shape; drawn solid, as its 12 edges (``wire``), or not at all."""
+        c = self._c
+        half = 0.5 * (hi - lo)
+        col = pb.createCollisionShape(pb.GEOM_BOX, halfExtents=half.tolist(), physicsClientId=c)
+        vis = -1
+        if rgba is not None and not wire:
+            vis = pb.createVisualShape(pb.GEOM_BOX, halfExtents=half.tolist(), rgbaColor=list(rgba), physicsClientId=c)
+        elif rgba is not None:  # the tiny renderer has no transparency: draw the box as its edges (Fig. 2)
+            t = 0.002
+            extents, centres = [], []
+            for axis in range(3):
+                for s1 in (-1, 1):
+                    for s2 in (-1, 1):
+                        e = np.full(3, t)
+                        e[axis] = half[axis]
+                        ctr = np.zeros(3)
+                        others = [k for k in range(3) if k != axis]
+                        ctr[others[0]], ctr[others[1]] = s1 * half[others[0]], s2 * half[others[1]]
+                        extents.append(e.tolist())
+                        centres.append(ctr.tolist())
+            vis = pb.createVisualShapeArray(
+                shapeTypes=[pb.GEOM_BOX] * 12,
+                halfExtents=extents,
+                rgbaColors=[list(rgba)] * 12,
+                visualFramePositions=centres,
+                physicsClientId=c,
+            )
+        return pb.createMultiBody(
+            baseMass=0,
+            baseCollisionShapeIndex=col,
+            baseVisualShapeIndex=vis,
+            basePosition=(0.5 * (lo + hi)).tolist(),
+            physicsClientId=c,
+        )
+
+    def _cluster_bodies_of(self, cl: Cluster) -> tuple[int, int]:
+        """Berries (one multi-sphere visual body) and peduncle of a cluster."""
+        c = self._c
+        n = len(cl.berries)
+        # pybullet crashes on arrays of more than 16 shapes: clusters have at most 15 berries.
+        vis = pb.createVisualShapeArray(
+            shapeTypes=[pb.GEOM_SPHERE] * n,
+            radii=cl.berries[:, 3].tolist(),
+            rgbaColors=[list(_GRAPE)] * n,
+            visualFramePositions=cl.berries[:, :3].tolist(),
+            physicsClientId=c,
+        )
+        berries = pb.createMultiBody(baseMass=0, baseVisualShapeIndex=vis, physicsClientId=c)
+        top = cl.cut_point + PEDUNCLE_GAP * cl.down
+        length = PEDUNCLE_GAP + 0.05  # from the berries to a little above the cutting point
+        stem = pb.createVisualShape(pb.GEOM_CAPSULE, radius=0.004, length=length, rgbaColor=_GREEN, physicsClientId=c)
+        centre = top - 0.5 * length * cl.down
+        peduncle = pb.createMultiBody(
+            baseMass=0,
+            baseVisualShapeIndex=stem,
+            basePosition=centre.tolist(),
+            baseOrientation=_quat_z_to(-cl.down),
+            physicsClientId=c,
+        )
+        return berries, peduncle
+
+    def load_scene(self, scene: Scene) -> None:
+        """Replace the clusters, stems and leaves by those of ``scene`` (bodies of the last one removed)."""
+        c = self._c
+        for body in self._box_bodies + self._cluster_bodies:
+            pb.removeBody(body, physicsClientId=c)
+        self._box_bodies, self._cluster_bodies = [], []
+        for cl in scene.clusters:
+            self._box_bodies.append(self._box_body(cl.box_lo, cl.box_hi, _BOX if self.show_boxes else None, wire=True))
+            self._cluster_bodies += self._cluster_bodies_of(cl)
+        for ob in scene.obstacles:
+            self._box_bodies.append(self._box_body(ob.lo, ob.hi, _GREEN if ob.kind == "leaf" else _BROWN))
+
+    def remove_cluster(self, index: int) -> None:
+        """Take a harvested cluster (berries, peduncle and box) out of the scene: it is in the clamp now."""
+        c = self._c
+        for body in (self._box_bodies[index], self._cluster_bodies[2 * index], self._cluster_bodies[2 * index + 1]):
+            pb.resetBasePositionAndOrientation(body, [0.0, 0.0, -50.0 - index], [0, 0, 0, 1], physicsClientId=c)
+
+    def set_joints(self, q: np.ndarray) -> None:
+        """Put the arm at joint values ``q`` (rad), kinematically."""
+        c = self._c
+        for j in range(self.N_JOINTS):
+            pb.resetJointState(self.robot, j, float(q[j]), physicsClientId=c)
+
+    def tip_pose(self) -> tuple[np.ndarray, np.ndarray]:
+        """Clamp-centre position (m) and rotation matrix in the base frame."""
+        state = pb.getLinkState(self.robot, self.TIP_LINK, computeForwardKinematics=True, physicsClientId=self._c)
+        return np.array(state[4]), np.array(pb.getMatrixFromQuaternion(state[5])).reshape(3, 3)
+
+    def link_poses(self) -> list[tuple[np.ndarray, np.ndarray]]:
+        """Position and rotation matrix of the URDF frames of links 1..6, tool and clamp centre."""
+        states = pb.getLinkStates(self.robot, list(range(8)), computeForwardKinematics=True, physicsClientId=self._c)
+        return [(np.array(s[4]), np.array(pb.getMatrixFromQuaternion(s[5])).reshape(3, 3)) for s in states]
+
+    def collisions(self, margin: float = 0.0) -> list[int]:
+        """Indices (clusters first, then obstacles) of the boxes the arm touches or comes within ``margin`` of."""
+        c = self._c
+        return [
+            i
+            for i, body in enumerate(self._box_bodies)
+            if pb.getClosestPoints(self.robot, body, distance=margin, physicsClientId=c)
+        ]
+
+    def min_distance(self, limit: float = 0.5) -> float:
+        """Smallest signed distance (m) between the arm and any box still in the scene, capped at ``limit``."""
+        c = self._c
+        best = limit
+        for body in self._box_bodies:
+            for pt in pb.getClosestPoints(self.robot, body, distance=limit, physicsClientId=c):
+                best = min(best, pt[8])
+        return best
+
+    def render(self, width: int, height: int) -> np.ndarray:
+        """An RGB frame (height, width, 3) from a fixed camera behind and beside the platform."""
+        c = self._c
+        view = pb.computeViewMatrix(
+            cameraEyePosition=[-0.2, -1.35, 0.45],
+            cameraTargetPosition=[0.6, 0.0, -0.25],
+            cameraUpVector=[0, 0, 1],
+            physicsClientId=c,
+        )
+        proj = pb.computeProjectionMatrixFOV(
+            fov=50.0, aspect=width / height, nearVal=0.05, farVal=6.0, physicsClientId=c
+        )
+        img = pb.getCameraImage(width, height, view, proj, renderer=pb.ER_TINY_RENDERER, shadow=0, physicsClientId=c)
+        return np.asarray(img[2], dtype=np.uint8).reshape(height, width, 4)[:, :, :3]
+
+    def close(self) -> None:
+        """Disconnect the client (idempotent)."""
+        if self.client is not None:
+            try:
+                pb.disconnect(physicsClientId=self.client)
+            finally:
+                self.client = None
+
+
+def _quat_z_to(direction: np.ndarray) -> list[float]:
+    """Quaternion (x, y, z, w) rotating the z axis onto ``direction``."""
+    d = direction / np.linalg.norm(direction)
+    axis = np.cross([0.0, 0.0, 1.0], d)
+    s = np.linalg.norm(axis)
+    if s < 1e-12:
+        return [0.0, 0.0, 0.0, 1.0] if d[2] > 0 else [1.0, 0.0, 0.0, 0.0]
+    angle = np.arctan2(s, d[2])
+    axis = axis / s * np.sin(angle / 2)
+    return [float(axis[0]), float(axis[1]), float(axis[2]), float(np.cos(angle / 2))]

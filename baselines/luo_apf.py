@@ -1,0 +1,460 @@
+"""Luo et al. (2018): energy-optimal harvesting order (eq. 11) and APF sampling path points (Alg. 1).
+
+:func:`harvest_order` picks the order of the clusters that minimises the weighted sum of joint rotations
+of eq. 11 over the tour home -> clusters -> home, exactly (all n! orders, n <= 5 here). The joint values at
+each cluster are the analytic IK solution at its cutting pose nearest the home configuration.
+
+:func:`plan_harvest` then generates the path points of Alg. 1 cluster after cluster. From the clamp's
+current position it samples ``n_samples`` points on a sphere of radius ``step`` around it, scores them
+with the artificial potential field ``U = U_att + U_rep`` (eqs. 12-13, 15; the forces of eqs. 14 and 16
+are its negative gradient, which the sampling follows), turns the scores into probabilities
+``p ~ exp(-U / temperature)``, and takes the most probable sample whose configuration (analytic IK, the
+solution nearest the current joints, eq. 4) keeps the whole arm clear of every box (the point-set test of
+eqs. 6-9); when none is, it samples again. The orientation is interpolated (slerp) from the start
+orientation to the cluster's along the way. Each harvest ends with a straight approach over the last
+:data:`~agri_envs.arm.scene.PRE_CUT` metres along the cluster's approach axis (the clamp must come in from
+the front, its pallet under the berries) and the same way back; the cut cluster's box leaves with it.
+
+:class:`LuoApfPolicy` is the thin SB3-style adapter: it reads the cutting points and boxes from the
+GrapeHarvest-v0 observation (what the paper's vision system supplies), plans once per episode and
+follows the joint waypoints through joint-delta actions. The planner itself imports no Gymnasium.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import itertools
+import math
+import time
+from typing import Any
+
+import numpy as np
+
+from agri_envs.arm.collision import ArmCollisionModel, box_distance
+from agri_envs.arm.kinematics import JOINT_LIMITS, ik_branches
+from agri_envs.arm.robot_model import flange_pose_for_tip, tip_pose
+from agri_envs.arm.scene import PRE_CUT, cut_pose
+
+#: Weights omega_i of eq. 11. The paper weighs each joint by its motor's power without giving numbers; we
+#: take the rated powers of a 6-axis arm of this size (400, 400, 200, 100, 100, 50 W) as shares of the total.
+JOINT_WEIGHTS = np.array([400.0, 400.0, 200.0, 100.0, 100.0, 50.0]) / 1250.0
+
+
+@dataclasses.dataclass(frozen=True)
+class LuoApfParams:
+    """Parameters of Alg. 1 (the paper tunes them "repeatedly" without giving values; these are ours).
+
+    Attributes:
+        step: Radius of the sampling neighbourhood, i.e. the distance between path points (m).
+        n_samples: Samples drawn per neighbourhood.
+        k_att: Attractive gain k of eq. 13 (1/m^2 scale of U).
+        eta: Repulsive gain eta of eq. 15.
+        rho: Influence range rho of an obstacle in eq. 15 (m).
+        temperature: Temperature of the sample probabilities ``exp(-U / T)``.
+        max_resample: Neighbourhoods drawn at one path point before the planner gives up.
+        max_points: Path points per segment before the planner gives up.
+        max_joint_jump: Largest joint change between consecutive path points (rad): a larger one would
+            switch IK branch and sweep the arm through unchecked space.
+        max_rotation: Largest change of the clamp's orientation between consecutive path points (rad).
+        margin: Clearance added around every box in the collision test (m).
+        spacing: d_min of eq. 7, the spacing of the arm's point set (m).
+    """
+
+    step: float = 0.03
+    n_samples: int = 12
+    k_att: float = 1.0
+    eta: float = 1e-4
+    rho: float = 0.06
+    temperature: float = 1e-4
+    max_resample: int = 8
+    max_points: int = 200
+    max_joint_jump: float = 0.35
+    max_rotation: float = 0.2
+    margin: float = 0.004
+    spacing: float = 0.02
+
+
+@dataclasses.dataclass(frozen=True)
+class ClusterTarget:
+    """What the planner knows of a cluster: its cutting pose and its box."""
+
+    cut_point: np.ndarray
+    approach: np.ndarray
+    down: np.ndarray
+    box_lo: np.ndarray
+    box_hi: np.ndarray
+
+    def tip_pose(self, offset: float = 0.0) -> np.ndarray:
+        """Clamp pose at the cut, or ``offset`` metres back along the approach."""
+        return cut_pose(self.cut_point, self.approach, self.down, offset)
+
+
+@dataclasses.dataclass
+class Plan:
+    """A full harvesting plan.
+
+    Attributes:
+        order: Cluster indices in harvesting order.
+        points: Clamp-centre path points (K, 3) in the base frame (m), start included.
+        waypoints: Joint values (K, 6) at the path points (rad).
+        cuts: Index into ``points`` of each cut, in harvesting order.
+        success: Whether every segment was planned.
+        planning_time: Wall time of the whole plan (s).
+        energy: Value of eq. 11's objective for ``order``.
+    """
+
+    order: tuple[int, ...]
+    points: np.ndarray
+    waypoints: np.ndarray
+    cuts: list[int]
+    success: bool
+    planning_time: float
+    energy: float
+
+    @property
+    def path_length(self) -> float:
+        """Eq. 17: length of the polyline through the path points (m)."""
+        return float(np.sum(np.linalg.norm(np.diff(self.points, axis=0), axis=1)))
+
+
+def order_cost(q_home: np.ndarray, q_clusters: np.ndarray, order: tuple[int, ...]) -> float:
+    """Eq. 11 for one order: sum over joints of omega_i times the joint's total rotation on the tour."""
+    tour = np.vstack([q_home, q_clusters[list(order)], q_home])
+    return float(np.sum(JOINT_WEIGHTS * np.abs(np.diff(tour, axis=0))))
+
+
+def harvest_order(q_home: np.ndarray, q_clusters: np.ndarray) -> tuple[tuple[int, ...], float]:
+    """The order minimising eq. 11, searched over every permutation (ties: the first in lexicographic order).
+
+    Args:
+        q_home: Home configuration (6,).
+        q_clusters: Configuration at each cluster's cut, shape (n, 6).
+
+    Returns:
+        ``(order, cost)``.
+    """
+    n = len(q_clusters)
+    if n == 0:
+        return (), 0.0
+    nodes = np.vstack([q_home, q_clusters])
+    pair = np.sum(JOINT_WEIGHTS * np.abs(nodes[:, None, :] - nodes[None, :, :]), axis=-1)  # (n+1, n+1)
+    perms = np.array(list(itertools.permutations(range(1, n + 1))))
+    cost = pair[0, perms[:, 0]] + pair[perms[:, -1], 0]
+    if n > 1:
+        cost += np.sum(pair[perms[:, :-1], perms[:, 1:]], axis=1)
+    best = int(np.argmin(cost))
+    return tuple(int(i) - 1 for i in perms[best]), float(cost[best])
+
+
+def _log_rotation(r: np.ndarray) -> np.ndarray:
+    """Rotation vector of a rotation matrix."""
+    cos = np.clip((np.trace(r) - 1.0) / 2.0, -1.0, 1.0)
+    angle = math.acos(cos)
+    if angle < 1e-9:
+        return np.zeros(3)
+    if math.pi - angle < 1e-6:  # half turn: the axis from the symmetric part
+        axis = np.sqrt(np.maximum((np.diag(r) + 1.0) / 2.0, 0.0))
+        k = int(np.argmax(axis))
+        axis[[i for i in range(3) if i != k]] *= np.sign(r[k, [i for i in range(3) if i != k]] + 1e-300)
+        return angle * axis / np.linalg.norm(axis)
+    w = np.array([r[2, 1] - r[1, 2], r[0, 2] - r[2, 0], r[1, 0] - r[0, 1]])
+    return angle * w / (2.0 * math.sin(angle))
+
+
+def _exp_rotations(vecs: np.ndarray) -> np.ndarray:
+    """Rotation matrices of rotation vectors (N, 3): shape (N, 3, 3)."""
+    angle = np.linalg.norm(vecs, axis=1)
+    k = vecs / np.maximum(angle, 1e-12)[:, None]
+    kx = np.zeros((len(vecs), 3, 3))
+    kx[:, 0, 1], kx[:, 0, 2], kx[:, 1, 2] = -k[:, 2], k[:, 1], -k[:, 0]
+    kx[:, 1, 0], kx[:, 2, 0], kx[:, 2, 1] = k[:, 2], -k[:, 1], k[:, 0]
+    s, c = np.sin(angle)[:, None, None], np.cos(angle)[:, None, None]
+    return np.eye(3) + s * kx + (1.0 - c) * kx @ kx
+
+
+class ApfPlanner:
+    """Alg. 1 against a set of AABBs, with the arm's point-set collision test.
+
+    Args:
+        lo: Box minima (B, 3) (m).
+        hi: Box maxima (B, 3) (m).
+        rng: Random generator of the samples.
+        params: Planner parameters.
+    """
+
+    def __init__(self, lo: np.ndarray, hi: np.ndarray, rng: np.random.Generator, params: LuoApfParams) -> None:
+        self.p = params
+        self.rng = rng
+        self.model = ArmCollisionModel(lo, hi, margin=params.margin, spacing=params.spacing)
+
+    def set_boxes(self, lo: np.ndarray, hi: np.ndarray) -> None:
+        """Replace the obstacle boxes (a harvested cluster's box leaves the scene)."""
+        self.model.set_boxes(lo, hi)
+
+    def potential(self, x: np.ndarray, goal: np.ndarray) -> np.ndarray:
+        """U_sum of eq. 12 at points (N, 3): eq. 13 plus eq. 15 summed over the boxes.
+
+        ``X - X_0`` of eq. 15 is read as the distance from X to the nearest point of the obstacle's box.
+        """
+        p = self.p
+        u = 0.5 * p.k_att * np.sum((x - goal) ** 2, axis=1)
+        if len(self.model.lo):
+            d = np.maximum(box_distance(x, self.model.lo, self.model.hi), 1e-4)
+            near = d < p.rho
+            u = u + np.sum(np.where(near, 0.5 * p.eta * (1.0 / d - 1.0 / p.rho) ** 2, 0.0), axis=1)
+        return u
+
+    def reachable(self, poses: np.ndarray, q_current: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Nearest IK solutions to ``q_current`` of clamp poses (N, 4, 4), and which are reachable.
+
+        Reachable: an analytic solution inside the joint ranges, with no joint changing by more than
+        ``max_joint_jump`` (a larger change is a switch of IK branch).
+        """
+        q, valid = ik_branches(flange_pose_for_tip(poses), q_current)
+        jump = np.max(np.abs(q - q_current) * (1.0 + JOINT_WEIGHTS), axis=2)
+        jump[~valid] = np.inf
+        rows = np.arange(len(q))
+        best = np.argmin(jump, axis=1)
+        q_best = q[rows, best]
+        ok = np.isfinite(jump[rows, best]) & (np.max(np.abs(q_best - q_current), axis=1) <= self.p.max_joint_jump)
+        return q_best, ok
+
+    def solve(self, poses: np.ndarray, q_current: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`reachable`, and collision-free (eqs. 6-9) too."""
+        q_best, ok = self.reachable(poses, q_current)
+        if ok.any():
+            idx = np.flatnonzero(ok)
+            ok[idx] = ~self.model.collides(q_best[idx])
+        return q_best, ok
+
+    def segment(self, q: np.ndarray, goal: np.ndarray) -> tuple[list[np.ndarray], list[np.ndarray]] | None:
+        """Path points and joint values from configuration ``q`` to the clamp pose ``goal`` (Alg. 1).
+
+        Returns:
+            ``(points, configurations)`` excluding the start and ending exactly at the goal, or None when
+            no collision-free path point was found.
+        """
+        p = self.p
+        start = tip_pose(q)
+        x, r0, rg, xg = start[:3, 3], start[:3, :3], goal[:3, :3], goal[:3, 3]
+        total = max(float(np.linalg.norm(xg - x)), 1e-9)
+        turn = _log_rotation(r0.T @ rg)
+        angle = float(np.linalg.norm(turn))
+        rot_step = 1.0 if angle < 1e-9 else p.max_rotation / angle  # orientation progress per path point
+        frac = 0.0
+        points: list[np.ndarray] = []
+        configs: list[np.ndarray] = []
+        for _ in range(p.max_points):
+            if np.linalg.norm(xg - x) <= p.step and frac + rot_step >= 1.0:
+                q_goal, ok = self.solve(goal[None], q)
+                if not ok[0]:
+                    return None
+                points.append(xg.copy())
+                configs.append(q_goal[0])
+                return points, configs
+            for _attempt in range(p.max_resample):
+                dirs = self.rng.normal(size=(p.n_samples, 3))
+                samples = x + p.step * dirs / np.linalg.norm(dirs, axis=1, keepdims=True)
+                u = self.potential(samples, xg)
+                prob = np.exp(-(u - u.min()) / p.temperature)
+                prob /= prob.sum()
+                # Orientation: slerp by the distance covered, but by at most max_rotation per path point.
+                progress = 1.0 - np.clip(np.linalg.norm(xg - samples, axis=1) / total, 0.0, 1.0)
+                fracs = np.clip(progress, frac, min(1.0, frac + rot_step))
+                poses = np.zeros((p.n_samples, 4, 4))
+                poses[:, :3, :3] = r0 @ _exp_rotations(fracs[:, None] * turn)
+                poses[:, :3, 3], poses[:, 3, 3] = samples, 1.0
+                q_new, ok = self.reachable(poses, q)
+                # The most probable reachable sample that keeps the arm clear; a colliding one is resampled.
+                pick = next((int(k) for k in np.argsort(-prob) if ok[k] and not self.model.collides(q_new[k])[0]), -1)
+                if pick >= 0:
+                    x, q, frac = samples[pick], q_new[pick], float(fracs[pick])
+                    points.append(x.copy())
+                    configs.append(q.copy())
+                    break
+            else:
+                return None
+        return None
+
+    def straight(self, q: np.ndarray, target: ClusterTarget) -> tuple[list[np.ndarray], list[np.ndarray]] | None:
+        """Path points of the straight approach from the pre-cut pose to the cut (orientation fixed)."""
+        n = max(1, math.ceil(PRE_CUT / self.p.step))
+        poses = np.array([target.tip_pose(PRE_CUT * (1.0 - k / n)) for k in range(1, n + 1)])
+        q_new, ok = self.solve(poses, q)  # one batch: the approach is short, the IK branch stays that of q
+        steps = np.diff(np.vstack([q, q_new]), axis=0)
+        if not ok.all() or np.max(np.abs(steps)) > self.p.max_joint_jump:
+            return None
+        return list(poses[:, :3, 3]), list(q_new)
+
+
+def cut_configurations(q_home: np.ndarray, targets: list[ClusterTarget]) -> np.ndarray | None:
+    """Joint values at each cluster's cut (IK nearest home, through its pre-cut pose), for eq. 11."""
+    out = []
+    for t in targets:
+        pre, ok = ik_branches(flange_pose_for_tip(t.tip_pose(PRE_CUT))[None], q_home)
+        if not ok[0].any():
+            return None
+        q_pre = pre[0][ok[0]][np.argmin(np.max(np.abs(pre[0][ok[0]] - q_home), axis=1))]
+        cut, ok = ik_branches(flange_pose_for_tip(t.tip_pose())[None], q_pre)
+        if not ok[0].any():
+            return None
+        out.append(cut[0][ok[0]][np.argmin(np.max(np.abs(cut[0][ok[0]] - q_pre), axis=1))])
+    return np.array(out).reshape(-1, 6)
+
+
+def plan_harvest(
+    q_start: np.ndarray,
+    targets: list[ClusterTarget],
+    obstacles_lo: np.ndarray,
+    obstacles_hi: np.ndarray,
+    rng: np.random.Generator,
+    params: LuoApfParams | None = None,
+) -> Plan:
+    """The full plan: eq. 11's order, then Alg. 1 to each cluster, the cut, and back home.
+
+    Args:
+        q_start: Start (and home) configuration (6,).
+        targets: The clusters.
+        obstacles_lo: Minima (B, 3) of the boxes other than the clusters' (stems, leaves).
+        obstacles_hi: Maxima (B, 3) of those boxes.
+        rng: Random generator of Alg. 1's samples.
+        params: Planner parameters (defaults when None).
+    """
+    t0 = time.perf_counter()
+    p = params or LuoApfParams()
+    q_home = np.asarray(q_start, dtype=np.float64)
+    q_cut = cut_configurations(q_home, targets)
+    order, energy = harvest_order(q_home, q_cut) if q_cut is not None else (tuple(range(len(targets))), math.nan)
+    left = list(range(len(targets)))
+
+    def boxes() -> tuple[np.ndarray, np.ndarray]:
+        lo = np.vstack([obstacles_lo.reshape(-1, 3)] + [targets[i].box_lo[None] for i in left])
+        hi = np.vstack([obstacles_hi.reshape(-1, 3)] + [targets[i].box_hi[None] for i in left])
+        return lo, hi
+
+    planner = ApfPlanner(*boxes(), rng=rng, params=p)
+    q = q_home.copy()
+    points, configs, cuts = [tip_pose(q)[:3, 3]], [q.copy()], []
+    success = True
+    home_pose = tip_pose(q_home)
+    for i in (*order, None):
+        goal = home_pose if i is None else targets[i].tip_pose(PRE_CUT)
+        seg = planner.segment(q, goal)
+        if seg is not None and i is not None:
+            approach = planner.straight(seg[1][-1], targets[i])
+            seg = None if approach is None else (seg[0] + approach[0], seg[1] + approach[1])
+        if seg is None:
+            success = False
+            break
+        points += seg[0]
+        configs += seg[1]
+        if i is not None:  # cut, then back out the way the clamp came in, without the cut cluster's box
+            n_in = math.ceil(PRE_CUT / p.step)
+            cuts.append(len(points) - 1)
+            points += points[-n_in - 1 : -1][::-1]
+            configs += configs[-n_in - 1 : -1][::-1]
+            left.remove(i)
+            planner.set_boxes(*boxes())
+        q = configs[-1]
+    return Plan(order, np.array(points), np.array(configs), cuts, success, time.perf_counter() - t0, energy)
+
+
+# ---------------------------------------------------------------------------------------- policy adapter
+
+
+def targets_from_observation(obs: np.ndarray) -> tuple[list[ClusterTarget], list[int], np.ndarray, np.ndarray]:
+    """Clusters (unharvested, with their slot indices) and other boxes from a GrapeHarvest-v0 observation."""
+    from agri_envs.arm.grape_harvest import _ARM_FEATURES, _CLUSTER_FEATURES, _OBSTACLE_FEATURES, MAX_CLUSTERS
+
+    o = np.asarray(obs, dtype=np.float64)
+    targets, slots = [], []
+    for i in range(MAX_CLUSTERS):
+        c = o[_ARM_FEATURES + i * _CLUSTER_FEATURES :][:_CLUSTER_FEATURES]
+        if c[0] > 0.5 and c[1] < 0.5:
+            targets.append(ClusterTarget(c[2:5], c[5:8], c[8:11], c[11:14], c[14:17]))
+            slots.append(i)
+    rest = o[_ARM_FEATURES + MAX_CLUSTERS * _CLUSTER_FEATURES :].reshape(-1, _OBSTACLE_FEATURES)
+    rest = rest[rest[:, 0] > 0.5]
+    return targets, slots, rest[:, 1:4], rest[:, 4:7]
+
+
+def joints_from_observation(obs: np.ndarray) -> np.ndarray:
+    """Joint values (rad) from the observation's normalised joints."""
+    lo, hi = JOINT_LIMITS[:, 0], JOINT_LIMITS[:, 1]
+    return lo + (np.asarray(obs[:6], dtype=np.float64) + 1.0) * 0.5 * (hi - lo)
+
+
+class LuoApfPolicy:
+    """SB3-style ``predict`` adapter: plan at the start of each episode, then follow the joint waypoints.
+
+    Args:
+        max_joint_step: The env's ``max_joint_step`` (rad per step at action 1).
+        seed: Seed of Alg. 1's sampling (each episode continues the same stream).
+        params: Planner parameters.
+    """
+
+    def __init__(self, max_joint_step: float, seed: int = 0, params: LuoApfParams | None = None) -> None:
+        self.max_joint_step = max_joint_step
+        self.params = params or LuoApfParams()
+        self.rng = np.random.default_rng(seed)
+        self.plans: list[Plan | None] = []
+        self.slots: list[list[int]] = []
+        self.cursor: list[int] = []
+
+    def _start(self, env_index: int, obs: np.ndarray) -> None:
+        targets, slots, lo, hi = targets_from_observation(obs)
+        plan = plan_harvest(joints_from_observation(obs), targets, lo, hi, self.rng, self.params)
+        while len(self.plans) <= env_index:
+            self.plans.append(None)
+            self.slots.append([])
+            self.cursor.append(0)
+        self.plans[env_index], self.slots[env_index], self.cursor[env_index] = plan, slots, 1
+
+    def predict(
+        self,
+        observation: dict[str, np.ndarray],
+        state: Any = None,
+        episode_start: np.ndarray | None = None,
+        deterministic: bool = False,
+    ) -> tuple[np.ndarray, Any]:
+        """Joint-delta actions toward the next waypoint of each env's plan (batched or single observation)."""
+        obs = np.asarray(observation["observation"])
+        single = obs.ndim == 1
+        batch = obs[None] if single else obs
+        starts = np.ones(len(batch), bool) if episode_start is None else np.asarray(episode_start, bool).reshape(-1)
+        actions = np.zeros((len(batch), 6), dtype=np.float32)
+        for k, o in enumerate(batch):
+            if starts[k] or k >= len(self.plans) or self.plans[k] is None:
+                self._start(k, o)
+            plan = self.plans[k]
+            assert plan is not None
+            q = joints_from_observation(o)
+            while self.cursor[k] < len(plan.waypoints) and np.max(np.abs(plan.waypoints[self.cursor[k]] - q)) < 1e-4:
+                self.cursor[k] += 1
+            if self.cursor[k] < len(plan.waypoints):
+                delta = plan.waypoints[self.cursor[k]] - q
+                actions[k] = np.clip(delta / self.max_joint_step, -1.0, 1.0)
+        return (actions[0] if single else actions), state
+
+    def episode_metrics(self, index: int) -> dict[str, Any]:
+        """Table 2's columns for the last plan of env ``index``: order, path length, path points, time."""
+        plan = self.plans[index] if index < len(self.plans) else None
+        if plan is None:
+            return {}
+        slots = self.slots[index]
+        return {
+            "order": "->".join(str(slots[i] + 1) for i in plan.order),
+            "path_length_mm": plan.path_length * 1000.0,
+            "path_points": len(plan.points),
+            "planning_time_ms": plan.planning_time * 1000.0,
+            "plan_success": plan.success,
+            "energy": plan.energy,
+        }
+
+
+def make_luo_apf(env: Any) -> LuoApfPolicy:
+    """Registry factory: the policy for a GrapeHarvest-v0 env with joint-delta actions."""
+    cfg = env.unwrapped.config
+    if cfg.control != "joint":
+        raise ValueError(f"luo-apf drives joint-delta actions: make the env with control='joint' (got {cfg.control!r})")
+    return LuoApfPolicy(cfg.max_joint_step)

@@ -1,0 +1,249 @@
+"""GrapeHarvest-v0: API checkers, HER reward, determinism, pickling, strictness, collisions, rendering."""
+
+import json
+import pickle
+import resource
+
+import gymnasium as gym
+import numpy as np
+import pytest
+from gymnasium.utils.env_checker import check_env
+
+import agri_envs  # noqa: F401
+from agri_envs.arm.grape_harvest import GrapeHarvestConfig, GrapeHarvestEnv
+from agri_envs.arm.kinematics import nearest_ik
+from agri_envs.arm.robot_model import flange_pose_for_tip, tip_pose
+from agri_envs.arm.scene import HOME_Q, harvest_configurations
+
+ENV_ID = "agri_envs/GrapeHarvest-v0"
+
+
+def rollout(env, seed, n, action_seed=0):
+    rng = np.random.default_rng(action_seed)
+    obs, info = env.reset(seed=seed)
+    out = [(obs, 0.0, info)]
+    for _ in range(n):
+        obs, r, te, tr, info = env.step(rng.uniform(-1, 1, 6).astype(np.float32))
+        out.append((obs, r, info))
+        if te or tr:
+            obs, info = env.reset()
+            out.append((obs, 0.0, info))
+    return out
+
+
+def assert_same(a, b):
+    assert len(a) == len(b)
+    for (o1, r1, i1), (o2, r2, i2) in zip(a, b, strict=True):
+        for k in o1:
+            assert np.array_equal(o1[k], o2[k]), k
+        assert r1 == r2
+        assert json.dumps(i1, sort_keys=True) == json.dumps(i2, sort_keys=True)
+
+
+def drive_to(env, q_target, max_steps=200):
+    """Joint-delta actions toward q_target until reached or the episode ends; returns the last step."""
+    out = None
+    for _ in range(max_steps):
+        delta = (q_target - env.unwrapped.q) / env.unwrapped.config.max_joint_step
+        out = env.step(np.clip(delta, -1, 1))
+        if out[2] or out[3] or np.max(np.abs(env.unwrapped.q - q_target)) < 1e-9:
+            break
+    return out
+
+
+@pytest.mark.parametrize(
+    "kwargs", [{}, {"control": "ee", "reward_type": "dense"}, {"min_clusters": 5, "n_leaves": 8, "n_canes": 4}]
+)
+def test_gymnasium_and_sb3_checkers(kwargs):
+    from stable_baselines3.common.env_checker import check_env as sb3_check_env
+
+    env = gym.make(ENV_ID, **kwargs)
+    check_env(env.unwrapped)
+    sb3_check_env(env.unwrapped)
+    env.close()
+
+
+@pytest.mark.parametrize("reward_type", ["sparse", "dense"])
+def test_compute_reward_batched_equals_per_sample_and_step_reward(reward_type):
+    env = gym.make(ENV_ID, reward_type=reward_type, terminate_on_collision=False)
+    obs, _ = env.reset(seed=3)
+    rng = np.random.default_rng(0)
+    achieved, desired, infos, rewards = [], [], [], []
+    for _ in range(40):
+        obs, r, _, _, info = env.step(rng.uniform(-1, 1, 6))
+        assert r == env.unwrapped.compute_reward(obs["achieved_goal"], obs["desired_goal"], info)
+        achieved.append(obs["achieved_goal"])
+        desired.append(obs["desired_goal"])
+        infos.append(info)
+        rewards.append(r)
+    infos[0] = dict(infos[0], collision=True)  # a collision step is penalised in the batch too
+    batch = env.unwrapped.compute_reward(np.array(achieved), np.array(desired), np.array(infos))
+    single = [env.unwrapped.compute_reward(a, d, i) for a, d, i in zip(achieved, desired, infos, strict=True)]
+    assert batch.shape == (40,)
+    np.testing.assert_array_equal(batch, single)
+    assert single[0] == pytest.approx(rewards[0] - 1.0)
+    # A goal relabelled to the achieved one is reached (HER's premise).
+    reached = env.unwrapped.compute_reward(np.array(achieved), np.array(achieved), np.array(infos[1:] + infos[:1]))
+    np.testing.assert_allclose(reached[:-1], 0.0, atol=1e-6)
+    assert reached[-1] <= -1.0
+
+
+def test_same_seed_same_actions_identical_and_seeds_differ():
+    assert_same(rollout(gym.make(ENV_ID), 7, 150), rollout(gym.make(ENV_ID), 7, 150))
+    a = rollout(gym.make(ENV_ID), 7, 1)
+    b = rollout(gym.make(ENV_ID), 8, 1)
+    assert not np.array_equal(a[0][0]["observation"], b[0][0]["observation"])
+
+
+def test_pickled_env_continues_identically():
+    env = gym.make(ENV_ID, terminate_on_collision=False)
+    rollout(env, 3, 20)
+    clone = pickle.loads(pickle.dumps(env))
+    assert clone.unwrapped.sim.client != env.unwrapped.sim.client
+    for a in np.random.default_rng(1).uniform(-1, 1, (60, 6)):
+        o1, r1, t1, u1, i1 = env.step(a)
+        o2, r2, t2, u2, i2 = clone.step(a)
+        assert all(np.array_equal(o1[k], o2[k]) for k in o1) and r1 == r2 and i1 == i2
+    clone.close()
+
+
+def test_bad_actions_and_clipping():
+    env = gym.make(ENV_ID)
+    env.reset(seed=0)
+    with pytest.raises(ValueError, match="NaN or inf"):
+        env.step(np.array([np.nan, 0, 0, 0, 0, 0]))
+    with pytest.raises(ValueError, match="NaN or inf"):
+        env.step(np.array([0, 0, 0, np.inf, 0, 0]))
+    with pytest.raises(ValueError, match="shape"):
+        env.step(np.zeros(3))
+    e1, e2 = gym.make(ENV_ID), gym.make(ENV_ID)
+    e1.reset(seed=4)
+    e2.reset(seed=4)
+    o1, *_ = e1.step(np.array([5.0, -3.0, 0.5, 0, 0, 9.0]))
+    o2, *_ = e2.step(np.array([1.0, -1.0, 0.5, 0, 0, 1.0]))
+    assert all(np.array_equal(o1[k], o2[k]) for k in o1)
+
+
+def test_config_strictness():
+    with pytest.raises(ValueError, match="unknown argument.*'n_leaf'.*did you mean 'n_leaves'"):
+        gym.make(ENV_ID, n_leaf=3)
+    with pytest.raises(ValueError, match=r"max_clusters=6 is out of range; expected in \[1, 5\]"):
+        gym.make(ENV_ID, max_clusters=6)
+    with pytest.raises(ValueError, match=r"position_tolerance=0.0 m is out of range"):
+        gym.make(ENV_ID, position_tolerance=0.0)
+    with pytest.raises(ValueError, match="control='torque' is invalid"):
+        gym.make(ENV_ID, control="torque")
+    with pytest.raises(ValueError, match="min_clusters=4 exceeds max_clusters=3"):
+        gym.make(ENV_ID, min_clusters=4, max_clusters=3)
+    with pytest.raises(ValueError, match="reset options"):
+        gym.make(ENV_ID).reset(seed=0, options={"n_clusters": 4})
+
+
+def test_docstring_documents_every_argument():
+    for name, _default, _unit, valid, doc in GrapeHarvestConfig().describe():
+        assert doc and valid != "any value", name
+        assert f"| ``{name}`` |" in GrapeHarvestEnv.__doc__, name
+
+
+def test_cluster_count_and_workspace():
+    env = gym.make(ENV_ID, min_clusters=3, max_clusters=3)
+    for seed in range(3):
+        obs, info = env.reset(seed=seed)
+        assert info["n_clusters"] == 3 and env.observation_space.contains(obs)
+        for c in env.unwrapped.scene.clusters:
+            assert harvest_configurations(c) is not None  # reachable (Fig. 3)
+            assert c.cut_point[2] > c.box_hi[2]  # the cutting point is above the box
+
+
+def test_several_envs_have_separate_clients_and_close_is_idempotent():
+    envs = [gym.make(ENV_ID) for _ in range(3)]
+    clients = {e.unwrapped.sim.client for e in envs}
+    assert len(clients) == 3
+    for i, e in enumerate(envs):
+        e.reset(seed=i)
+    envs[0].close()
+    envs[0].close()
+    obs, *_ = envs[1].step(np.zeros(6))  # the others keep working
+    assert obs["observation"].shape == (198,)
+    with pytest.raises(RuntimeError, match="closed"):
+        envs[0].unwrapped.sim.set_joints(HOME_Q)
+    for e in envs[1:]:
+        e.close()
+
+
+def peak_rss_growth_kb(warmup, cycles):
+    """Growth of the process's peak RSS over ``cycles`` make/reset/close cycles, after ``warmup`` of them."""
+
+    def cycle(n):
+        for _ in range(n):
+            env = gym.make(ENV_ID)
+            env.reset(seed=0)
+            env.close()
+
+    cycle(warmup)
+    before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    cycle(cycles)
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss - before
+
+
+def test_make_close_cycles_do_not_grow_memory():
+    assert peak_rss_growth_kb(20, 60) < 20_000
+
+
+@pytest.mark.slow
+def test_thousand_make_close_cycles_do_not_grow_memory():
+    assert peak_rss_growth_kb(50, 1000) < 20_000
+
+
+def test_touching_a_box_is_a_collision_that_ends_the_episode():
+    env = gym.make(ENV_ID, min_clusters=2, max_clusters=2)
+    env.reset(seed=1)
+    cluster = env.unwrapped.scene.clusters[0]
+    inside = cluster.tip_pose()
+    inside[:3, 3] = 0.5 * (cluster.box_lo + cluster.box_hi)  # the clamp in the middle of the berries
+    q = nearest_ik(flange_pose_for_tip(inside), harvest_configurations(cluster)[1])
+    assert q is not None
+    obs, reward, terminated, truncated, info = drive_to(env, q)
+    assert terminated and info["collision"] and not info["is_success"]
+    assert reward == -1.0 - env.unwrapped.config.collision_penalty
+
+
+def test_reaching_a_cutting_point_harvests_the_cluster():
+    env = gym.make(ENV_ID, min_clusters=2, max_clusters=2, n_leaves=0)
+    obs, info = env.reset(seed=2)
+    target = info["target_index"]
+    pre, cut = harvest_configurations(env.unwrapped.scene.clusters[target])
+    drive_to(env, pre)
+    _, reward, terminated, _, info = drive_to(env, cut)
+    assert info["harvested"] == 1 and reward == 0.0 and not info["collision"] and not terminated
+    assert info["distance"] < 1e-6
+    obs, *_, info = env.step(np.zeros(6))  # the designated goal moves on one step later
+    assert info["target_index"] != target
+    assert obs["observation"][15 + 17 * target + 1] == 1.0  # flagged harvested
+    assert env.unwrapped.sim.collisions(margin=0.5).count(target) == 0  # its box left the scene
+
+
+def test_end_effector_control_moves_the_clamp():
+    env = gym.make(ENV_ID, control="ee")
+    obs, _ = env.reset(seed=0)
+    start = obs["achieved_goal"][:3].astype(float)
+    obs, *_ = env.step(np.array([1.0, 0, 0, 0, 0, 0]))
+    np.testing.assert_allclose(obs["achieved_goal"][:3] - start, [0.02, 0, 0], atol=1e-6)
+    np.testing.assert_allclose(tip_pose(env.unwrapped.q)[:3, 3], obs["achieved_goal"][:3], atol=1e-6)
+
+
+def test_rgb_render_headless_and_human():
+    env = gym.make(ENV_ID, render_mode="rgb_array", render_width=160, render_height=120)
+    env.reset(seed=0)
+    frame = env.render()
+    assert frame.shape == (120, 160, 3) and frame.dtype == np.uint8
+    assert frame.std() > 10  # a scene, not a blank image
+    arm_orange = (frame[..., 0] > 180) & (frame[..., 1] > 90) & (frame[..., 1] < 170) & (frame[..., 2] < 80)
+    assert arm_orange.sum() > 50
+    env.close()
+    env.close()
+    human = gym.make(ENV_ID, render_mode="human", render_width=120, render_height=90)
+    human.reset(seed=0)
+    human.step(np.zeros(6))
+    assert human.render() is None
+    human.close()
