@@ -69,15 +69,12 @@ def list_scenarios(env_id: str | None = None) -> list[Scenario]:
 
 _NAV = "agri_envs/GreenhouseNav-v0"
 register_scenario(
-    Scenario(_NAV, "default", {}, "The default greenhouse: three rows, two people walking, loop 0->1->...->7->0.")
-)
-register_scenario(
     Scenario(
         _NAV,
         "sim-loop",
         {"n_rows": 3, "growth": 0.0, "n_trees": 0, "n_people": 2},
         "Harik sec. 3.2, Figs. 6-9: three rows of small plants inside a wall, waypoints 0->1->...->7->0, "
-        "two people walking.",
+        "two people walking (the env's defaults).",
     )
 )
 register_scenario(

@@ -105,6 +105,7 @@ class HarikApfController:
         self.backing_left = 0.0  # metres still to back off
         self.blocked = False
         self.stops = 0
+        self.blocked_steps = 0
 
     def obstacle_zones(self, ranges: np.ndarray, sonar: np.ndarray) -> tuple[float, float, float]:
         """Distances (m) to the nearest obstacle in front of, left of and right of the footprint.
@@ -176,6 +177,7 @@ class HarikApfController:
                 self.blocked = True
                 self.stops += 1
                 self.backing_left = p.step_back_distance
+            self.blocked_steps += 1
             u = 0.0
         else:
             self.blocked = False
@@ -267,8 +269,18 @@ class HarikApfPolicy:
         return (actions[0] if single else actions), state
 
     def episode_metrics(self, index: int = 0) -> dict[str, float]:
-        """Per-episode statistics of env ``index``: how often the safety stop triggered."""
-        return {"safety_stops": float(self._controller(index).stops)}
+        """Per-episode statistics of env ``index``.
+
+        Returns:
+            ``safety_stops`` (how often the passive safety stop triggered), ``blocked_time`` (s spent
+            waiting for the front to clear) and ``blocked_at_end`` (1 when the episode ended while waiting).
+        """
+        c = self._controller(index)
+        return {
+            "safety_stops": float(c.stops),
+            "blocked_time": c.blocked_steps * self.robot.control_period,
+            "blocked_at_end": float(c.blocked),
+        }
 
 
 def robot_geometry(env: Any) -> RobotGeometry:

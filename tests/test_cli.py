@@ -94,3 +94,22 @@ def test_report_has_tables_and_plots(tmp_path):
         if line.startswith("!["):
             assert (tmp_path / line.split("(")[1].rstrip(")")).stat().st_size > 10_000
     assert "<table>" in (tmp_path / "report.html").read_text()
+
+
+def test_failures_are_counted_by_cause():
+    from training.plots_rover import failure_cause, failure_lines
+
+    base = {"is_success": False, "collision": False, "episode_time": 150.0, "waypoints_reached": 3, "n_waypoints": 8}
+    episodes = [
+        {**base, "seed": 0, "collision": True},
+        {**base, "seed": 1, "final_position_error": 1.2, "blocked_at_end": 1.0},
+        {**base, "seed": 2, "final_position_error": 0.02, "blocked_at_end": 1.0},
+        {**base, "seed": 3, "final_position_error": 0.02, "blocked_at_end": 0.0},
+        {**base, "seed": 4, "is_success": True},
+    ]
+    causes = [failure_cause(e) for e in episodes[:4]]
+    assert causes[0] == "collision" and causes[1] == "localization lost"
+    assert causes[2].startswith("waiting at the safety stop") and "local minimum" in causes[3]
+    lines = failure_lines({"episodes": episodes})
+    assert lines[0].startswith("Failures: 4 of 5") and sum(ln.startswith("- seed") for ln in lines) == 4
+    assert failure_lines({"episodes": episodes[4:]}) == ["No failures."]

@@ -1,6 +1,5 @@
 """GrapeHarvest-v0: API checkers, HER reward, determinism, pickling, strictness, collisions, rendering."""
 
-import json
 import pickle
 import resource
 
@@ -8,6 +7,7 @@ import gymnasium as gym
 import numpy as np
 import pytest
 from gymnasium.utils.env_checker import check_env
+from rollouts import assert_same, rollout
 
 import agri_envs  # noqa: F401
 from agri_envs.arm.grape_harvest import GrapeHarvestConfig, GrapeHarvestEnv
@@ -16,28 +16,6 @@ from agri_envs.arm.robot_model import flange_pose_for_tip, tip_pose
 from agri_envs.arm.scene import HOME_Q, harvest_configurations
 
 ENV_ID = "agri_envs/GrapeHarvest-v0"
-
-
-def rollout(env, seed, n, action_seed=0):
-    rng = np.random.default_rng(action_seed)
-    obs, info = env.reset(seed=seed)
-    out = [(obs, 0.0, info)]
-    for _ in range(n):
-        obs, r, te, tr, info = env.step(rng.uniform(-1, 1, 6).astype(np.float32))
-        out.append((obs, r, info))
-        if te or tr:
-            obs, info = env.reset()
-            out.append((obs, 0.0, info))
-    return out
-
-
-def assert_same(a, b):
-    assert len(a) == len(b)
-    for (o1, r1, i1), (o2, r2, i2) in zip(a, b, strict=True):
-        for k in o1:
-            assert np.array_equal(o1[k], o2[k]), k
-        assert r1 == r2
-        assert json.dumps(i1, sort_keys=True) == json.dumps(i2, sort_keys=True)
 
 
 def drive_to(env, q_target, max_steps=200):

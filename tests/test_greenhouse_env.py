@@ -1,6 +1,5 @@
 """GreenhouseNav-v0: API checkers, determinism, pickling, config strictness, bad actions, rendering."""
 
-import json
 import math
 import pickle
 import subprocess
@@ -10,35 +9,13 @@ import gymnasium as gym
 import numpy as np
 import pytest
 from gymnasium.utils.env_checker import check_env
+from rollouts import assert_same, rollout
 
 import agri_envs  # noqa: F401
 from agri_envs.rover.greenhouse_nav import GreenhouseNavConfig
 
 ENV_ID = "agri_envs/GreenhouseNav-v0"
 SMALL = {"n_rows": 1, "row_length": 3.0}
-
-
-def rollout(env, seed, n, action_seed=0):
-    rng = np.random.default_rng(action_seed)
-    obs, info = env.reset(seed=seed)
-    out = [(obs, 0.0, info)]
-    for _ in range(n):
-        obs, r, te, tr, info = env.step(rng.uniform(-1, 1, 2).astype(np.float32))
-        out.append((obs, r, info))
-        if te or tr:
-            obs, info = env.reset()
-            out.append((obs, 0.0, info))
-    return out
-
-
-def assert_same(a, b):
-    assert len(a) == len(b)
-    for (o1, r1, i1), (o2, r2, i2) in zip(a, b, strict=True):
-        assert o1.keys() == o2.keys()
-        for k in o1:
-            assert np.array_equal(o1[k], o2[k]), k
-        assert r1 == r2
-        assert json.dumps(i1, sort_keys=True, default=str) == json.dumps(i2, sort_keys=True, default=str)
 
 
 @pytest.mark.parametrize("kwargs", [{}, {"full_scan": True, "localization": "none"}, {"localization": "odometry"}])

@@ -50,8 +50,10 @@ def scene_of(result: dict[str, Any], seed: int) -> Any:
     return env
 
 
-def plot_trace(result: dict[str, Any], trace: dict[str, Any], out_dir: Path, stem: str) -> list[str]:
-    """Save the trajectory map and the d(t) / alpha(t) figure of one recorded episode; return file names."""
+def plot_trace(
+    result: dict[str, Any], trace: dict[str, Any], out_dir: Path, stem: str, curves: bool = True
+) -> list[str]:
+    """Save the trajectory map (and with ``curves`` the d(t) / alpha(t) figure) of one episode; return file names."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -67,22 +69,26 @@ def plot_trace(result: dict[str, Any], trace: dict[str, Any], out_dir: Path, ste
     fig, ax = plt.subplots(figsize=(8, 5.5))
     draw_geometry(ax, geometry)
     ax.plot(x, y, color="#2859c8", lw=1.6, label="robot (true pose)")
-    est_x = np.array([np.nan if v is None else v for v in data.get("est_x", [])], float)
-    if est_x.size and np.any(np.isfinite(est_x)) and not np.allclose(est_x, x, equal_nan=True):
-        est_y = np.array([np.nan if v is None else v for v in data["est_y"]], float)
-        ax.plot(est_x, est_y, color="#d08020", lw=1.0, ls="--", label="estimated pose")
+    for kx, ky, what in (("est_x", "est_y", "odometry"), ("slam_x", "slam_y", "SLAM")):
+        est_x = np.array([np.nan if v is None else v for v in data.get(kx, [])], float)
+        if est_x.size and np.any(np.isfinite(est_x)) and not np.allclose(est_x, x[: est_x.size], equal_nan=True):
+            est_y = np.array([np.nan if v is None else v for v in data[ky]], float)
+            ax.plot(est_x, est_y, color="#d08020", lw=1.0, ls="--", label=f"pose estimate ({what})")
     ax.scatter(waypoints[:, 0], waypoints[:, 1], color="#d21e1e", zorder=5, s=30)
     for i, (wx, wy) in enumerate(waypoints):
         ax.annotate(str(i), (wx, wy), textcoords="offset points", xytext=(5, 5), color="#a01010", fontsize=10)
     ax.plot(x[:1], y[:1], marker="o", color="#2859c8", ms=8)
     ax.set_xlabel("x [m]")
     ax.set_ylabel("y [m]")
-    ax.set_title(f"{result['policy']}: trajectory, seed {trace['seed']} (Harik Fig. 9)")
-    ax.legend(loc="upper right", fontsize=8)
+    label = result.get("label") or result["scenario"] or "default env"
+    ax.set_title(f"{result['policy']} on {label}: trajectory, seed {trace['seed']}")
+    ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.1), ncol=2, fontsize=8, frameon=False)
     traj_name = f"{stem}_trajectory.png"
     fig.tight_layout()
     fig.savefig(out_dir / traj_name, dpi=110)
     plt.close(fig)
+    if not curves:
+        return [traj_name]
 
     dt = float(result["env_kwargs"].get("control_period", 1 / 15))
     t = dt * np.arange(len(x))
@@ -104,45 +110,112 @@ def plot_trace(result: dict[str, Any], trace: dict[str, Any], out_dir: Path, ste
     return [traj_name, curves_name]
 
 
+#: Final position error (m) above which a failed episode counts as lost localization.
+LOST_LOCALIZATION = 0.25
+
+
+def failure_cause(record: dict[str, Any]) -> str:
+    """Why an episode failed, from its record: collision, lost localization, blocked in front, or stuck."""
+    if record.get("collision"):
+        return "collision"
+    if (record.get("final_position_error") or 0.0) > LOST_LOCALIZATION:
+        return "localization lost"
+    if record.get("blocked_at_end"):
+        return "waiting at the safety stop (something stays in front)"
+    return "time limit while free to move (APF local minimum or too slow)"
+
+
 def failure_lines(result: dict[str, Any]) -> list[str]:
-    """One line per failed episode: seed and cause (collision, or time limit with waypoints reached)."""
-    lines = []
-    for e in result["episodes"]:
-        if e["is_success"]:
-            continue
-        cause = "collision" if e.get("collision") else "time limit"
+    """Counts of failures by cause, then one line per failed episode (seed, cause, progress)."""
+    failed = [e for e in result["episodes"] if not e["is_success"]]
+    if not failed:
+        return ["No failures."]
+    causes: dict[str, int] = {}
+    for e in failed:
+        causes[failure_cause(e)] = causes.get(failure_cause(e), 0) + 1
+    counts = ", ".join(f"{n} {cause}" for cause, n in sorted(causes.items(), key=lambda kv: -kv[1]))
+    lines = [f"Failures: {len(failed)} of {len(result['episodes'])} ({counts}).", ""]
+    for e in failed:
+        extra = ""
+        if e.get("final_position_error") is not None:
+            extra = f", final localization error {e['final_position_error']:.2f} m"
         lines.append(
-            f"- seed {e['seed']}: {cause} after {e.get('episode_time', 0):.1f} s, "
-            f"{e.get('waypoints_reached', '?')}/{e.get('n_waypoints', '?')} waypoints"
+            f"- seed {e['seed']}: {failure_cause(e)} after {e.get('episode_time', 0):.1f} s, "
+            f"{e.get('waypoints_reached', '?')}/{e.get('n_waypoints', '?')} waypoints{extra}"
         )
     return lines
 
 
+def _ci_text(summary: dict[str, Any], key: str) -> str:
+    value = summary.get(key)
+    if value is None:
+        return "-"
+    lo, hi = summary.get(f"{key}_ci") or (None, None)
+    return f"{value:.3f}" if lo is None else f"{value:.3f} [{lo:.3f}, {hi:.3f}]"
+
+
+def policy_table(results: list[dict[str, Any]]) -> list[str]:
+    """Per-policy lines of one scenario: failures by cause, safety stops, waiting time, localization."""
+    rows = [
+        "| policy | failures | safety stops / episode | waiting at the stop [s] | ATE RMSE [m] "
+        "| final pose error [m] |",
+        "|---|---|---|---|---|---|",
+    ]
+    for r in results:
+        s = r["summary"]
+        failed = [e for e in r["episodes"] if not e["is_success"]]
+        causes: dict[str, int] = {}
+        for e in failed:
+            causes[failure_cause(e)] = causes.get(failure_cause(e), 0) + 1
+        fails = ", ".join(f"{n} {c}" for c, n in causes.items()) or "none"
+        stops = f"{s['mean_safety_stops']:.2f}" if s.get("mean_safety_stops") is not None else "-"
+        waiting = f"{s['mean_blocked_time']:.1f}" if s.get("mean_blocked_time") is not None else "-"
+        rows.append(
+            f"| {r['policy']} | {len(failed)} of {s['episodes']}: {fails} | {stops} | {waiting} | "
+            f"{_ci_text(s, 'mean_ate_rmse')} | {_ci_text(s, 'mean_final_position_error')} |"
+        )
+    return rows
+
+
+def lead_result(results: list[dict[str, Any]]) -> dict[str, Any]:
+    """The result whose episode is plotted: the first policy that is not privileged (the paper's robot)."""
+    return next((r for r in results if not r["privileged"]), results[0])
+
+
 def report_section(results: list[dict[str, Any]], out_dir: Path) -> str:
-    """Markdown (with PNG plots written to ``out_dir``) for every GreenhouseNav-v0 result."""
-    parts = []
-    for result in results:
-        label = result.get("label") or result["scenario"] or "default"
-        stem = f"greenhouse_{label.replace(' ', '_').replace('=', '')}_{result['policy']}"
-        parts.append(f"### {result['policy']} ({label})")
-        s = result["summary"]
-        if "mean_safety_stops" in s:
-            parts.append(f"Passive safety stops per episode (mean): {s['mean_safety_stops']:.2f}.")
-        fails = failure_lines(result)
-        parts.append("Failures:" if fails else "No failures.")
-        parts += fails
-        if "ate_rmse" in s:
-            parts.append(
-                f"Localization: ATE RMSE {s['mean_ate_rmse']:.3f} m (95 % CI {s['mean_ate_rmse_ci'][0]:.3f}-"
-                f"{s['mean_ate_rmse_ci'][1]:.3f}), final position error {s['mean_final_position_error']:.3f} m, "
-                f"largest error {s['mean_ate_max']:.3f} m (means over episodes)."
-            )
-        if int(result["env_kwargs"].get("mission_cycles", 1)) > 1:
-            parts += repeatability_section(result, out_dir, stem)
-        else:
-            for trace in result.get("traces", [])[:1]:
-                for name in plot_trace(result, trace, out_dir, stem):
-                    parts.append(f"![{name}]({name})")
+    """Markdown (with PNG plots written to ``out_dir``) for the GreenhouseNav-v0 results, one part per scenario.
+
+    Each part has a table of the policies (failures counted by cause, safety stops, localization error
+    with 95 % bootstrap intervals), the failed seeds, and plots of one episode of the lead policy: the
+    trajectory with its pose estimate (Harik Figs. 9, 11, 16), d(t) and alpha(t) (Figs. 7-8, 14-15) for
+    single missions, and the overlay of the cycles with the drift per cycle (Fig. 17) for repeated ones.
+    """
+    from agri_envs.scenarios import scenario
+
+    by_label: dict[str, list[dict[str, Any]]] = {}
+    for r in results:
+        by_label.setdefault(r.get("label") or r["scenario"] or "default", []).append(r)
+    parts: list[str] = []
+    described: set[str] = set()
+    for label, group in by_label.items():
+        name = group[0]["scenario"]
+        parts.append(f"### {label}")
+        if name and name not in described:
+            parts += ["", scenario(group[0]["env_id"], name).description]
+            described.add(name)
+        parts += [""] + policy_table(group) + [""]
+        for r in group:
+            failed = failure_lines(r)
+            if failed != ["No failures."]:
+                parts += [f"{r['policy']}:", ""] + failed[2:] + [""]
+        lead = lead_result(group)
+        stem = f"greenhouse_{label.replace(' ', '_').replace('=', '')}_{lead['policy']}"
+        traces = lead.get("traces", [])[:1]
+        if int(lead["env_kwargs"].get("mission_cycles", 1)) > 1:
+            parts += [f"Episode of {lead['policy']}:", ""] + repeatability_section(lead, out_dir, stem)
+        for trace in traces if int(lead["env_kwargs"].get("mission_cycles", 1)) == 1 else []:
+            names = plot_trace(lead, trace, out_dir, stem, curves=name in (None, "sim-loop", "corridor"))
+            parts += [f"![{n}]({n})" for n in names]
         parts.append("")
     return "\n".join(parts)
 
