@@ -53,10 +53,10 @@ def main() -> None:
     except Exception as exc:  # panda-gym missing: say so, keep our numbers
         print(f"PandaReach-v3 unavailable ({exc}); install the bench extra: pip install -e '.[bench]'")
         peer = float("nan")
-    print(f"{'env':<52}{'steps/s':>10}{'vs peer':>9}")
-    print(f"{ENV_ID + ' (no termination)':<52}{ours:>10.0f}{ours / peer:>8.2f}x")
-    print(f"{ENV_ID + ' (default: ends on collision)':<52}{ours_default:>10.0f}{ours_default / peer:>8.2f}x")
-    print(f"{'PandaReach-v3 (panda-gym, pybullet)':<52}{peer:>10.0f}{1.0:>8.2f}x")
+    print(f"{'env':<56}{'steps/s':>10}{'vs peer':>9}")
+    print(f"{ENV_ID + ' (no termination)':<56}{ours:>10.0f}{ours / peer:>8.2f}x")
+    print(f"{ENV_ID + ' (default: ends on collision)':<56}{ours_default:>10.0f}{ours_default / peer:>8.2f}x")
+    print(f"{'PandaReach-v3 (panda-gym, pybullet)':<56}{peer:>10.0f}{1.0:>8.2f}x")
     times, success = planning_times(args.plans)
     print(
         f"luo-apf full plan over {args.plans} table2 seeds: median {np.median(times):.1f} ms, "
