@@ -110,6 +110,18 @@ def plot_trace(
     return [traj_name, curves_name]
 
 
+#: What a reader needs to know to compare the rover policies (printed under the policy list).
+ROVER_NOTES = (
+    "The SLAM policies get no pose from the env: they run Hector SLAM on the full scan from the start "
+    "pose. Since the env, not the robot, decides when a waypoint is reached (by default within 0.3 m of the true "
+    "position), they aim 0.1 m inside that radius; with d_min = 0.3 m on the estimate they would stop "
+    "a centimetre short and wait forever. `harik-apf` adds two safeguards to Hector (no mapping of beams "
+    "that end in known free space, a cost check on each Gauss-Newton step); `harik-apf-hector-plain` "
+    "runs without them, so the difference between the two rows is what they buy. Failures are "
+    "classified from the episode's end: collision, localization lost (final pose error over "
+    "0.25 m), waiting at the safety stop with something in front, or stuck while free to move."
+)
+
 #: Final position error (m) above which a failed episode counts as lost localization.
 LOST_LOCALIZATION = 0.25
 
@@ -191,11 +203,18 @@ def report_section(results: list[dict[str, Any]], out_dir: Path) -> str:
     single missions, and the overlay of the cycles with the drift per cycle (Fig. 17) for repeated ones.
     """
     from agri_envs.scenarios import scenario
+    from baselines import policy_spec
 
     by_label: dict[str, list[dict[str, Any]]] = {}
     for r in results:
         by_label.setdefault(r.get("label") or r["scenario"] or "default", []).append(r)
-    parts: list[str] = []
+    parts: list[str] = ["Policies:", ""]
+    for name in dict.fromkeys(r["policy"] for r in results):
+        try:
+            parts.append(f"- `{name}`: {policy_spec(name).description}.")
+        except ValueError:  # a checkpoint, not a registered baseline
+            parts.append(f"- `{name}`: a trained policy.")
+    parts += ["", ROVER_NOTES, ""]
     described: set[str] = set()
     for label, group in by_label.items():
         name = group[0]["scenario"]
