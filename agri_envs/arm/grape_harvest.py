@@ -9,9 +9,10 @@ import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
+from agri_envs._actions import checked_action
 from agri_envs._config import StrictConfig, param
 from agri_envs.arm.kinematics import JOINT_LIMITS, nearest_ik
-from agri_envs.arm.robot_model import flange_pose_for_tip, tip_pose
+from agri_envs.arm.robot_model import flange_pose_for_tip, goal_vector, tip_pose
 from agri_envs.arm.scene import HOME_Q, Scene, SceneParams, sample_scene
 from agri_envs.arm.sim import ArmSim
 from agri_envs.arm.task import HarvestTask, goal_errors
@@ -239,7 +240,8 @@ class GrapeHarvestEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
         )
         self.sim = ArmSim(show_boxes=cfg.show_boxes)
         self._window: Any = None
-        self.home_goal = _goal_of(tip_pose(HOME_Q)).astype(np.float32).astype(np.float64)
+        home = tip_pose(HOME_Q)
+        self.home_goal = goal_vector(home[:3, 3], home[:3, :3]).astype(np.float32).astype(np.float64)
         self.scene: Scene | None = None
         self.q = HOME_Q.copy()
 
@@ -261,7 +263,7 @@ class GrapeHarvestEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
         achieved = self._achieved()
         self.task.reset(self.scene, self.home_goal, achieved)
         self._path_length = 0.0
-        self._tip = achieved[:3].copy()
+        self._achieved_goal = achieved
         pos, ang = goal_errors(achieved, self.task.desired_goal)
         info = self._info({"collision": False, "is_success": False, "distance": pos, "angle_error": ang}, False)
         if self.render_mode == "human":
@@ -272,13 +274,8 @@ class GrapeHarvestEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
         """Move the arm by one action, check collisions and harvests, and score the step."""
         if self.scene is None:
             raise RuntimeError("call reset() before step()")
-        a = np.asarray(action, dtype=np.float64)
-        if a.shape != (6,):
-            raise ValueError(f"action must have shape (6,), got {np.shape(action)}")
-        if not np.all(np.isfinite(a)):
-            raise ValueError(f"action contains NaN or inf: {action}")
-        a = np.clip(a, -1.0, 1.0)
-        self.task.begin_step(self._achieved())
+        a = checked_action(action, 6)
+        self.task.begin_step(self._achieved_goal)
         ik_failed = False
         if self.config.control == "joint":
             q_new = np.clip(self.q + a * self.config.max_joint_step, JOINT_LIMITS[:, 0], JOINT_LIMITS[:, 1])
@@ -288,8 +285,8 @@ class GrapeHarvestEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
         self.sim.set_joints(self.q)
         collision = bool(self.sim.collisions())
         achieved = self._achieved()
-        self._path_length += float(np.linalg.norm(achieved[:3] - self._tip))
-        self._tip = achieved[:3].copy()
+        self._path_length += float(np.linalg.norm(achieved[:3] - self._achieved_goal[:3]))
+        self._achieved_goal = achieved
         outcome = self.task.evaluate(achieved, collision)
         for i in outcome["harvested_now"]:
             self.sim.remove_cluster(i)
@@ -364,7 +361,7 @@ class GrapeHarvestEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
     def _achieved(self) -> np.ndarray:
         """The achieved goal, rounded to the observation's float32 so that rewards match ``compute_reward``."""
         pos, rot = self.sim.tip_pose()
-        return np.concatenate([pos, rot[:, 2], rot[:, 0]]).astype(np.float32).astype(np.float64)
+        return goal_vector(pos, rot).astype(np.float32).astype(np.float64)
 
     def _observe(self, achieved: np.ndarray) -> dict[str, np.ndarray]:
         assert self.scene is not None
@@ -398,16 +395,12 @@ class GrapeHarvestEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
             "target_index": self.task.target,
             "distance": float(outcome["distance"]),
             "angle_error": float(outcome["angle_error"]),
-            "tip_x": float(self._tip[0]),
-            "tip_y": float(self._tip[1]),
-            "tip_z": float(self._tip[2]),
+            "tip_x": float(self._achieved_goal[0]),
+            "tip_y": float(self._achieved_goal[1]),
+            "tip_z": float(self._achieved_goal[2]),
             "path_length": self._path_length,
             "ik_failed": ik_failed,
         }
-
-
-def _goal_of(pose: np.ndarray) -> np.ndarray:
-    return np.concatenate([pose[:3, 3], pose[:3, 2], pose[:3, 0]])
 
 
 def _rotation(rotvec: np.ndarray) -> np.ndarray:

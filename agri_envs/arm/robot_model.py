@@ -210,6 +210,11 @@ def tip_pose(q: np.ndarray) -> np.ndarray:
     return link_frames(q)[..., 5, :, :] @ TOOL_TRANSFORM
 
 
+def goal_vector(position: np.ndarray, rotation: np.ndarray) -> np.ndarray:
+    """The 9-vector of a clamp pose used as goal: position (3), approach axis (tool z), pallet axis (tool x)."""
+    return np.concatenate([position, rotation[:, 2], rotation[:, 0]])
+
+
 def flange_pose_for_tip(tip: np.ndarray) -> np.ndarray:
     """The flange pose that puts the clamp centre at ``tip`` (4x4 or (N, 4, 4))."""
     return tip @ np.linalg.inv(TOOL_TRANSFORM)

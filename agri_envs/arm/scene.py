@@ -22,7 +22,14 @@ import numpy as np
 
 from agri_envs.arm.collision import ArmCollisionModel
 from agri_envs.arm.kinematics import nearest_ik, within_limits
-from agri_envs.arm.robot_model import TOOL_HALF_X, TOOL_HALF_Y, TOOL_LENGTH, TOOL_OVERHANG, flange_pose_for_tip
+from agri_envs.arm.robot_model import (
+    TOOL_HALF_X,
+    TOOL_HALF_Y,
+    TOOL_LENGTH,
+    TOOL_OVERHANG,
+    flange_pose_for_tip,
+    goal_vector,
+)
 
 #: Height of the shoulder (frame 0) above the ground (m): the column on the mobile platform.
 BASE_HEIGHT = 1.55
@@ -87,8 +94,7 @@ class Cluster:
 
     def goal(self) -> np.ndarray:
         """The goal vector of the cut: position (3), approach axis (3), pallet axis (3)."""
-        r = self.tip_pose()[:3, :3]
-        return np.concatenate([self.cut_point, r[:, 2], r[:, 0]])
+        return goal_vector(self.cut_point, self.tip_pose()[:3, :3])
 
 
 @dataclasses.dataclass(frozen=True)

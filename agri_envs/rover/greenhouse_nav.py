@@ -11,6 +11,7 @@ import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
+from agri_envs._actions import checked_action
 from agri_envs._config import StrictConfig, param
 from agri_envs.rover import robot as rover
 from agri_envs.rover.layout import (
@@ -426,13 +427,7 @@ class GreenhouseNavEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
         """Apply ``[u, r]`` for one control period and return the Gymnasium 5-tuple."""
         if self.world is None:
             raise RuntimeError("call reset() before step()")
-        a = np.asarray(action, dtype=np.float64).reshape(-1)
-        if a.shape != (2,):
-            raise ValueError(f"action must have shape (2,), got {np.shape(action)}")
-        if not np.all(np.isfinite(a)):
-            raise ValueError(f"action contains NaN or inf: {action}")
-        u = min(1.0, max(-1.0, a[0]))
-        r = min(1.0, max(-1.0, a[1]))
+        u, r = checked_action(action, 2).tolist()
         spec = self.robot_spec
         v_cmd = u * (spec.max_speed if u >= 0 else spec.max_reverse_speed)
         w_cmd = r * spec.max_turn_rate
