@@ -137,15 +137,22 @@ def failure_cause(record: dict[str, Any]) -> str:
     return "time limit while free to move (APF local minimum or too slow)"
 
 
+def failure_counts(episodes: list[dict[str, Any]]) -> str:
+    """``"2 localization lost, 1 collision"``: failed episodes counted by cause, most frequent first."""
+    causes: dict[str, int] = {}
+    for e in episodes:
+        if not e["is_success"]:
+            cause = failure_cause(e)
+            causes[cause] = causes.get(cause, 0) + 1
+    return ", ".join(f"{n} {cause}" for cause, n in sorted(causes.items(), key=lambda kv: -kv[1]))
+
+
 def failure_lines(result: dict[str, Any]) -> list[str]:
     """Counts of failures by cause, then one line per failed episode (seed, cause, progress)."""
     failed = [e for e in result["episodes"] if not e["is_success"]]
     if not failed:
         return ["No failures."]
-    causes: dict[str, int] = {}
-    for e in failed:
-        causes[failure_cause(e)] = causes.get(failure_cause(e), 0) + 1
-    counts = ", ".join(f"{n} {cause}" for cause, n in sorted(causes.items(), key=lambda kv: -kv[1]))
+    counts = failure_counts(failed)
     lines = [f"Failures: {len(failed)} of {len(result['episodes'])} ({counts}).", ""]
     for e in failed:
         extra = ""
@@ -176,10 +183,7 @@ def policy_table(results: list[dict[str, Any]]) -> list[str]:
     for r in results:
         s = r["summary"]
         failed = [e for e in r["episodes"] if not e["is_success"]]
-        causes: dict[str, int] = {}
-        for e in failed:
-            causes[failure_cause(e)] = causes.get(failure_cause(e), 0) + 1
-        fails = ", ".join(f"{n} {c}" for c, n in causes.items()) or "none"
+        fails = failure_counts(failed) or "none"
         stops = f"{s['mean_safety_stops']:.2f}" if s.get("mean_safety_stops") is not None else "-"
         waiting = f"{s['mean_blocked_time']:.1f}" if s.get("mean_blocked_time") is not None else "-"
         rows.append(
