@@ -11,6 +11,7 @@ from agri_envs.rover import robot as rover
 from agri_envs.sim2d.sensors import tim561
 from baselines import make_policy, policy_spec
 from baselines.harik_apf import HarikApfController, HarikApfParams, RobotGeometry
+from training.evaluate import run_episode
 
 ENV_ID = "agri_envs/GreenhouseNav-v0"
 
@@ -95,18 +96,7 @@ def test_sb3_evaluate_policy_accepts_it_unchanged():
 def run(kwargs, seeds):
     env = gym.make(ENV_ID, full_scan=True, localization="ground_truth", **kwargs)
     policy = make_policy("harik-apf-gt", env)
-    results = []
-    for seed in seeds:
-        obs, info = env.reset(seed=seed)
-        start = True
-        while True:
-            action, _ = policy.predict(obs, episode_start=np.array([start]))
-            start = False
-            obs, _, term, trunc, info = env.step(action)
-            if term or trunc:
-                break
-        results.append(info)
-    return results
+    return [run_episode(env, policy, seed, None)["record"] for seed in seeds]
 
 
 def test_solves_the_easy_preset():

@@ -19,6 +19,7 @@ from baselines.luo_apf import (
     plan_harvest,
     targets_from_observation,
 )
+from training.evaluate import run_episode
 
 ENV_ID = "agri_envs/GrapeHarvest-v0"
 
@@ -91,22 +92,16 @@ def test_planned_path_points_are_collision_free_in_pybullet(seed):
     assert min(clearances) > 0.0
 
 
-def run_episode(env, policy, seed):
-    obs, info = env.reset(seed=seed)
-    start = True
-    while True:
-        action, _ = policy.predict(obs, episode_start=np.array([start]))
-        start = False
-        obs, _, terminated, truncated, info = env.step(action)
-        if terminated or truncated:
-            return info
+def run(env, policy, seed):
+    """The evaluator's record of one episode (final info keys plus the policy's own metrics)."""
+    return run_episode(env, policy, seed, None)["record"]
 
 
 def test_policy_solves_the_easy_preset():
     env = gym.make(ENV_ID, min_clusters=2, max_clusters=2, n_leaves=0, n_canes=0)
     policy = make_policy("luo-apf", env)
     for seed in range(3):
-        info = run_episode(env, policy, seed)
+        info = run(env, policy, seed)
         assert info["is_success"] and not info["collision"] and info["harvested"] == 2
         metrics = policy.episode_metrics(0)
         assert metrics["plan_success"] and metrics["path_points"] > 10 and metrics["planning_time_ms"] > 0
@@ -135,5 +130,5 @@ def test_sb3_evaluate_policy_accepts_it_unchanged():
 def test_table2_success_at_least_95_percent_over_100_seeds():
     env = gym.make(ENV_ID, min_clusters=2, max_clusters=5)
     policy = make_policy("luo-apf", env)
-    success = [run_episode(env, policy, seed)["is_success"] for seed in range(100)]
+    success = [run(env, policy, seed)["is_success"] for seed in range(100)]
     assert np.mean(success) >= 0.95, np.flatnonzero(~np.array(success))
