@@ -6,7 +6,7 @@ until an env is made::
     import gymnasium as gym
     import agri_envs  # noqa: F401
 
-    env = gym.make("agri_envs/GreenhouseNav-v0", n_rows=4, growth=0.5)
+    env = gym.make("agri_envs/GreenhouseNav-v1", n_rows=4, growth=0.5)
 """
 
 from __future__ import annotations
@@ -20,15 +20,15 @@ __all__ = ["__version__", "register_envs"]
 
 def register_envs() -> None:
     """Register all agri_envs ids with Gymnasium (idempotent)."""
-    if "agri_envs/GreenhouseNav-v0" not in registry:
+    if "agri_envs/GreenhouseNav-v1" not in registry:
         register(
-            id="agri_envs/GreenhouseNav-v0",
+            id="agri_envs/GreenhouseNav-v1",
             entry_point="agri_envs.rover.greenhouse_nav:GreenhouseNavEnv",
             max_episode_steps=2250,
         )
-    if "agri_envs/GrapeHarvest-v0" not in registry:
+    if "agri_envs/GrapeHarvest-v1" not in registry:
         register(
-            id="agri_envs/GrapeHarvest-v0",
+            id="agri_envs/GrapeHarvest-v1",
             entry_point="agri_envs.arm.grape_harvest:GrapeHarvestEnv",
             max_episode_steps=1000,
         )

@@ -2,8 +2,8 @@
 
 A scenario is data only (env id, arguments, a description), so users can build the same env by hand::
 
-    kwargs = scenario("agri_envs/GreenhouseNav-v0", "sim-loop").env_kwargs
-    env = gym.make("agri_envs/GreenhouseNav-v0", **kwargs)
+    kwargs = scenario("agri_envs/GreenhouseNav-v1", "sim-loop").env_kwargs
+    env = gym.make("agri_envs/GreenhouseNav-v1", **kwargs)
 """
 
 from __future__ import annotations
@@ -67,7 +67,7 @@ def list_scenarios(env_id: str | None = None) -> list[Scenario]:
     return [s for (e, _), s in _SCENARIOS.items() if env_id is None or e == env_id]
 
 
-_NAV = "agri_envs/GreenhouseNav-v0"
+_NAV = "agri_envs/GreenhouseNav-v1"
 register_scenario(
     Scenario(
         _NAV,
@@ -107,7 +107,7 @@ register_scenario(
     )
 )
 
-_GRAPE = "agri_envs/GrapeHarvest-v0"
+_GRAPE = "agri_envs/GrapeHarvest-v1"
 register_scenario(
     Scenario(
         _GRAPE,

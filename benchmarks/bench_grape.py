@@ -1,4 +1,4 @@
-"""Speed of GrapeHarvest-v0 next to panda-gym's PandaReach-v3, and luo-apf's planning time per full plan.
+"""Speed of GrapeHarvest-v1 next to panda-gym's PandaReach-v3, and luo-apf's planning time per full plan.
 
 Prints steps/s (random actions, one process, median of several runs, both envs measured in this run; the
 peer needs ``pip install -e ".[bench]"``) and the median / 90th-percentile wall time of one full
@@ -17,10 +17,10 @@ import numpy as np
 from bench_greenhouse import steps_per_second  # the same measurement: median steps/s of random actions
 
 import agri_envs  # noqa: F401
+from agri_baselines.luo_apf import joints_from_observation, plan_harvest, targets_from_observation
 from agri_envs.scenarios import scenario
-from baselines.luo_apf import joints_from_observation, plan_harvest, targets_from_observation
 
-ENV_ID = "agri_envs/GrapeHarvest-v0"
+ENV_ID = "agri_envs/GrapeHarvest-v1"
 
 
 def planning_times(n: int) -> tuple[np.ndarray, float]:

@@ -1,4 +1,4 @@
-"""Hector SLAM speed and accuracy on recorded GreenhouseNav-v0 drives, next to KISS-ICP on the same scans.
+"""Hector SLAM speed and accuracy on recorded GreenhouseNav-v1 drives, next to KISS-ICP on the same scans.
 
 Records drives of the privileged ``harik-apf-gt`` controller (811-beam scans with the env's noise and
 dropouts, people walking), then replays the scans through
@@ -26,12 +26,12 @@ import gymnasium as gym
 import numpy as np
 
 import agri_envs  # noqa: F401
+from agri_baselines import make_policy
+from agri_baselines.hector_slam import HectorSlam, HectorSlamConfig
 from agri_envs.scenarios import scenario
-from baselines import make_policy
-from baselines.hector_slam import HectorSlam, HectorSlamConfig
-from training.evaluate import localization_errors, start_frame_to_world
+from agri_training.evaluate import localization_errors, start_frame_to_world
 
-ENV_ID = "agri_envs/GreenhouseNav-v0"
+ENV_ID = "agri_envs/GreenhouseNav-v1"
 
 
 def record(scenario_name: str, seed: int) -> tuple[np.ndarray, np.ndarray, gym.Env]:

@@ -2,7 +2,7 @@
 
 import json
 
-from training.cli import main, parse_env_kwargs
+from agri_training.cli import main, parse_env_kwargs
 
 
 def test_parse_env_kwargs_types():
@@ -20,7 +20,7 @@ def test_evaluate_writes_json(tmp_path, capsys):
         [
             "evaluate",
             "--env",
-            "agri_envs/GreenhouseNav-v0",
+            "agri_envs/GreenhouseNav-v1",
             "--policy",
             "harik-apf-gt",
             "--episodes",
@@ -51,7 +51,7 @@ def test_evaluate_errors_are_clear(tmp_path, capsys):
         [
             "evaluate",
             "--env",
-            "agri_envs/GreenhouseNav-v0",
+            "agri_envs/GreenhouseNav-v1",
             "--policy",
             "harik-apf-gt",
             "--episodes",
@@ -68,7 +68,7 @@ def test_evaluate_errors_are_clear(tmp_path, capsys):
         [
             "evaluate",
             "--env",
-            "agri_envs/GreenhouseNav-v0",
+            "agri_envs/GreenhouseNav-v1",
             "--policy",
             "harik-apf-gt",
             "--episodes",
@@ -81,12 +81,12 @@ def test_evaluate_errors_are_clear(tmp_path, capsys):
         ]
     )
     assert rc == 2 and "needs full_scan=True" in capsys.readouterr().err
-    rc = main(["evaluate", "--env", "agri_envs/GreenhouseNav-v0", "--policy", "nope", "--out", "x.json"])
+    rc = main(["evaluate", "--env", "agri_envs/GreenhouseNav-v1", "--policy", "nope", "--out", "x.json"])
     assert rc == 2 and "unknown policy" in capsys.readouterr().err
 
 
 def test_report_has_tables_and_plots(tmp_path):
-    rc = main(["report", "--out", str(tmp_path), "--episodes", "1", "--env", "agri_envs/GreenhouseNav-v0", "--quiet"])
+    rc = main(["report", "--out", str(tmp_path), "--episodes", "1", "--env", "agri_envs/GreenhouseNav-v1", "--quiet"])
     assert rc == 0
     md = (tmp_path / "report.md").read_text()
     assert "| harik-apf-gt |" in md and "_trajectory.png" in md and "_d_alpha.png" in md
@@ -97,7 +97,7 @@ def test_report_has_tables_and_plots(tmp_path):
 
 
 def test_failures_are_counted_by_cause():
-    from training.plots_rover import failure_cause, failure_lines
+    from agri_training.plots_rover import failure_cause, failure_lines
 
     base = {"is_success": False, "collision": False, "episode_time": 150.0, "waypoints_reached": 3, "n_waypoints": 8}
     episodes = [

@@ -1,4 +1,4 @@
-"""GrapeHarvest-v0: API checkers, HER reward, determinism, pickling, strictness, collisions, rendering."""
+"""GrapeHarvest-v1: API checkers, HER reward, determinism, pickling, strictness, collisions, rendering."""
 
 import pickle
 import resource
@@ -15,7 +15,7 @@ from agri_envs.arm.kinematics import nearest_ik
 from agri_envs.arm.robot_model import flange_pose_for_tip, tip_pose
 from agri_envs.arm.scene import HOME_Q, harvest_configurations
 
-ENV_ID = "agri_envs/GrapeHarvest-v0"
+ENV_ID = "agri_envs/GrapeHarvest-v1"
 
 
 def drive_to(env, q_target, max_steps=200):

@@ -7,13 +7,13 @@ import numpy as np
 import pytest
 
 import agri_envs  # noqa: F401
+from agri_baselines import make_policy, policy_spec
+from agri_baselines.harik_apf import HarikApfController, HarikApfParams, RobotGeometry
 from agri_envs.rover import robot as rover
 from agri_envs.sim2d.sensors import tim561
-from baselines import make_policy, policy_spec
-from baselines.harik_apf import HarikApfController, HarikApfParams, RobotGeometry
-from training.evaluate import run_episode
+from agri_training.evaluate import run_episode
 
-ENV_ID = "agri_envs/GreenhouseNav-v0"
+ENV_ID = "agri_envs/GreenhouseNav-v1"
 
 
 @pytest.fixture

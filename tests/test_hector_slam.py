@@ -7,12 +7,12 @@ import numpy as np
 import pytest
 
 import agri_envs  # noqa: F401
+from agri_baselines import make_policy, policy_spec
+from agri_baselines.hector_slam import HectorSlam, HectorSlamConfig, interpolate_map
 from agri_envs.sim2d.gridmap import rasterize
-from baselines import make_policy, policy_spec
-from baselines.hector_slam import HectorSlam, HectorSlamConfig, interpolate_map
-from training.evaluate import localization_errors, run_episode, start_frame_to_world
+from agri_training.evaluate import localization_errors, run_episode, start_frame_to_world
 
-ENV_ID = "agri_envs/GreenhouseNav-v0"
+ENV_ID = "agri_envs/GreenhouseNav-v1"
 
 
 def compose(a, b):
@@ -188,13 +188,13 @@ def test_the_slam_module_imports_no_gymnasium():
     import subprocess
     import sys
 
-    code = "import sys, baselines.hector_slam; print('gymnasium' in sys.modules)"
+    code = "import sys, agri_baselines.hector_slam; print('gymnasium' in sys.modules)"
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.strip() == "False"
 
 
 def test_checked_gauss_newton_never_raises_the_matching_cost(scene):
-    from baselines.hector_slam import _gauss_newton, _matching_cost
+    from agri_baselines.hector_slam import _gauss_newton, _matching_cost
 
     start = scene.robot.pose.copy()
     slam = make_slam(scene)

@@ -7,10 +7,8 @@ import numpy as np
 import pytest
 
 import agri_envs  # noqa: F401
-from agri_envs.arm.robot_model import tip_pose
-from agri_envs.arm.scene import HOME_Q
-from baselines import make_policy, policy_spec
-from baselines.luo_apf import (
+from agri_baselines import make_policy, policy_spec
+from agri_baselines.luo_apf import (
     JOINT_WEIGHTS,
     LuoApfParams,
     cut_configurations,
@@ -19,9 +17,11 @@ from baselines.luo_apf import (
     plan_harvest,
     targets_from_observation,
 )
-from training.evaluate import run_episode
+from agri_envs.arm.robot_model import tip_pose
+from agri_envs.arm.scene import HOME_Q
+from agri_training.evaluate import run_episode
 
-ENV_ID = "agri_envs/GrapeHarvest-v0"
+ENV_ID = "agri_envs/GrapeHarvest-v1"
 
 
 def tour_cost(q_home, q_clusters, perm):

@@ -1,4 +1,4 @@
-"""GrapeHarvest-v0: a 6-DOF arm cuts grape clusters without touching their anti-collision boxes (Luo 2018)."""
+"""GrapeHarvest-v1: a 6-DOF arm cuts grape clusters without touching their anti-collision boxes (Luo 2018)."""
 
 from __future__ import annotations
 
@@ -27,7 +27,7 @@ OBS_DIM = _ARM_FEATURES + MAX_CLUSTERS * _CLUSTER_FEATURES + MAX_OBSTACLES * _OB
 
 @dataclasses.dataclass(frozen=True)
 class GrapeHarvestConfig(StrictConfig):
-    """Arguments of ``agri_envs/GrapeHarvest-v0`` (each one a ``gym.make`` keyword)."""
+    """Arguments of ``agri_envs/GrapeHarvest-v1`` (each one a ``gym.make`` keyword)."""
 
     min_clusters: int = param(2, "fewest grape clusters in an episode (the count is drawn uniformly)", low=1, high=5)
     max_clusters: int = param(5, "most grape clusters in an episode", low=1, high=5)
@@ -188,7 +188,7 @@ class GrapeHarvestEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
 
     Example::
 
-        env = gym.make("agri_envs/GrapeHarvest-v0", min_clusters=3, max_clusters=3, reward_type="dense")
+        env = gym.make("agri_envs/GrapeHarvest-v1", min_clusters=3, max_clusters=3, reward_type="dense")
 
     ## Baselines
 
@@ -199,6 +199,7 @@ class GrapeHarvestEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
     ## Version History
 
     * v0: initial release.
+    * v1: (in progress) see the training issue; the entry is completed with the changes.
 
     ## References
 

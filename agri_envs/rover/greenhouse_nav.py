@@ -1,4 +1,4 @@
-"""GreenhouseNav-v0: waypoint navigation of a LIDAR rover between greenhouse rows (Harik 2018)."""
+"""GreenhouseNav-v1: waypoint navigation of a LIDAR rover between greenhouse rows (Harik 2018)."""
 
 from __future__ import annotations
 
@@ -33,7 +33,7 @@ LOCALIZATION_MODES = ("ground_truth", "odometry", "none")
 
 @dataclasses.dataclass(frozen=True)
 class GreenhouseNavConfig(StrictConfig):
-    """Arguments of ``agri_envs/GreenhouseNav-v0`` (each one a ``gym.make`` keyword)."""
+    """Arguments of ``agri_envs/GreenhouseNav-v1`` (each one a ``gym.make`` keyword)."""
 
     # Scene
     scene: str = param(
@@ -294,7 +294,7 @@ class GreenhouseNavEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
 
     Example::
 
-        env = gym.make("agri_envs/GreenhouseNav-v0", n_rows=4, growth=0.6, n_people=3, full_scan=True)
+        env = gym.make("agri_envs/GreenhouseNav-v1", n_rows=4, growth=0.6, n_people=3, full_scan=True)
 
     ## Baselines
 
@@ -303,6 +303,7 @@ class GreenhouseNavEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
     ## Version History
 
     * v0: initial release.
+    * v1: (in progress) see the training issue; the entry is completed with the changes.
 
     ## References
 

@@ -1,4 +1,4 @@
-"""Report section of GreenhouseNav-v0: trajectory on the greenhouse map, d(t) and alpha(t) (Harik Figs. 7-9)."""
+"""Report section of GreenhouseNav-v1: trajectory on the greenhouse map, d(t) and alpha(t) (Harik Figs. 7-9)."""
 
 from __future__ import annotations
 
@@ -199,15 +199,15 @@ def lead_result(results: list[dict[str, Any]]) -> dict[str, Any]:
 
 
 def report_section(results: list[dict[str, Any]], out_dir: Path) -> str:
-    """Markdown (with PNG plots written to ``out_dir``) for the GreenhouseNav-v0 results, one part per scenario.
+    """Markdown (with PNG plots written to ``out_dir``) for the GreenhouseNav-v1 results, one part per scenario.
 
     Each part has a table of the policies (failures counted by cause, safety stops, localization error
     with 95 % bootstrap intervals), the failed seeds, and plots of one episode of the lead policy: the
     trajectory with its pose estimate (Harik Figs. 9, 11, 16), d(t) and alpha(t) (Figs. 7-8, 14-15) for
     single missions, and the overlay of the cycles with the drift per cycle (Fig. 17) for repeated ones.
     """
+    from agri_baselines import policy_spec
     from agri_envs.scenarios import scenario
-    from baselines import policy_spec
 
     by_label: dict[str, list[dict[str, Any]]] = {}
     for r in results:

@@ -21,9 +21,9 @@ import gymnasium as gym
 import numpy as np
 
 import agri_envs
+from agri_baselines import list_policies, make_policy, policy_spec
 from agri_envs.scenarios import scenario as get_scenario
-from baselines import list_policies, make_policy, policy_spec
-from training.stats import bootstrap_ci
+from agri_training.stats import bootstrap_ci
 
 
 @dataclasses.dataclass(frozen=True)
@@ -32,7 +32,7 @@ class EvalRequest:
 
     Attributes:
         env_id: Registered env id.
-        policy: Baseline name (see ``baselines``) or path to an SB3 ``.zip`` checkpoint.
+        policy: Baseline name (see ``agri_baselines``) or path to an SB3 ``.zip`` checkpoint.
         episodes: Number of episodes (seeds ``seed`` .. ``seed + episodes - 1``).
         seed: First seed.
         scenario: Name of an env-argument preset (``agri_envs.scenarios``), or None.

@@ -14,13 +14,13 @@ import re
 from pathlib import Path
 from typing import Any
 
+from agri_baselines import list_policies
 from agri_envs.scenarios import Scenario, list_scenarios
-from baselines import list_policies
-from training.evaluate import EvalRequest, evaluate
+from agri_training.evaluate import EvalRequest, evaluate
 
 SECTION_HOOKS = {
-    "agri_envs/GreenhouseNav-v0": "training.plots_rover:report_section",
-    "agri_envs/GrapeHarvest-v0": "training.plots_arm:report_section",
+    "agri_envs/GreenhouseNav-v1": "agri_training.plots_rover:report_section",
+    "agri_envs/GrapeHarvest-v1": "agri_training.plots_arm:report_section",
 }
 
 

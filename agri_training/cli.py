@@ -27,7 +27,7 @@ def parse_env_kwargs(items: list[str]) -> dict[str, Any]:
 
 
 def _cmd_evaluate(args: argparse.Namespace) -> int:
-    from training.evaluate import EvalRequest, evaluate, format_summary
+    from agri_training.evaluate import EvalRequest, evaluate, format_summary
 
     request = EvalRequest(
         env_id=args.env,
@@ -48,7 +48,7 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
 
 
 def _cmd_report(args: argparse.Namespace) -> int:
-    from training.report import build_report, default_suite
+    from agri_training.report import build_report, default_suite
 
     suite = default_suite(episodes=args.episodes, only_env=args.env)
     path = build_report(suite, Path(args.out), progress=not args.quiet)
@@ -60,8 +60,8 @@ def _cmd_list(args: argparse.Namespace) -> int:
     import gymnasium as gym
 
     import agri_envs  # noqa: F401
+    from agri_baselines import list_policies
     from agri_envs.scenarios import list_scenarios
-    from baselines import list_policies
 
     print("envs:")
     for env_id in sorted(k for k in gym.registry if k.startswith("agri_envs/")):
@@ -81,7 +81,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="agri", description=__doc__)
     sub = parser.add_subparsers(dest="command", required=True)
     ev = sub.add_parser("evaluate", help="run a policy over seeds S, S+1, ... and write a JSON result")
-    ev.add_argument("--env", required=True, help="env id, e.g. agri_envs/GreenhouseNav-v0")
+    ev.add_argument("--env", required=True, help="env id, e.g. agri_envs/GreenhouseNav-v1")
     ev.add_argument("--scenario", default=None, help="named preset of env arguments (agri list)")
     ev.add_argument("--policy", required=True, help="baseline name (agri list) or SB3 checkpoint .zip")
     ev.add_argument("--episodes", type=int, default=20)

@@ -16,7 +16,7 @@ orientation to the cluster's along the way. Each harvest ends with a straight ap
 the front, its pallet under the berries) and the same way back; the cut cluster's box leaves with it.
 
 :class:`LuoApfPolicy` is the thin SB3-style adapter: it reads the cutting points and boxes from the
-GrapeHarvest-v0 observation (what the paper's vision system supplies), plans once per episode and
+GrapeHarvest-v1 observation (what the paper's vision system supplies), plans once per episode and
 follows the joint waypoints through joint-delta actions. The planner itself imports no Gymnasium.
 """
 
@@ -363,7 +363,7 @@ def plan_harvest(
 
 
 def targets_from_observation(obs: np.ndarray) -> tuple[list[ClusterTarget], list[int], np.ndarray, np.ndarray]:
-    """Clusters (unharvested, with their slot indices) and other boxes from a GrapeHarvest-v0 observation."""
+    """Clusters (unharvested, with their slot indices) and other boxes from a GrapeHarvest-v1 observation."""
     from agri_envs.arm.grape_harvest import _ARM_FEATURES, _CLUSTER_FEATURES, _OBSTACLE_FEATURES, MAX_CLUSTERS
 
     o = np.asarray(obs, dtype=np.float64)
@@ -453,7 +453,7 @@ class LuoApfPolicy:
 
 
 def make_luo_apf(env: Any) -> LuoApfPolicy:
-    """Registry factory: the policy for a GrapeHarvest-v0 env with joint-delta actions."""
+    """Registry factory: the policy for a GrapeHarvest-v1 env with joint-delta actions."""
     cfg = env.unwrapped.config
     if cfg.control != "joint":
         raise ValueError(f"luo-apf drives joint-delta actions: make the env with control='joint' (got {cfg.control!r})")

@@ -6,7 +6,7 @@ deterministic=False) -> (actions, state)`` on batched observations, so
 here by name with the env they drive, the env arguments they need (for example the full-resolution
 scan) and whether they use privileged information (ground-truth pose, the true scene).
 
-    >>> from baselines import make_policy
+    >>> from agri_baselines import make_policy
     >>> policy = make_policy("harik-apf-gt", env)  # doctest: +SKIP
 """
 
@@ -96,8 +96,8 @@ def make_policy(name: str, env: gym.Env[Any, Any]) -> Any:
 register_policy(
     PolicySpec(
         name="harik-apf-gt",
-        env_id="agri_envs/GreenhouseNav-v0",
-        entry_point="baselines.harik_apf:make_harik_apf_gt",
+        env_id="agri_envs/GreenhouseNav-v1",
+        entry_point="agri_baselines.harik_apf:make_harik_apf_gt",
         env_kwargs={"localization": "ground_truth", "full_scan": True},
         privileged=True,
         description="Harik 2018 APF controller (eqs. 12-14, passive safety stop) on the ground-truth pose",
@@ -106,8 +106,8 @@ register_policy(
 register_policy(
     PolicySpec(
         name="harik-apf",
-        env_id="agri_envs/GreenhouseNav-v0",
-        entry_point="baselines.harik_apf:make_harik_apf_slam",
+        env_id="agri_envs/GreenhouseNav-v1",
+        entry_point="agri_baselines.harik_apf:make_harik_apf_slam",
         env_kwargs={"localization": "none", "full_scan": True},
         privileged=False,
         description="Harik 2018 APF controller on a Hector SLAM pose from the LIDAR alone (no odometry)",
@@ -116,8 +116,8 @@ register_policy(
 register_policy(
     PolicySpec(
         name="harik-apf-hector-plain",
-        env_id="agri_envs/GreenhouseNav-v0",
-        entry_point="baselines.harik_apf:make_harik_apf_hector_plain",
+        env_id="agri_envs/GreenhouseNav-v1",
+        entry_point="agri_baselines.harik_apf:make_harik_apf_hector_plain",
         env_kwargs={"localization": "none", "full_scan": True},
         privileged=False,
         description="harik-apf on plain Hector SLAM, as ROS hector_mapping (no guard against people, no step check)",
@@ -126,8 +126,8 @@ register_policy(
 register_policy(
     PolicySpec(
         name="luo-apf",
-        env_id="agri_envs/GrapeHarvest-v0",
-        entry_point="baselines.luo_apf:make_luo_apf",
+        env_id="agri_envs/GrapeHarvest-v1",
+        entry_point="agri_baselines.luo_apf:make_luo_apf",
         env_kwargs={"control": "joint"},
         description="Luo 2018: energy-optimal harvesting order (eq. 11) and APF sampling path points (Alg. 1)",
     )

@@ -15,7 +15,7 @@ and wait (no forward motion) until the front is free, still turning toward the w
 corridor experiment (sec. 3.4).
 
 :class:`HarikApfController` is the pure algorithm (no Gymnasium); :class:`HarikApfPolicy` adapts it to
-SB3's ``predict`` on GreenhouseNav-v0 observations.
+SB3's ``predict`` on GreenhouseNav-v1 observations.
 """
 
 from __future__ import annotations
@@ -192,7 +192,7 @@ class HarikApfController:
 
 
 class HarikApfPolicy:
-    """SB3-style ``predict`` adapter of :class:`HarikApfController` for GreenhouseNav-v0.
+    """SB3-style ``predict`` adapter of :class:`HarikApfController` for GreenhouseNav-v1.
 
     Reads the ``waypoint`` (d, alpha from the env's localization), ``scan`` and ``sonar`` observation keys,
     so the env must be made with ``full_scan=True`` and a localization other than ``"none"``. One
@@ -331,13 +331,13 @@ class HarikApfSlamPolicy(HarikApfPolicy):
 
     def __init__(self, *args: Any, slam_config: Any = None, **kwargs: Any) -> None:
         super().__init__(*args, **kwargs)
-        from baselines.hector_slam import HectorSlamConfig
+        from agri_baselines.hector_slam import HectorSlamConfig
 
         self.slam_config = slam_config or HectorSlamConfig()
         self.slams: list[Any] = []
 
     def _slam(self, i: int) -> Any:
-        from baselines.hector_slam import HectorSlam
+        from agri_baselines.hector_slam import HectorSlam
 
         while len(self.slams) <= i:
             self.slams.append(HectorSlam(self.slam_config, self.robot.beam_angles, self.robot.lidar_mount))
@@ -398,6 +398,6 @@ def make_harik_apf_hector_plain(env: Any) -> HarikApfSlamPolicy:
     No free-space guard against moving people and no cost check of Gauss-Newton steps, as in ROS
     ``hector_mapping`` (see :mod:`baselines.hector_slam`).
     """
-    from baselines.hector_slam import HectorSlamConfig
+    from agri_baselines.hector_slam import HectorSlamConfig
 
     return make_harik_apf_slam(env, slam_config=HectorSlamConfig(free_space_guard=None, max_step_halvings=0))

@@ -1,4 +1,4 @@
-"""Report section of GrapeHarvest-v0: Luo's Table 2 side by side with ours, success rate, Fig. 6-style 3D path."""
+"""Report section of GrapeHarvest-v1: Luo's Table 2 side by side with ours, success rate, Fig. 6-style 3D path."""
 
 from __future__ import annotations
 
@@ -61,7 +61,7 @@ def plot_planned_path(result: dict[str, Any], seed: int, out_dir: Path, stem: st
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from baselines import make_policy
+    from agri_baselines import make_policy
 
     env = gym.make(
         result["env_id"], render_mode="rgb_array", render_width=640, render_height=480, **result["env_kwargs"]
@@ -112,7 +112,7 @@ def plot_planned_path(result: dict[str, Any], seed: int, out_dir: Path, stem: st
 
 
 def report_section(results: list[dict[str, Any]], out_dir: Path) -> str:
-    """Markdown (with PNG plots written to ``out_dir``) for every GrapeHarvest-v0 result."""
+    """Markdown (with PNG plots written to ``out_dir``) for every GrapeHarvest-v1 result."""
     parts = []
     for result in results:
         label = result.get("label") or result["scenario"] or "default"
