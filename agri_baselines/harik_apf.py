@@ -105,6 +105,7 @@ class HarikApfController:
         self.backing_left = 0.0  # metres still to back off
         self.blocked = False
         self.stops = 0
+        self.turn_stops = 0  # stops triggered while turning on the spot (|alpha| > alpha_max)
         self.blocked_steps = 0
 
     def obstacle_zones(self, ranges: np.ndarray, sonar: np.ndarray) -> tuple[float, float, float]:
@@ -166,16 +167,37 @@ class HarikApfController:
         u, r = self.attractive(d, alpha)
         if abs(alpha) <= p.alpha_max:
             # Eq. 12 with eq. 11: each side within the threshold pushes the robot away from it.
+            #
+            # Reading of d_obs (eq. 10). The paper writes d_obs as the Euclidean distance between the robot
+            # and the obstacle, the robot taken as a point. We use the sideways gap between the body's
+            # side and the obstacle (``left``/``right`` from obstacle_zones). For this robot the two
+            # readings differ where it matters: the body is 0.5 m wide in 1.2-1.6 m corridors, so the centre
+            # distance of a side obstacle never falls below the half-width (0.25 m) even at contact, and
+            # k_rep / d_obs would grow only 1.4 times between a 10 cm gap and a touch; the gap reading
+            # grows without bound as the side closes in, which is what a repulsion that "keeps a safe
+            # distance" (sec. 3.1) must do. It is also what the paper's robot measures for its sides:
+            # the HC-SR04 sonars sit on the body's sides (sec. 2.1) and read the gap from the edge. The
+            # repulsion is restricted to obstacles alongside the body (the sides, sec. 3.1): what lies
+            # ahead is the front zone's, handled by the passive safety stop below.
             if right < p.d_obs_threshold:
                 r += p.k_rep / max(right, 1e-3)
             if left < p.d_obs_threshold:
                 r -= p.k_rep / max(left, 1e-3)
+            # Clamp not in eq. 14: the paper saturates r only for |alpha| > alpha_max, but k_rep / d_obs is
+            # unbounded as d_obs -> 0, so inside the band r could exceed r_max, the rate the paper
+            # introduced the saturation for ("high ... angular velocities ... may damage its actuators",
+            # sec. 3.1). Clamping at r_max applies that same limit to the repulsive term; it changes r only
+            # when a side is closer than k_rep / (r_max - K_a |alpha|), i.e. 2.5 cm at alpha = 0.
             r = min(p.r_max, max(-p.r_max, r))
-        # Passive motion safety: something in front -> stop, step back a few cm, wait (turning allowed).
-        if front < p.front_stop_distance and u > 0.0:
+        # Passive motion safety (sec. 3.1): something in front -> stop, step back a few cm, wait. The front
+        # detection acts whatever u is, also in a turn on the spot (u = 0, eq. 14): in a corridor the
+        # robot faces the wall halfway through a 180 deg turn, steps back and keeps turning until the
+        # front is free (sec. 3.4, Figs. 14-15: d stays almost constant while alpha decreases).
+        if front < p.front_stop_distance:
             if not self.blocked:
                 self.blocked = True
                 self.stops += 1
+                self.turn_stops += int(abs(alpha) > p.alpha_max)
                 self.backing_left = p.step_back_distance
             self.blocked_steps += 1
             u = 0.0
@@ -272,12 +294,15 @@ class HarikApfPolicy:
         """Per-episode statistics of env ``index``.
 
         Returns:
-            ``safety_stops`` (how often the passive safety stop triggered), ``blocked_time`` (s spent
-            waiting for the front to clear) and ``blocked_at_end`` (1 when the episode ended while waiting).
+            ``safety_stops`` (how often the passive safety stop triggered), ``turn_safety_stops`` (those
+            that triggered while turning on the spot, |alpha| > alpha_max: the corridor turns of sec. 3.4),
+            ``blocked_time`` (s spent waiting for the front to clear) and ``blocked_at_end`` (1 when the
+            episode ended while waiting).
         """
         c = self._controller(index)
         return {
             "safety_stops": float(c.stops),
+            "turn_safety_stops": float(c.turn_stops),
             "blocked_time": c.blocked_steps * self.robot.control_period,
             "blocked_at_end": float(c.blocked),
         }

@@ -1,5 +1,6 @@
 """Harik APF: eqs. 12-14 worked values, repulsion, passive safety, SB3 compatibility, solving the env."""
 
+import dataclasses
 import math
 
 import gymnasium as gym
@@ -73,6 +74,104 @@ def test_passive_safety_stop_steps_back_then_waits(controller):
     ranges, sonar = free_scan()
     sonar[0], sonar[3] = 0.2, 0.1
     assert all(controller.command(5.0, 0.0, ranges, sonar)[0] == 0.0 for _ in range(5))
+
+
+def wall_scan(controller, y, x0, x1, ranges=None):
+    """Full LIDAR scan (m) with a wall along the body axis at body-frame ``y`` from ``x0`` to ``x1``.
+
+    The ranges are exact ray-segment intersections from the LIDAR mount, so the points the controller
+    reconstructs lie on the wall.
+    """
+    mx, my, myaw = controller.robot.lidar_mount
+    ang = myaw + controller.robot.beam_angles
+    out = np.full(len(ang), 10.0) if ranges is None else ranges
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = (y - my) / np.sin(ang)
+    x_hit = mx + t * np.cos(ang)
+    hit = (t > 0) & (x_hit >= x0) & (x_hit <= x1)
+    out[hit] = np.minimum(out[hit], t[hit])
+    return out
+
+
+def cross_wall_scan(controller, x, y0, y1):
+    """Full LIDAR scan (m) with a wall across the robot's path at body-frame ``x``, from ``y0`` to ``y1``."""
+    mx, my, myaw = controller.robot.lidar_mount
+    ang = myaw + controller.robot.beam_angles
+    out = np.full(len(ang), 10.0)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = (x - mx) / np.cos(ang)
+    y_hit = my + t * np.sin(ang)
+    hit = (t > 0) & (y_hit >= y0) & (y_hit <= y1)
+    out[hit] = t[hit]
+    return out
+
+
+def test_lidar_side_obstacles_repel_to_the_other_side(controller):
+    # Only the LIDAR sees the obstacle (sonars free): a wall alongside the body, 15 cm from its left side.
+    half_w, half_l = 0.5 * rover.WIDTH, 0.5 * rover.LENGTH
+    _, sonar = free_scan()
+    gap = 0.15
+    ranges = wall_scan(controller, half_w + gap, -half_l, half_l)
+    front, left, right = controller.obstacle_zones(ranges, sonar)
+    assert left == pytest.approx(gap) and right == math.inf and front == math.inf
+    _, r = controller.command(5.0, 0.0, ranges, sonar)
+    assert r == pytest.approx(-controller.p.k_rep / gap)  # obstacle on the left: turn right (r < 0)
+    controller.reset()
+    ranges = wall_scan(controller, -(half_w + 0.2), -half_l, half_l)
+    front, left, right = controller.obstacle_zones(ranges, sonar)
+    assert right == pytest.approx(0.2) and left == math.inf
+    _, r = controller.command(5.0, 0.0, ranges, sonar)
+    assert r == pytest.approx(controller.p.k_rep / 0.2)  # obstacle on the right: turn left (r > 0)
+
+
+def test_lidar_front_zone_triggers_the_safety_stop(controller):
+    # An obstacle 20 cm ahead of the front edge, off the front sonar's axis: only the LIDAR sees it.
+    half_l = 0.5 * rover.LENGTH
+    _, sonar = free_scan()
+    ranges = cross_wall_scan(controller, half_l + 0.2, 0.1, 0.25)
+    front, left, right = controller.obstacle_zones(ranges, sonar)
+    assert front == pytest.approx(0.2)
+    u, _ = controller.command(5.0, 0.0, ranges, sonar)
+    assert u < 0.0 and controller.stops == 1  # stop and step back
+    # The same obstacle 1 m ahead is no reason to stop.
+    controller.reset()
+    u, _ = controller.command(5.0, 0.0, cross_wall_scan(controller, half_l + 1.0, 0.1, 0.25), sonar)
+    assert u > 0.0 and controller.stops == 0
+
+
+def test_safety_stop_acts_in_a_turn_on_the_spot(controller):
+    # Sec. 3.4: halfway through a 180 deg turn the robot faces the wall; it steps back and keeps turning.
+    half_l = 0.5 * rover.LENGTH
+    p = controller.p
+    _, sonar = free_scan()
+    ranges = cross_wall_scan(controller, half_l + 0.2, -1.0, 1.0)
+    alpha = 2.5  # waypoint behind: |alpha| > alpha_max, eq. 14 turns on the spot with u = 0
+    assert controller.attractive(5.0, alpha) == (0.0, p.r_max)
+    commands = [controller.command(5.0, alpha, ranges, sonar) for _ in range(20)]
+    backing = [u for u, _ in commands if u < 0]
+    assert backing and commands[0][0] < 0  # steps back at once
+    assert sum(-u / 15 for u in backing) == pytest.approx(p.step_back_distance, abs=0.01)
+    assert all(r == p.r_max for _, r in commands)  # and keeps turning toward the waypoint
+    assert controller.stops == 1 and controller.turn_stops == 1
+
+
+def test_repulsion_is_what_keeps_the_robot_in_narrow_grown_rows():
+    # Leaves reach into 1.05 m corridors (growth 1): the robot enters each corridor off-centre after the
+    # turn at the headland (d_min = 0.3 m lets it leave the waypoint off the centre line). With the
+    # side repulsion it gets through; with attraction alone it ends up blocked or touching the plants.
+    kwargs = {"n_rows": 2, "corridor_width": 1.05, "growth": 1.0, "n_people": 0}
+    env = gym.make(ENV_ID, full_scan=True, localization="ground_truth", **kwargs)
+    results = {}
+    for k_rep in (None, 0.0):
+        infos = []
+        for seed in range(3):
+            policy = make_policy("harik-apf-gt", env)
+            if k_rep is not None:
+                policy.params = dataclasses.replace(policy.params, k_rep=k_rep)
+            infos.append(run_episode(env, policy, seed, None)["record"])
+        results[k_rep] = infos
+    assert all(i["is_success"] and not i["collision"] for i in results[None])
+    assert not any(i["is_success"] for i in results[0.0])
 
 
 def test_policy_spec_is_privileged_and_requires_full_scan():

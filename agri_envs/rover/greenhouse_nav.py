@@ -62,6 +62,11 @@ class GreenhouseNavConfig(StrictConfig):
     )
     office_length: float = param(14.0, "corridor length (scene='corridor')", unit="m", low=6.0, high=60.0)
     office_width: float = param(1.6, "corridor width (scene='corridor')", unit="m", low=1.0, high=4.0)
+    office_route: str = param(
+        "experiment",
+        "corridor mission: Harik 3.4 or 3.5",
+        choices=("experiment", "repeatability"),
+    )
     n_people: int = param(2, "people walking the corridors and headlands", low=0, high=20)
     people_tease_prob: float = param(
         0.3, "chance that a person stands in the robot's way for a while", low=0.0, high=1.0
@@ -148,7 +153,7 @@ class GreenhouseNavConfig(StrictConfig):
 
     def office_params(self) -> OfficeParams:
         """The office-corridor scene part of the config."""
-        return OfficeParams(length=self.office_length, width=self.office_width)
+        return OfficeParams(length=self.office_length, width=self.office_width, route=self.office_route)
 
     def reward_weights(self) -> RewardWeights:
         """The reward part of the config."""
@@ -265,6 +270,7 @@ class GreenhouseNavEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
     | ``layout_seed`` | -1 |  | in [-1, 2147483647] | seed of the scene layout; -1 draws a new layout every episode |
     | ``office_length`` | 14 | m | in [6.0, 60.0] | corridor length (scene='corridor') |
     | ``office_width`` | 1.6 | m | in [1.0, 4.0] | corridor width (scene='corridor') |
+    | ``office_route`` | 'experiment' |  | one of 'experiment', 'repeatability' | corridor mission: Harik 3.4 or 3.5 |
     | ``n_people`` | 2 |  | in [0, 20] | people walking the corridors and headlands |
     | ``people_tease_prob`` | 0.3 |  | in [0.0, 1.0] | chance that a person stands in the robot's way for a while |
     | ``max_speed`` | 0.6 | m/s | in [0.1, 2.0] | forward speed limit (reverse: half of it) |

@@ -214,6 +214,8 @@ class OfficeParams:
         door_spacing: Distance between door recesses along each wall (m).
         door_width: Width of a recess (m).
         door_depth: Depth of a recess (m).
+        route: ``"experiment"``: the mission 0 -> 1 -> 2 -> 3 -> 2 -> 0 of sec. 3.4 (Figs. 14-16);
+            ``"repeatability"``: 0 -> 2 -> 3 -> 4 -> 0 of sec. 3.5 (Fig. 17).
     """
 
     length: float = 14.0
@@ -221,13 +223,22 @@ class OfficeParams:
     door_spacing: float = 3.5
     door_width: float = 0.9
     door_depth: float = 0.3
+    route: str = "experiment"
+
+
+#: The office-corridor missions (waypoint indices after the start at waypoint 0), Harik secs. 3.4 and 3.5.
+ROUTES: dict[str, tuple[int, ...]] = {"experiment": (1, 2, 3, 2, 0), "repeatability": (2, 3, 4, 0)}
 
 
 def generate_office_corridor(p: OfficeParams, rng: np.random.Generator) -> Layout:
     """A straight office corridor with door recesses and cabinets; waypoints force 180 deg turns.
 
-    The mission is the paper's 0 -> 1 -> 2 -> 3 -> 2 -> 0 along the corridor: waypoint 1 lies at the far end
-    and 3 near the start, so the robot turns around at 1 and at 3 (and again at 2 on the way back).
+    The ``experiment`` mission is the paper's 0 -> 1 -> 2 -> 3 -> 2 -> 0 along the corridor: waypoint 1 lies
+    at the far end and 3 near the start, so the robot turns around at 1 and at 3 (and again at 2 on the way
+    back). The ``repeatability`` mission is sec. 3.5's 0 -> 2 -> 3 -> 4 -> 0, with waypoint 4 between 2 and
+    the far end: the robot turns around at every waypoint. The paper gives the waypoints only on a map
+    (Fig. 13) whose scale the text does not state; these positions are ours, chosen so that both missions
+    have the 180 deg turns the text describes.
     """
     b = GeometryBuilder()
     t = 0.5 * WALL_THICKNESS
@@ -266,7 +277,10 @@ def generate_office_corridor(p: OfficeParams, rng: np.random.Generator) -> Layou
         h + WALL_THICKNESS + p.door_depth,
     )
     geometry = b.build(bounds)
-    waypoints = np.array([[1.0, yc], [w - 1.0, yc], [0.55 * w, yc], [0.25 * w, yc]])
+    waypoints = np.array([[1.0, yc], [w - 1.0, yc], [0.55 * w, yc], [0.25 * w, yc], [0.8 * w, yc]])
+    if p.route not in ROUTES:
+        raise ValueError(f"OfficeParams.route={p.route!r} is invalid; expected one of {sorted(ROUTES)}")
+    mission = np.array(ROUTES[p.route])
     # People walk the centre line between doors and step into doorways: every dead end is a recess, so
     # someone who turns back from the robot can always get out of its way.
     door_nodes.sort()
@@ -277,8 +291,8 @@ def generate_office_corridor(p: OfficeParams, rng: np.random.Generator) -> Layou
     return Layout(
         geometry=geometry,
         waypoints=waypoints,
-        mission=np.array([1, 2, 3, 2, 0]),
-        start_pose=_start_facing(waypoints, 1),
+        mission=mission,
+        start_pose=_start_facing(waypoints, int(mission[0])),
         routes=routes,
     )
 
