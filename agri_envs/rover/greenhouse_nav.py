@@ -589,7 +589,10 @@ class GreenhouseNavEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
         return frame
 
     def close(self) -> None:
-        """Release the renderer (idempotent)."""
+        """Release the renderer and the pymunk world (idempotent; ``reset()`` builds a new world)."""
         if self._renderer is not None:
             self._renderer.close()
             self._renderer = None
+        if self.world is not None:
+            self.world.close()
+            self.world = None

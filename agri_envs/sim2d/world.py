@@ -12,8 +12,11 @@ for the numba sensor kernels.
 
 from __future__ import annotations
 
+import atexit
 import dataclasses
+import gc
 import math
+import weakref
 
 import numpy as np
 import pymunk
@@ -82,9 +85,28 @@ class World2D:
             self.movers.append(body)
             self.circles[n_static + i, 2] = 0.2
         self.robots: list[RobotBody] = []
+        _LIVE_WORLDS.add(self)
         thin = [float(r) for r in geometry.circles[:, 2]] + [float(r) for r in geometry.capsules[:, 4] if r > 0]
         # Substep length: half the thinnest obstacle's half-thickness, so a substep can never jump over it.
         self.max_substep = max(0.002, 0.5 * min(thin, default=0.1))
+
+    def close(self) -> None:
+        """Free the pymunk objects now (idempotent); the world cannot be used afterwards.
+
+        pymunk frees its C objects from cffi callbacks that read pymunk's module globals. A space still
+        alive when the interpreter wipes those globals at exit (an env that was never closed, kept
+        alive into that phase) makes the callbacks fail with ``Exception ignored ... spacefree ...
+        'NoneType' object has no attribute 'new_handle'``. Closing drops every reference to pymunk
+        objects, so they are freed while pymunk is intact; an exit hook closes the worlds left open.
+        """
+        if "space" not in self.__dict__:
+            return
+        self.space.remove(*self.space.shapes, *self.space.bodies)
+        del self.space
+        self.movers.clear()
+        for robot in self.robots:
+            del robot.body, robot.shape
+        self.robots.clear()
 
     # -- moving obstacles -------------------------------------------------------------------------------
     @property
@@ -181,3 +203,14 @@ class World2D:
         robot.v, robot.w = (0.0, 0.0) if contact else (v, w)
         self._sync(robot, pose)
         return contact
+
+
+#: Worlds not closed yet, closed by the exit hook below before the interpreter wipes module globals.
+_LIVE_WORLDS: weakref.WeakSet[World2D] = weakref.WeakSet()
+
+
+@atexit.register
+def _close_live_worlds() -> None:
+    for world in list(_LIVE_WORLDS):
+        world.close()
+    gc.collect()  # pymunk bodies and shapes hold handles to themselves: only the collector frees them

@@ -1,0 +1,213 @@
+"""Gymnasium's own env tests, written after its ``tests/envs/test_envs.py``, over every registered env.
+
+The ids come from ``gym.registry`` (every ``agri_envs/`` id), so an env added later is covered without
+editing this file; each runs with its defaults and, where listed in ``EXTRA_KWARGS``, with more argument
+sets. Checks: the env checkers of Gymnasium and SB3 with the render check on, the determinism rollout
+(two envs, same seed, same actions), pickling (the copy continues identically), every declared render
+mode, ``render()`` warning under ``render_mode=None``, reset after ``close()``, and a clean interpreter
+exit for a script that never closes its env.
+"""
+
+from __future__ import annotations
+
+import pickle
+import subprocess
+import sys
+import textwrap
+import warnings
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+import pytest
+from gymnasium.utils.env_checker import check_env, data_equivalence
+
+import agri_envs  # noqa: F401
+
+ENV_IDS = sorted(env_id for env_id in gym.registry if env_id.startswith("agri_envs/"))
+
+#: Argument sets beyond the defaults, per env id (short episodes, other scenes and modes).
+EXTRA_KWARGS: dict[str, list[dict[str, Any]]] = {
+    "agri_envs/GreenhouseNav-v1": [
+        {"scene": "corridor", "n_people": 1, "full_scan": True, "localization": "none"},
+        {"localization": "odometry", "lidar_beams": 30, "growth": 0.6, "n_trees": 3, "n_rows": 2},
+    ],
+    "agri_envs/GrapeHarvest-v1": [{"control": "ee", "reward_type": "dense"}],
+}
+
+#: Known failures that another branch fixes; strict, so the merge that fixes them flips the mark.
+KNOWN_FAILURES: dict[tuple[str, str], str] = {
+    ("agri_envs/GrapeHarvest-v1", "checkers"): "SB3's checker resets the env its render check closed: ArmSim is closed",
+    ("agri_envs/GrapeHarvest-v1", "reset_after_close"): "ArmSim is closed: reset does not reopen the simulation yet",
+    ("agri_envs/GrapeHarvest-v1", "render_none_warns"): "render() with render_mode=None returns None silently",
+}
+
+CASES = [(env_id, kwargs) for env_id in ENV_IDS for kwargs in [{}, *EXTRA_KWARGS.get(env_id, [])]]
+SEED = 0
+NUM_STEPS = 40
+
+
+def case_id(case: tuple[str, dict[str, Any]]) -> str:
+    env_id, kwargs = case
+    return env_id.split("/")[-1] + ("-" + "-".join(f"{k}={v}" for k, v in kwargs.items()) if kwargs else "")
+
+
+def cases(check: str) -> list[Any]:
+    """The (env id, kwargs) cases, with the known failures of ``check`` marked ``xfail(strict=True)``."""
+    out = []
+    for case in CASES:
+        reason = KNOWN_FAILURES.get((case[0], check))
+        marks = [pytest.mark.xfail(strict=True, reason=reason)] if reason else []
+        out.append(pytest.param(*case, id=case_id(case), marks=marks))
+    return out
+
+
+def env_ids(check: str) -> list[Any]:
+    """Every env id once, with the known failures of ``check`` marked ``xfail(strict=True)``."""
+    out = []
+    for env_id in ENV_IDS:
+        reason = KNOWN_FAILURES.get((env_id, check))
+        marks = [pytest.mark.xfail(strict=True, reason=reason)] if reason else []
+        out.append(pytest.param(env_id, id=env_id.split("/")[-1], marks=marks))
+    return out
+
+
+def test_every_env_of_the_package_is_covered():
+    assert {"agri_envs/GreenhouseNav-v1", "agri_envs/GrapeHarvest-v1"} <= set(ENV_IDS)
+    assert set(EXTRA_KWARGS) <= set(ENV_IDS), "EXTRA_KWARGS names an env that is not registered"
+
+
+@pytest.mark.parametrize(("env_id", "kwargs"), cases("checkers"))
+def test_env_checkers_with_render_check(env_id, kwargs):
+    from stable_baselines3.common.env_checker import check_env as sb3_check_env
+
+    env = gym.make(env_id, render_mode="rgb_array", **kwargs)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        check_env(env.unwrapped, skip_render_check=False)
+    assert not [str(w.message) for w in caught], "Gymnasium's checker warned"
+    env.close()
+    # SB3's checker closes the env at the end of its render check.
+    sb3_check_env(gym.make(env_id, render_mode="rgb_array", **kwargs).unwrapped, skip_render_check=False)
+
+
+@pytest.mark.parametrize(("env_id", "kwargs"), cases("determinism"))
+def test_env_determinism_rollout(env_id, kwargs):
+    """Two envs, same seed, same actions: identical observations, rewards, terminations and infos."""
+    env_1 = gym.make(env_id, disable_env_checker=True, **kwargs)
+    env_2 = gym.make(env_id, disable_env_checker=True, **kwargs)
+    obs_1, info_1 = env_1.reset(seed=SEED)
+    obs_2, info_2 = env_2.reset(seed=SEED)
+    assert data_equivalence(obs_1, obs_2, exact=True)
+    assert data_equivalence(info_1, info_2, exact=True)
+    env_1.action_space.seed(SEED)
+    for t in range(NUM_STEPS):
+        action = env_1.action_space.sample()
+        obs_1, rew_1, term_1, trunc_1, info_1 = env_1.step(action)
+        obs_2, rew_2, term_2, trunc_2, info_2 = env_2.step(action)
+        assert data_equivalence(obs_1, obs_2, exact=True), f"[{t}] observations differ"
+        assert env_1.observation_space.contains(obs_1), f"[{t}] observation outside the space"
+        assert rew_1 == rew_2 and term_1 == term_2 and trunc_1 == trunc_2, f"[{t}]"
+        assert data_equivalence(info_1, info_2, exact=True), f"[{t}] infos differ"
+        if term_1 or trunc_1:
+            env_1.reset(seed=SEED)
+            env_2.reset(seed=SEED)
+    env_1.close()
+    env_2.close()
+
+
+@pytest.mark.parametrize(("env_id", "kwargs"), cases("pickle"))
+def test_pickle_env(env_id, kwargs):
+    """A pickled copy resets and steps like the original, and a copy taken mid-episode continues identically."""
+    env = gym.make(env_id, **kwargs)
+    env.action_space.seed(SEED)
+    action = env.action_space.sample()
+    env_reset = env.reset(seed=123)
+    env_step = env.step(action)
+    copy = pickle.loads(pickle.dumps(env))
+    assert data_equivalence(env_reset, copy.reset(seed=123))
+    assert data_equivalence(env_step, copy.step(action))
+    # Mid-episode: both continue with the same actions.
+    for _ in range(5):
+        env.step(env.action_space.sample())
+    copy = pickle.loads(pickle.dumps(env))
+    for t in range(10):
+        action = env.action_space.sample()
+        assert data_equivalence(env.step(action), copy.step(action), exact=True), f"[{t}] the copy diverged"
+    env.close()
+    copy.close()
+
+
+@pytest.mark.parametrize(("env_id", "kwargs"), cases("render_modes"))
+def test_render_modes(env_id, kwargs):
+    """Every declared mode renders after reset: ``rgb_array`` an RGB frame, ``human`` a window (None)."""
+    modes = gym.make(env_id, **kwargs).metadata["render_modes"]
+    assert "rgb_array" in modes
+    for mode in modes:
+        env = gym.make(env_id, render_mode=mode, **kwargs)
+        env.reset(seed=SEED)
+        env.step(env.action_space.sample())
+        frame = env.render()
+        if mode == "rgb_array":
+            assert isinstance(frame, np.ndarray) and frame.dtype == np.uint8
+            assert frame.ndim == 3 and frame.shape[2] == 3 and frame.shape[0] > 0 and frame.shape[1] > 0
+            assert frame.std() > 0, "blank frame"
+        else:
+            assert frame is None
+        env.close()
+        env.close()  # idempotent
+
+
+@pytest.mark.parametrize("env_id", env_ids("render_none_warns"))
+def test_render_without_render_mode_warns(env_id):
+    env = gym.make(env_id).unwrapped  # the raw env: the passive checker wrapper would warn on its own
+    env.reset(seed=SEED)
+    with pytest.warns(UserWarning, match="render_mode"):
+        assert env.render() is None
+    env.close()
+
+
+@pytest.mark.parametrize(("env_id", "kwargs"), cases("reset_after_close"))
+def test_reset_after_close(env_id, kwargs):
+    """``close()`` then ``reset()`` gives a working env, the same as a fresh one for the same seed."""
+    env = gym.make(env_id, **kwargs)
+    env.reset(seed=SEED)
+    env.step(env.action_space.sample())
+    env.close()
+    obs, info = env.reset(seed=SEED)
+    fresh = gym.make(env_id, **kwargs)
+    assert data_equivalence((obs, info), fresh.reset(seed=SEED), exact=True)
+    action = env.action_space.sample()
+    assert data_equivalence(env.step(action), fresh.step(action), exact=True)
+    env.close()
+    fresh.close()
+
+
+@pytest.mark.parametrize("env_id", env_ids("clean_exit"))
+def test_script_that_never_closes_its_env_exits_cleanly(env_id):
+    """No "Exception ignored ..." noise at interpreter exit when a script leaves its env open.
+
+    The env is kept alive into the interpreter's final phase, where it wipes module globals (here
+    through ``sys``, which is wiped last; in real scripts a long-lived module or object does the same).
+    An engine object freed after its module's globals are gone fails in its finalizer; pymunk's Space
+    did (``spacefree ... 'NoneType' object has no attribute 'new_handle'``).
+    """
+    script = textwrap.dedent(
+        f"""
+        import sys
+        import gymnasium as gym
+        import agri_envs
+        env = gym.make({env_id!r})
+        env.reset(seed=0)
+        for _ in range(3):
+            env.step(env.action_space.sample())
+        modules = [m for name, m in sys.modules.items() if name.startswith(("pymunk", "pybullet"))]
+        sys._agri_test_keep_alive = (env, modules)
+        print("ok")
+        """
+    )
+    out = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0 and "ok" in out.stdout, out.stderr
+    # pybullet announces itself on stderr at import; anything else is noise.
+    noise = [line for line in out.stderr.splitlines() if line.strip() and not line.startswith("pybullet build time")]
+    assert not noise, out.stderr
