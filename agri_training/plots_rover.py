@@ -198,6 +198,10 @@ def lead_result(results: list[dict[str, Any]]) -> dict[str, Any]:
     return next((r for r in results if not r["privileged"]), results[0])
 
 
+#: Scenarios whose traced episode gets the d(t) and alpha(t) curves of Harik Figs. 7-8 and 14-15.
+CURVE_SCENARIOS = (None, "sim-loop", "sim-loop-people", "corridor", "corridor-people")
+
+
 def report_section(results: list[dict[str, Any]], out_dir: Path) -> str:
     """Markdown (with PNG plots written to ``out_dir``) for the GreenhouseNav-v1 results, one part per scenario.
 
@@ -237,7 +241,7 @@ def report_section(results: list[dict[str, Any]], out_dir: Path) -> str:
         if int(lead["env_kwargs"].get("mission_cycles", 1)) > 1:
             parts += [f"Episode of {lead['policy']}:", ""] + repeatability_section(lead, out_dir, stem)
         for trace in traces if int(lead["env_kwargs"].get("mission_cycles", 1)) == 1 else []:
-            names = plot_trace(lead, trace, out_dir, stem, curves=name in (None, "sim-loop", "corridor"))
+            names = plot_trace(lead, trace, out_dir, stem, curves=name in CURVE_SCENARIOS)
             parts += [f"![{n}]({n})" for n in names]
         parts.append("")
     return "\n".join(parts)

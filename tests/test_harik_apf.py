@@ -208,3 +208,48 @@ def test_default_scene_with_people_at_least_95_percent():
     success = np.mean([i["is_success"] and not i["collision"] for i in infos])
     assert success >= 0.95, [(k, i["collision"], i["waypoints_reached"]) for k, i in enumerate(infos)]
     assert all(math.isfinite(i["min_clearance"]) for i in infos)
+
+
+def scenario_run(name, policy_name, seeds):
+    from agri_envs.scenarios import scenario
+
+    kwargs = dict(scenario(ENV_ID, name).env_kwargs)
+    kwargs.update(policy_spec(policy_name).env_kwargs)
+    env = gym.make(ENV_ID, **kwargs)
+    policy = make_policy(policy_name, env)
+    return [run_episode(env, policy, seed, None)["record"] for seed in seeds]
+
+
+def test_paper_scenarios_have_no_people_and_variants_do():
+    from agri_envs.scenarios import scenario
+
+    for name in ("sim-loop", "plant-development", "corridor", "repeatability"):
+        assert scenario(ENV_ID, name).env_kwargs["n_people"] == 0, name
+    for name in ("sim-loop-people", "corridor-people", "repeatability-people"):
+        assert scenario(ENV_ID, name).env_kwargs["n_people"] > 0, name
+    rep = scenario(ENV_ID, "repeatability").env_kwargs
+    assert rep["scene"] == "corridor" and rep["office_route"] == "repeatability" and rep["mission_cycles"] == 10
+    env = gym.make(ENV_ID, **{k: v for k, v in rep.items() if k != "max_episode_steps"})
+    env.reset(seed=0)
+    assert env.unwrapped.layout.mission.tolist() == [2, 3, 4, 0]  # Harik sec. 3.5: 0 -> 2 -> 3 -> 4 -> 0
+    assert env.unwrapped.task.targets.shape == (40, 2)
+
+
+def test_corridor_turns_make_safety_stops_and_succeed():
+    # Sec. 3.4: in each 180 deg turn the front detection triggers; the robot steps back, keeps turning, goes on.
+    infos = scenario_run("corridor", "harik-apf-gt", range(3))
+    assert all(i["is_success"] and not i["collision"] for i in infos)
+    assert all(i["turn_safety_stops"] >= 1 for i in infos), [i["turn_safety_stops"] for i in infos]
+
+
+@pytest.mark.slow
+def test_corridor_must_reach_20_seeds():
+    infos = scenario_run("corridor", "harik-apf-gt", range(20))
+    assert all(i["is_success"] and not i["collision"] for i in infos)
+    assert all(i["turn_safety_stops"] >= 1 for i in infos)
+
+
+@pytest.mark.slow
+def test_repeatability_in_the_office_corridor_completed_by_harik_apf():
+    infos = scenario_run("repeatability", "harik-apf", range(2))
+    assert all(i["is_success"] and i["waypoints_reached"] == 40 for i in infos)
