@@ -237,9 +237,27 @@ def test_paper_scenarios_have_no_people_and_variants_do():
 
 def test_corridor_turns_make_safety_stops_and_succeed():
     # Sec. 3.4: in each 180 deg turn the front detection triggers; the robot steps back, keeps turning, goes on.
-    infos = scenario_run("corridor", "harik-apf-gt", range(3))
-    assert all(i["is_success"] and not i["collision"] for i in infos)
-    assert all(i["turn_safety_stops"] >= 1 for i in infos), [i["turn_safety_stops"] for i in infos]
+    from agri_envs.scenarios import scenario
+
+    kwargs = {**scenario(ENV_ID, "corridor").env_kwargs, **policy_spec("harik-apf-gt").env_kwargs}
+    env = gym.make(ENV_ID, **kwargs)
+    policy = make_policy("harik-apf-gt", env)
+    keys = ("distance_to_waypoint", "bearing_to_waypoint", "waypoint_index")
+    for seed in range(3):
+        out = run_episode(env, policy, seed, keys)
+        info, trace = out["record"], out["trace"]
+        assert info["is_success"] and not info["collision"]
+        assert info["turn_safety_stops"] >= 1
+        d = np.array(trace["distance_to_waypoint"])
+        alpha = np.abs(np.array(trace["bearing_to_waypoint"]))
+        index = np.array(trace["waypoint_index"])
+        # Figs. 14-15: after waypoints 1 and 3 (and 2 on the way back) the next one is behind the robot;
+        # while it turns around, d stays almost constant and alpha decreases.
+        for k in (1, 3, 4):
+            i0 = int(np.flatnonzero(index == k)[0])
+            i1 = i0 + int(np.flatnonzero(alpha[i0:] < policy.params.alpha_max)[0])
+            assert alpha[i0] > 2.5
+            assert np.ptp(d[i0 : i1 + 1]) < 0.1, (seed, k)
 
 
 @pytest.mark.slow
