@@ -56,6 +56,70 @@ def _cmd_report(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_leaderboard(args: argparse.Namespace) -> int:
+    from agri_training import leaderboard as lb
+
+    suites_dir = Path(args.suites)
+    entries_dir = Path(args.entries)
+    md = Path(args.markdown)
+    if args.action == "suites":
+        for s in lb.load_suites(suites_dir):
+            levels = len(s.levels())
+            print(f"{s.name} v{s.version}  {s.env_id}  seeds {s.seed_start}+{s.episodes} x {levels} level(s)")
+        return 0
+    if args.action == "render":
+        lb.write_markdown(md, entries_dir, suites_dir)
+        print(f"wrote {md}")
+        return 0
+    if args.action == "submit":
+        suites = lb.load_suites(suites_dir)
+        if args.all:
+            pairs = lb.all_baseline_pairs(s for s in suites if not args.env or s.env_id == args.env)
+        else:
+            if not args.suite or not args.policy:
+                raise ValueError("submit needs --suite and --policy (or --all for every baseline on every suite)")
+            names = args.suite
+            chosen = [lb.find_suite(n, suites_dir) for n in names] if names != ["all"] else suites
+            if args.policy.endswith(".zip"):
+                ref = lb.policy_reference(args.policy, args.name)
+                import gymnasium as gym
+
+                chosen = [s for s in chosen if s.env_id in gym.registry] if names == ["all"] else chosen
+            else:
+                ref = lb.policy_reference(args.policy)
+                from agri_baselines import policy_spec
+
+                env_id = policy_spec(args.policy).env_id
+                chosen = [s for s in chosen if s.env_id == env_id] if names == ["all"] else chosen
+            pairs = [(s, ref) for s in chosen]
+        command = "agri leaderboard " + " ".join(sys.argv[2:] if len(sys.argv) > 2 else [])
+        entries, seconds = lb.timed(lb.evaluate_entries, pairs, args.jobs, not args.quiet, command)
+        for entry in entries:
+            print(f"wrote {lb.write_entry(entry, entries_dir)}")
+        lb.write_markdown(md, entries_dir, suites_dir)
+        print(f"wrote {md} ({len(entries)} entries evaluated in {seconds:.0f} s with {args.jobs} job(s))")
+        return 0
+    # verify
+    entries = lb.load_entries(entries_dir)
+    if args.entries_named:
+        wanted = {str(Path(e).resolve()) for e in args.entries_named}
+        entries = [e for e in entries if str(Path(e["_path"]).resolve()) in wanted]
+        if len(entries) != len(wanted):
+            raise ValueError(f"not an entry under {entries_dir}: {sorted(wanted)}")
+    problems, seconds = lb.timed(
+        lb.verify_entries, entries, suites_dir, args.jobs, args.rtol, not args.quiet
+    )
+    if not args.no_markdown and not lb.leaderboard_is_current(md, entries_dir, suites_dir):
+        problems.append(f"{md} is stale: run `agri leaderboard render` and commit it")
+    if problems:
+        print(f"agri leaderboard verify: {len(problems)} problem(s) in {len(entries)} entries:", file=sys.stderr)
+        lb.print_problems(problems)
+        return 1
+    tol = "exactly" if args.rtol == 0 else f"within rtol {args.rtol:g}"
+    print(f"verified {len(entries)} entries {tol} in {seconds:.0f} s ({args.jobs} job(s)); {md.name} is current")
+    return 0
+
+
 def _cmd_list(args: argparse.Namespace) -> int:
     import gymnasium as gym
 
@@ -97,6 +161,28 @@ def build_parser() -> argparse.ArgumentParser:
     rp.add_argument("--env", default=None, help="only this env id")
     rp.add_argument("--quiet", action="store_true")
     rp.set_defaults(func=_cmd_report)
+    lb = sub.add_parser("leaderboard", help="pinned suites, leaderboard entries, LEADERBOARD.md (docs/leaderboard.md)")
+    lb.add_argument("--suites", default="leaderboard/suites", help="folder of suite YAML files")
+    lb.add_argument("--entries", default="leaderboard/entries", help="folder of entry JSON files")
+    lb.add_argument("--markdown", default="LEADERBOARD.md", help="the generated leaderboard page")
+    lbsub = lb.add_subparsers(dest="action", required=True)
+    lbsub.add_parser("suites", help="list the pinned suites")
+    lbsub.add_parser("render", help="regenerate LEADERBOARD.md from the entries")
+    su = lbsub.add_parser("submit", help="evaluate a policy on suites and write its entries (and LEADERBOARD.md)")
+    su.add_argument("--suite", nargs="+", help="suite names, or 'all' (every suite of the policy's env)")
+    su.add_argument("--policy", help="baseline name, or a learned policy's weights (.zip)")
+    su.add_argument("--name", default=None, help="display name of a learned policy")
+    su.add_argument("--all", action="store_true", help="every registered baseline on every suite of its env")
+    su.add_argument("--env", default=None, help="with --all: only this env id")
+    su.add_argument("--jobs", type=int, default=2, help="worker processes (results do not depend on it)")
+    su.add_argument("--quiet", action="store_true")
+    ve = lbsub.add_parser("verify", help="re-evaluate entries on their pinned seeds; fail on any difference")
+    ve.add_argument("entries_named", nargs="*", metavar="ENTRY", help="entry JSON files (default: all)")
+    ve.add_argument("--jobs", type=int, default=2, help="worker processes (results do not depend on it)")
+    ve.add_argument("--rtol", type=float, default=0.0, help="relative tolerance for floats (default 0: exact)")
+    ve.add_argument("--no-markdown", action="store_true", help="do not check that LEADERBOARD.md is current")
+    ve.add_argument("--quiet", action="store_true")
+    lb.set_defaults(func=_cmd_leaderboard)
     ls = sub.add_parser("list", help="registered envs, scenarios and baselines")
     ls.set_defaults(func=_cmd_list)
     return parser

@@ -23,7 +23,7 @@ import numpy as np
 import agri_envs
 from agri_baselines import list_policies, make_policy, policy_spec
 from agri_envs.scenarios import scenario as get_scenario
-from agri_training.stats import bootstrap_ci
+from agri_training.stats import format_interval, iqm, rate_interval, stratified_bootstrap_ci
 
 
 @dataclasses.dataclass(frozen=True)
@@ -195,25 +195,55 @@ def localization_errors(truth: np.ndarray, estimate: np.ndarray) -> dict[str, fl
     }
 
 
-def summarize(episodes: list[dict[str, Any]]) -> dict[str, Any]:
-    """Success and collision rates, means of every numeric metric, with 95 % bootstrap intervals."""
+#: Per-episode keys that measure the computer, not the policy (wall-clock and planning times): they are
+#: summarised but never expected to reproduce, so the leaderboard's verify skips them.
+TIMING_KEYS = frozenset({"wall_time_s", "planning_time_ms"})
+
+
+def is_timing_key(key: str) -> bool:
+    """True for a record or summary key derived from wall-clock time (see :data:`TIMING_KEYS`)."""
+    return any(t in key for t in TIMING_KEYS)
+
+
+#: How the summary's intervals are computed (printed under every table).
+INTERVALS_NOTE = (
+    "95 % intervals: Wilson score intervals for rates; stratified percentile bootstrap (2000 resamples, "
+    "seed 0, strata = scenario levels) for means and interquartile means (IQM)."
+)
+
+
+def summarize(episodes: list[dict[str, Any]], strata: list[str] | None = None) -> dict[str, Any]:
+    """Rates with Wilson intervals; mean and IQM of every numeric metric with stratified bootstrap intervals.
+
+    Args:
+        episodes: Per-episode records.
+        strata: Optional label per episode (the scenario level it ran in) for the stratified bootstrap.
+
+    Returns:
+        ``episodes``, ``success_rate`` (+ ``_ci``), ``collision_rate`` (+ ``_ci``), ``mean_KEY`` and
+        ``iqm_KEY`` (+ ``_ci``) for every numeric key, and the shortcuts ``mean_time``,
+        ``mean_time_successful``, ``ate_rmse`` and ``min_clearance`` (the worst episode's) where they apply.
+    """
     summary: dict[str, Any] = {"episodes": len(episodes)}
     if not episodes:
         return summary
-    success = np.array([e["is_success"] for e in episodes], dtype=float)
-    summary["success_rate"] = float(success.mean())
-    summary["success_rate_ci"] = bootstrap_ci(success)
+    success = [bool(e["is_success"]) for e in episodes]
+    summary["success_rate"] = float(np.mean(success))
+    summary["success_rate_ci"] = rate_interval(success)
     if "collision" in episodes[0]:
-        col = np.array([bool(e["collision"]) for e in episodes], dtype=float)
-        summary["collision_rate"] = float(col.mean())
-        summary["collision_rate_ci"] = bootstrap_ci(col)
+        col = [bool(e["collision"]) for e in episodes]
+        summary["collision_rate"] = float(np.mean(col))
+        summary["collision_rate_ci"] = rate_interval(col)
     skip = {"seed", "is_success", "collision", "truncated"}
     for key, value in episodes[0].items():
         if key in skip or isinstance(value, bool) or not isinstance(value, (int, float)):
             continue
         vals = np.array([e[key] if e.get(key) is not None else np.nan for e in episodes], dtype=float)
-        summary[f"mean_{key}"] = float(np.nanmean(vals)) if np.any(np.isfinite(vals)) else None
-        summary[f"mean_{key}_ci"] = bootstrap_ci(vals)
+        finite = np.any(np.isfinite(vals))
+        summary[f"mean_{key}"] = float(np.nanmean(vals)) if finite else None
+        summary[f"mean_{key}_ci"] = stratified_bootstrap_ci(vals, np.mean, strata)
+        summary[f"iqm_{key}"] = iqm(vals) if finite else None
+        summary[f"iqm_{key}_ci"] = stratified_bootstrap_ci(vals, iqm, strata)
     if "episode_time" in episodes[0]:
         ok = [e["episode_time"] for e in episodes if e["is_success"]]
         summary["mean_time"] = summary["mean_episode_time"]
@@ -226,7 +256,7 @@ def summarize(episodes: list[dict[str, Any]]) -> dict[str, Any]:
     return summary
 
 
-def evaluate(request: EvalRequest, progress: bool = True) -> dict[str, Any]:
+def evaluate(request: EvalRequest, progress: bool | Progress = True) -> dict[str, Any]:
     """Run the request and return the result document.
 
     For a scenario that sweeps an argument the document holds one result per value under ``levels`` (and
@@ -235,19 +265,24 @@ def evaluate(request: EvalRequest, progress: bool = True) -> dict[str, Any]:
     sc = get_scenario(request.env_id, request.scenario) if request.scenario else None
     if sc is None or sc.sweep is None:
         return evaluate_level(request, None, progress)
-    levels = [evaluate_level(request, kwargs, progress, label) for label, kwargs in sc.levels()]
+    specs = sc.levels()
+    own = not isinstance(progress, Progress)
+    bar = progress if isinstance(progress, Progress) else Progress(request.episodes * len(specs), len(specs), progress)
+    levels = [evaluate_level(request, kwargs, bar, label) for label, kwargs in specs]
+    if own:
+        bar.close()
     pooled = [e for level in levels for e in level["episodes"]]
     doc = {k: v for k, v in levels[0].items() if k not in ("episodes", "traces", "summary", "env_kwargs", "label")}
     doc.update(
         sweep={"parameter": sc.sweep[0], "values": list(sc.sweep[1])},
         levels=levels,
-        summary=_jsonable(summarize(pooled)),
+        summary=_jsonable(summarize(pooled, [lv["label"] for lv in levels for _ in lv["episodes"]])),
     )
     return doc
 
 
 def evaluate_level(
-    request: EvalRequest, base: Mapping[str, Any] | None, progress: bool = True, label: str | None = None
+    request: EvalRequest, base: Mapping[str, Any] | None, progress: bool | Progress = True, label: str | None = None
 ) -> dict[str, Any]:
     """Evaluate one set of env arguments (one level of a scenario)."""
     kwargs, privileged = resolve_env_kwargs(request, base)
@@ -257,22 +292,19 @@ def evaluate_level(
         trace_keys = tuple(env.unwrapped.metadata.get("trace_keys", ()))
         episodes: list[dict[str, Any]] = []
         traces: list[dict[str, Any]] = []
-        bar = _progress(request.episodes, f"{request.policy} on {request.env_id}", progress)
-        if progress:
-            _print_row(bar, None)
+        own = not isinstance(progress, Progress)
+        bar = Progress(request.episodes, enabled=bool(progress)) if own else progress
+        assert isinstance(bar, Progress)
+        where = label or request.scenario or "default"
+        bar.start_block(f"{request.policy} on {request.env_id.split('/')[-1]} [{where}]")
         for i in range(request.episodes):
             seed = request.seed + i
             out = run_episode(env, policy, seed, trace_keys if i < request.record_traces else None)
             episodes.append(out["record"])
             if out["trace"] is not None:
                 traces.append({"seed": seed, "data": out["trace"]})
-            if progress:
-                _print_row(bar, out["record"])
-            if bar is not None:
-                rate = np.mean([e["is_success"] for e in episodes])
-                bar.set_postfix(success=f"{rate:.0%}")
-                bar.update(1)
-        if bar is not None:
+            bar.episode_done(out["record"])
+        if own:
             bar.close()
     finally:
         env.close()
@@ -293,57 +325,85 @@ def evaluate_level(
     }
 
 
-def _progress(total: int, desc: str, enabled: bool) -> Any:
-    if not enabled:
-        return None
-    try:
-        from tqdm import tqdm
-    except ImportError:
-        return None
-    return tqdm(total=total, desc=desc, unit="ep", leave=False, file=sys.stderr)
+class Progress:
+    """One progress bar over a whole job of evaluation blocks (a policy on one scenario level each).
+
+    The bar counts episodes over all blocks, so tqdm's remaining time is the ETA of the whole job; its
+    label says which block runs (``[k/N] policy on env [level]``) and the success rate so far in it.
+    Nothing is printed per episode.
+
+    Args:
+        total_episodes: Episodes of the whole job.
+        total_blocks: Blocks of the whole job (1 for a single evaluation).
+        enabled: False for no output at all (also when tqdm is missing).
+    """
+
+    def __init__(self, total_episodes: int, total_blocks: int = 1, enabled: bool = True) -> None:
+        self.total_blocks = total_blocks
+        self.block = 0
+        self._successes = 0
+        self._done = 0
+        self._bar: Any = None
+        if enabled:
+            try:
+                from tqdm import tqdm
+            except ImportError:
+                return
+            self._bar = tqdm(total=total_episodes, unit="ep", file=sys.stderr, dynamic_ncols=True)
+
+    def start_block(self, desc: str) -> None:
+        """Announce the next block."""
+        self.block += 1
+        self._successes = self._done = 0
+        if self._bar is not None:
+            self._bar.set_description(f"[{self.block}/{self.total_blocks}] {desc}")
+
+    def episode_done(self, record: Mapping[str, Any]) -> None:
+        """Count one finished episode of the current block."""
+        self._done += 1
+        self._successes += bool(record.get("is_success"))
+        if self._bar is not None:
+            self._bar.set_postfix_str(f"success {self._successes}/{self._done}", refresh=False)
+            self._bar.update(1)
+
+    def skip(self, episodes: int, desc: str) -> None:
+        """Count a block that needs no run (e.g. a leaderboard entry that is up to date)."""
+        self.start_block(desc)
+        if self._bar is not None:
+            self._bar.update(episodes)
+
+    def close(self) -> None:
+        """Close the bar."""
+        if self._bar is not None:
+            self._bar.close()
+            self._bar = None
 
 
-_COLUMNS = (
-    ("seed", "{:>5}"),
-    ("is_success", "{!s:>7}"),
-    ("collision", "{!s:>9}"),
-    ("steps", "{:>6}"),
-    ("episode_time", "{:>8.1f}"),
-    ("path_length", "{:>8.2f}"),
-    ("min_clearance", "{:>9.3f}"),
-)
-
-
-def _print_row(bar: Any, record: dict[str, Any] | None) -> None:
-    if record is None:
-        line = f"{'seed':>5} {'success':>7} {'collision':>9} {'steps':>6} {'time[s]':>8} {'path[m]':>8} {'clear[m]':>9}"
-    else:
-        cells = []
-        for name, fmt in _COLUMNS:
-            v = record.get(name)
-            width = len(fmt.format(0)) if "f" in fmt or ":>" in fmt else 8
-            cells.append(fmt.format(v) if v is not None else f"{'-':>{width}}")
-        line = " ".join(cells)
-    (bar.write if bar is not None else print)(line)
+_FORMATS = {"episode_time": "{:.1f}", "path_length": "{:.2f}", "min_clearance": "{:.3f}", "return": "{:.1f}"}
 
 
 def format_summary(result: dict[str, Any]) -> str:
-    """Human-readable summary lines of a result document."""
+    """Human-readable summary: rates with Wilson intervals, means and IQMs with bootstrap intervals."""
     s = result["summary"]
     lines = [
         f"{result['policy']} on {result['env_id']}"
         + (f" [{result['scenario']}]" if result["scenario"] else "")
         + (" (privileged)" if result["privileged"] else "")
+        + f", {s['episodes']} episodes",
+        f"  {'metric':<24} {'value [95 % CI]':<30} IQM [95 % CI]",
     ]
     for key in ("success_rate", "collision_rate"):
         if key in s:
-            lo, hi = s[f"{key}_ci"]
-            lines.append(f"  {key:<22} {s[key]:.2f}  [{lo:.2f}, {hi:.2f}]")
+            lines.append(f"  {key:<24} {format_interval(s[key], s.get(key + '_ci'))}")
     for key, value in s.items():
-        if key.startswith("mean_") and not key.endswith("_ci") and isinstance(value, float):
-            lines.append(f"  {key:<22} {value:.3f}")
+        if key.startswith("mean_") and not key.endswith("_ci") and f"{key}_ci" in s:
+            name = key[len("mean_") :]
+            fmt = _FORMATS.get(name, "{:.3g}")
+            iqm_text = format_interval(s.get(f"iqm_{name}"), s.get(f"iqm_{name}_ci"), fmt)
+            lines.append(f"  {name:<24} {format_interval(value, s.get(key + '_ci'), fmt):<30} {iqm_text}")
     if s.get("min_clearance") is not None:
-        lines.append(f"  {'min_clearance':<22} {s['min_clearance']:.3f}")
+        lines.append(f"  {'min_clearance (worst)':<24} {s['min_clearance']:.3f}")
+    lines.append("  " + INTERVALS_NOTE)
     return "\n".join(lines)
 
 
