@@ -48,10 +48,18 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
 
 
 def _cmd_report(args: argparse.Namespace) -> int:
-    from agri_training.report import build_report, default_suite
+    from agri_training.report import build_report
 
-    suite = default_suite(episodes=args.episodes, only_env=args.env)
-    path = build_report(suite, Path(args.out), progress=not args.quiet)
+    path = build_report(
+        Path(args.out),
+        suites_dir=Path(args.suites),
+        entries_dir=Path(args.entries),
+        runs_dir=Path(args.runs),
+        only_env=args.env,
+        episodes=args.episodes,
+        jobs=args.jobs,
+        progress=not args.quiet,
+    )
     print(f"wrote {path} and {path.with_suffix('.html')}")
     return 0
 
@@ -106,9 +114,7 @@ def _cmd_leaderboard(args: argparse.Namespace) -> int:
         entries = [e for e in entries if str(Path(e["_path"]).resolve()) in wanted]
         if len(entries) != len(wanted):
             raise ValueError(f"not an entry under {entries_dir}: {sorted(wanted)}")
-    problems, seconds = lb.timed(
-        lb.verify_entries, entries, suites_dir, args.jobs, args.rtol, not args.quiet
-    )
+    problems, seconds = lb.timed(lb.verify_entries, entries, suites_dir, args.jobs, args.rtol, not args.quiet)
     if not args.no_markdown and not lb.leaderboard_is_current(md, entries_dir, suites_dir):
         problems.append(f"{md} is stale: run `agri leaderboard render` and commit it")
     if problems:
@@ -155,10 +161,17 @@ def build_parser() -> argparse.ArgumentParser:
     ev.add_argument("--out", required=True, help="output JSON file")
     ev.add_argument("--quiet", action="store_true", help="no progress bar")
     ev.set_defaults(func=_cmd_evaluate)
-    rp = sub.add_parser("report", help="evaluate every registered baseline and write a Markdown + HTML report")
-    rp.add_argument("--out", default="reports/baselines", help="output folder")
-    rp.add_argument("--episodes", type=int, default=None, help="override the episodes of every suite entry")
+    rp = sub.add_parser(
+        "report",
+        help="one Markdown + HTML page over the leaderboard entries (fresh runs where stale) and training runs",
+    )
+    rp.add_argument("--out", default="reports/latest", help="output folder")
+    rp.add_argument("--suites", default="leaderboard/suites", help="folder of suite YAML files")
+    rp.add_argument("--entries", default="leaderboard/entries", help="folder of leaderboard entries")
+    rp.add_argument("--runs", default="runs", help="folder of training runs (learning curves)")
+    rp.add_argument("--episodes", type=int, default=None, help="quick look: override every suite's episodes")
     rp.add_argument("--env", default=None, help="only this env id")
+    rp.add_argument("--jobs", type=int, default=2, help="worker processes for fresh evaluations")
     rp.add_argument("--quiet", action="store_true")
     rp.set_defaults(func=_cmd_report)
     lb = sub.add_parser("leaderboard", help="pinned suites, leaderboard entries, LEADERBOARD.md (docs/leaderboard.md)")

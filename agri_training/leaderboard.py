@@ -322,46 +322,77 @@ class Block:
     traces: int = 0
 
 
-def run_block(block: Block, progress: Any = False) -> dict[str, Any]:
-    """Evaluate one block and return the evaluator's result document of that level."""
+def run_block(block: Block, progress: Any = False, first: int = 0, count: int | None = None) -> dict[str, Any]:
+    """Evaluate a block (or its episodes ``first`` .. ``first + count - 1``): the evaluator's level document."""
     from agri_training.evaluate import EvalRequest, evaluate_level
 
     request = EvalRequest(
         env_id=block.suite.env_id,
         policy=block.policy,
-        episodes=block.suite.episodes,
-        seed=block.suite.seed_start,
+        episodes=block.suite.episodes - first if count is None else count,
+        seed=block.suite.seed_start + first,
         scenario=block.suite.scenario,
-        record_traces=block.traces,
+        record_traces=block.traces if first == 0 else 0,
     )
     return evaluate_level(request, block.env_kwargs, progress, block.label)
 
 
-def run_blocks(blocks: Sequence[Block], jobs: int = 1, progress: bool = True) -> list[dict[str, Any]]:
-    """Evaluate blocks (in ``jobs`` worker processes when > 1), in order; one progress bar with an overall ETA.
+def _merge_chunks(block: Block, parts: Sequence[dict[str, Any]]) -> dict[str, Any]:
+    """One level document from the documents of consecutive chunks of its seeds (as a serial run gives)."""
+    from agri_training.evaluate import _jsonable, summarize
 
-    Results do not depend on ``jobs``: each episode is seeded by the suite, wherever it runs.
+    doc = dict(parts[0])
+    doc["episodes"] = [e for p in parts for e in p["episodes"]]
+    doc["traces"] = [t for p in parts for t in p["traces"]]
+    doc["seed"] = block.suite.seed_start
+    doc["summary"] = _jsonable(summarize(doc["episodes"]))
+    return doc
+
+
+#: Episodes per task of the worker pool: small enough to balance long levels over the workers.
+CHUNK_EPISODES = 5
+
+
+def run_blocks(blocks: Sequence[Block], jobs: int = 1, progress: bool = True) -> list[dict[str, Any]]:
+    """Evaluate blocks, in order; one progress bar (block k of N, overall ETA).
+
+    With ``jobs > 1`` every block is cut into chunks of :data:`CHUNK_EPISODES` seeds that run in ``jobs``
+    worker processes. Results do not depend on ``jobs``: each episode is seeded by the suite wherever it
+    runs, and a level's summary is computed from its merged records exactly as in a serial run.
     """
     from agri_training.evaluate import Progress
 
     total = sum(b.suite.episodes for b in blocks)
-    bar = Progress(total, len(blocks), progress)
-    try:
-        if jobs <= 1 or len(blocks) <= 1:
+    if jobs <= 1:
+        bar = Progress(total, len(blocks), progress)
+        try:
             return [run_block(b, bar) for b in blocks]
-        results: list[dict[str, Any] | None] = [None] * len(blocks)
+        finally:
+            bar.close()
+    tasks = [(i, first) for i, b in enumerate(blocks) for first in range(0, b.suite.episodes, CHUNK_EPISODES)]
+    bar = Progress(total, len(tasks), progress)
+    parts: dict[tuple[int, int], dict[str, Any]] = {}
+    try:
         with ProcessPoolExecutor(max_workers=jobs) as pool:
-            futures = {pool.submit(run_block, b, False): i for i, b in enumerate(blocks)}
+            futures = {
+                pool.submit(
+                    run_block, blocks[i], False, first, min(CHUNK_EPISODES, blocks[i].suite.episodes - first)
+                ): (i, first)
+                for i, first in tasks
+            }
             for fut in as_completed(futures):
-                i = futures[fut]
-                results[i] = fut.result()
-                b = blocks[i]
-                bar.start_block(f"{b.policy} on {b.label} (done)")
-                for record in results[i]["episodes"]:  # type: ignore[index]
+                i, first = futures[fut]
+                parts[(i, first)] = fut.result()
+                n = len(parts[(i, first)]["episodes"])
+                bar.start_block(f"{blocks[i].policy} on {blocks[i].label}, seeds +{first}..+{first + n - 1} done")
+                for record in parts[(i, first)]["episodes"]:
                     bar.episode_done(record)
-        return [r for r in results if r is not None]
     finally:
         bar.close()
+    return [
+        _merge_chunks(b, [parts[(i, f)] for f in range(0, b.suite.episodes, CHUNK_EPISODES)])
+        for i, b in enumerate(blocks)
+    ]
 
 
 def blocks_of(suite: Suite, policy: str, traces: int = 0) -> list[Block]:
@@ -565,6 +596,8 @@ def _metric_format(metric: str) -> str:
         return "{:.2f}"
     if "clearance" in metric or "error" in metric or "ate" in metric:
         return "{:.3f}"
+    if "path_length" in metric:
+        return "{:.2f}"
     return "{:.1f}"
 
 

@@ -242,6 +242,21 @@ def newcombe_paired_interval(
     return max(-1.0, theta - delta), min(1.0, theta + eps)
 
 
+def newcombe_interval(k1: int, n1: int, k2: int, n2: int, level: float = LEVEL) -> tuple[float, float]:
+    """Interval of ``k1/n1 - k2/n2`` for two independent rates (Newcombe 1998, hybrid score method 10).
+
+    Used where the samples share no seeds, e.g. our success rate against a paper's reported trials.
+
+    Raises:
+        ValueError: For counts outside [0, n] or n < 1 (see :func:`wilson_interval`).
+    """
+    l1, u1 = wilson_interval(k1, n1, level)
+    l2, u2 = wilson_interval(k2, n2, level)
+    p1, p2 = k1 / n1, k2 / n2
+    d = p1 - p2
+    return d - math.sqrt((p1 - l1) ** 2 + (u2 - p2) ** 2), d + math.sqrt((u1 - p1) ** 2 + (p2 - l2) ** 2)
+
+
 def probability_of_improvement(x: np.ndarray, y: np.ndarray) -> float:
     """``P(X > Y) + P(X = Y) / 2`` over all pairs of an X value and a Y value (Mann-Whitney, as rliable)."""
     gt = (x[:, None] > y[None, :]).mean()

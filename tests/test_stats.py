@@ -9,6 +9,7 @@ from agri_training.stats import (
     clopper_pearson_interval,
     format_interval,
     iqm,
+    newcombe_interval,
     newcombe_paired_interval,
     paired_comparison,
     probability_of_improvement,
@@ -126,3 +127,12 @@ def test_format_interval():
     assert format_interval(1.0, (0.8389, 1.0)) == "1.00 [0.84, 1.00]"
     assert format_interval(None, None) == "-"
     assert format_interval(2.0, (float("nan"), float("nan"))) == "2.00"
+
+
+def test_newcombe_independent_interval():
+    # Newcombe (1998) "Interval estimation for the difference between independent proportions", example:
+    # 56/70 - 48/80 = 0.2, method 10 interval 0.0524 to 0.3339
+    assert newcombe_interval(56, 70, 48, 80) == pytest.approx((0.0524, 0.3339), abs=1e-4)
+    # 10/10 here against the paper's 9/10: the data support no difference
+    lo, hi = newcombe_interval(10, 10, 9, 10)
+    assert lo < 0 < hi
