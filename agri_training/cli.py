@@ -88,11 +88,10 @@ def _cmd_leaderboard(args: argparse.Namespace) -> int:
                 raise ValueError("submit needs --suite and --policy (or --all for every baseline on every suite)")
             names = args.suite
             chosen = [lb.find_suite(n, suites_dir) for n in names] if names != ["all"] else suites
-            if args.policy.endswith(".zip"):
+            if Path(args.policy).is_dir():  # an `agri train` run: its config names the env
                 ref = lb.policy_reference(args.policy, args.name)
-                import gymnasium as gym
-
-                chosen = [s for s in chosen if s.env_id in gym.registry] if names == ["all"] else chosen
+                env_id = yaml.safe_load((Path(args.policy) / "config.yaml").read_text())["env_id"]
+                chosen = [s for s in chosen if s.env_id == env_id] if names == ["all"] else chosen
             else:
                 ref = lb.policy_reference(args.policy)
                 from agri_baselines import policy_spec
@@ -183,7 +182,7 @@ def build_parser() -> argparse.ArgumentParser:
     lbsub.add_parser("render", help="regenerate LEADERBOARD.md from the entries")
     su = lbsub.add_parser("submit", help="evaluate a policy on suites and write its entries (and LEADERBOARD.md)")
     su.add_argument("--suite", nargs="+", help="suite names, or 'all' (every suite of the policy's env)")
-    su.add_argument("--policy", help="baseline name, or a learned policy's weights (.zip)")
+    su.add_argument("--policy", help="registered policy name, or an `agri train` run folder")
     su.add_argument("--name", default=None, help="display name of a learned policy")
     su.add_argument("--all", action="store_true", help="every registered baseline on every suite of its env")
     su.add_argument("--env", default=None, help="with --all: only this env id")

@@ -252,47 +252,88 @@ def sha256_file(path: Path | str) -> str:
     return h.hexdigest()
 
 
+#: The weights file of an ``agri train`` run directory (hashed into learned entries).
+RUN_WEIGHTS = "policy.pt"
+
+
+def _weights_file(path: Path) -> Path:
+    """The file whose sha256 identifies a learned policy: a run folder's weights, or the file itself."""
+    return path / RUN_WEIGHTS if path.is_dir() else path
+
+
+def _shown(path: Path) -> str:
+    try:
+        return str(path.resolve().relative_to(ROOT))
+    except ValueError:
+        return str(path)
+
+
 def policy_reference(policy: str, name: str | None = None) -> dict[str, Any]:
     """What an entry records about its policy.
 
     Args:
-        policy: A registered baseline name, or the path of a learned policy's weights (``.zip``).
-        name: Display name of a learned policy (default: the weights' parent folder and stem).
+        policy: A registered policy name (baseline, or trained with ``learned=True`` in its spec), or the
+            folder of an ``agri train`` run (its weights are ``policy.pt``).
+        name: Display name of a run (default: the run folder's name).
 
     Raises:
-        ValueError: For an unknown baseline or a missing weights file.
+        ValueError: For an unknown name or a run folder without weights.
     """
-    if not policy.endswith(".zip"):
-        from agri_baselines import policy_spec
-
-        spec = policy_spec(policy)
-        return {"kind": "baseline", "name": spec.name, "privileged": spec.privileged}
     path = Path(policy)
-    if not path.exists():
-        raise ValueError(f"policy weights {policy!r} not found")
-    try:
-        shown = str(path.resolve().relative_to(ROOT))
-    except ValueError:
-        shown = str(path)
-    return {
-        "kind": "learned",
-        "name": name or f"{path.parent.name}/{path.stem}",
-        "path": shown,
-        "sha256": sha256_file(path),
-        "privileged": False,
-    }
+    if path.is_dir() or policy.endswith((".zip", ".pt")):
+        weights = _weights_file(path)
+        if not weights.is_file():
+            raise ValueError(f"policy weights {str(weights)!r} not found")
+        privileged = False
+        config = (path if path.is_dir() else path.parent) / "config.yaml"
+        if config.is_file():
+            doc = yaml.safe_load(config.read_text())
+            privileged = bool(isinstance(doc, Mapping) and doc.get("privileged", False))
+        return {
+            "kind": "learned",
+            "name": name or (path.name if path.is_dir() else f"{path.parent.name}/{path.stem}"),
+            "path": _shown(path),
+            "sha256": sha256_file(weights),
+            "privileged": privileged,
+        }
+    from agri_baselines import policy_spec
+
+    spec = policy_spec(policy)
+    ref: dict[str, Any] = {"kind": "baseline", "name": spec.name, "privileged": spec.privileged}
+    if getattr(spec, "learned", False):  # a trained policy registered by name: hash its committed weights
+        ref["kind"] = "learned"
+        try:
+            from agri_training.learned import zoo_path  # type: ignore[attr-defined]
+
+            weights = _weights_file(Path(zoo_path(spec.name)))
+            if weights.is_file():
+                ref["sha256"] = sha256_file(weights)
+        except ImportError:
+            pass
+    return ref
 
 
 def _policy_argument(ref: Mapping[str, Any]) -> str:
-    """The ``policy`` argument of the evaluator for a reference (checks a learned policy's weights)."""
-    if ref["kind"] == "baseline":
+    """The ``policy`` argument of the evaluator for a reference (checks a learned policy's weights).
+
+    Raises:
+        ValueError: When a learned policy's weights are missing or their sha256 changed.
+    """
+    if "path" not in ref:
+        if ref.get("sha256"):
+            fresh = policy_reference(str(ref["name"])).get("sha256")
+            if fresh != ref["sha256"]:
+                raise ValueError(
+                    f"weights of {ref['name']!r} changed: sha256 {str(fresh)[:12]} != {ref['sha256'][:12]}"
+                )
         return str(ref["name"])
     path = Path(ref["path"])
     if not path.is_absolute():
         path = ROOT / path
-    if not path.exists():
-        raise ValueError(f"weights of {ref['name']!r} not found at {path}")
-    digest = sha256_file(path)
+    weights = _weights_file(path)
+    if not weights.is_file():
+        raise ValueError(f"weights of {ref['name']!r} not found at {weights}")
+    digest = sha256_file(weights)
     if digest != ref["sha256"]:
         raise ValueError(f"weights of {ref['name']!r} changed: sha256 {digest[:12]} != committed {ref['sha256'][:12]}")
     return str(path)

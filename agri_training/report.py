@@ -42,6 +42,12 @@ PAPER_RATES: dict[str, tuple[int, int, str]] = {
     "grape-table2": (9, 10, "Luo et al. 2018, Table 2"),
 }
 
+#: The suite whose baseline results are drawn as bands on an env's learning curves (default: its first).
+CURVE_SUITES: dict[str, str] = {
+    "agri_envs/GreenhouseNav-v1": "greenhouse-sim-loop",
+    "agri_envs/GrapeHarvest-v1": "grape-table2",
+}
+
 #: Equivalence margins for "matches": rates within +-0.10; other metrics within +-5 % of the reference mean.
 RATE_MARGIN = 0.10
 RELATIVE_MARGIN = 0.05
@@ -391,7 +397,10 @@ def learning_curves(env_id: str, runs: list[dict[str, Any]], rows: Sequence[Row]
             curves.append((run, c))
     if not curves:
         return ["Training runs were found, but none logs a success rate or a return."]
-    first_suite = next((r.suite for r in rows if r.suite.env_id == env_id), None)
+    env_suites = [r.suite for r in rows if r.suite.env_id == env_id]
+    first_suite = next((su for su in env_suites if su.name == CURVE_SUITES.get(env_id)), None) or next(
+        iter(env_suites), None
+    )
     base = [
         r for r in rows if first_suite and r.suite.name == first_suite.name and r.entry["policy"]["kind"] == "baseline"
     ]
@@ -413,6 +422,8 @@ def learning_curves(env_id: str, runs: list[dict[str, Any]], rows: Sequence[Row]
             ax.axhline(s[key], color=col, ls="--", lw=1.2, label=f"{b.entry['policy']['name']} (baseline, 95 % CI)")
         for i, (run, (_, label, xs, ys)) in enumerate(sel):
             ax.plot(xs, ys, color=colours(i), lw=1.6, label=f"{run['name']} ({label})")
+        if kind == "success":
+            ax.set_ylim(-0.03, 1.03)
         ax.set_xlabel("environment steps")
         ax.set_ylabel("success rate" if kind == "success" else "episode return")
         ax.set_title(f"{env_id}: learning curves, baselines as bands ({first_suite.name if first_suite else ''})")
@@ -516,7 +527,7 @@ def build_report(
     parts += [
         "",
         "No learned policy has an entry yet: the comparisons are between the baselines. Submit one with "
-        "`agri leaderboard submit --suite all --policy RUN/model.zip` (docs/leaderboard.md)."
+        "`agri leaderboard submit --suite all --policy RUN_DIR` (docs/leaderboard.md)."
         if not any(r.entry["policy"]["kind"] == "learned" for r in rows)
         else "",
         "",

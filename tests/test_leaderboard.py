@@ -191,3 +191,21 @@ def test_worker_pool_gives_the_serial_result(board):
     assert [e["seed"] for e in pooled[0]["episodes"]] == list(range(100000, 100007))
     assert lb.compare_documents(serial[0]["episodes"], pooled[0]["episodes"]) == []
     assert lb.compare_documents(serial[0]["summary"], pooled[0]["summary"]) == []
+
+
+def test_learned_policy_reference_pins_the_weights(tmp_path):
+    run = tmp_path / "ppo_nav"
+    run.mkdir()
+    (run / "config.yaml").write_text(yaml.safe_dump({"env_id": "agri_envs/GreenhouseNav-v1", "algo": "ppo"}))
+    (run / "policy.pt").write_bytes(b"weights v1")
+    ref = lb.policy_reference(str(run))
+    assert ref["kind"] == "learned" and ref["name"] == "ppo_nav" and ref["privileged"] is False
+    assert ref["sha256"] == lb.sha256_file(run / "policy.pt")
+    assert lb._policy_argument(ref) == str(run)
+    (run / "policy.pt").write_bytes(b"weights v2")
+    with pytest.raises(ValueError, match="changed"):
+        lb._policy_argument(ref)
+    (run / "policy.pt").unlink()
+    with pytest.raises(ValueError, match="not found"):
+        lb._policy_argument(ref)
+    assert lb.policy_reference("luo-apf") == {"kind": "baseline", "name": "luo-apf", "privileged": False}

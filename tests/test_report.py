@@ -80,7 +80,10 @@ def test_report_from_entries_and_fresh_runs(tmp_path, capsys):
 
 
 def _entry(name, successes, times, kind="baseline"):
-    eps = [{"seed": 100000 + i, "is_success": s, "episode_time": t} for i, (s, t) in enumerate(zip(successes, times))]
+    eps = [
+        {"seed": 100000 + i, "is_success": s, "episode_time": t}
+        for i, (s, t) in enumerate(zip(successes, times, strict=True))
+    ]
     return {"policy": {"kind": kind, "name": name}, "levels": [{"episodes": eps}], "privileged": False}
 
 
