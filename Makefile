@@ -9,7 +9,7 @@ $(STAMP): pyproject.toml
 	$(BIN)/pip install -q --upgrade pip
 	# CPU build of torch first: a bare torch requirement would pull a multi-GB CUDA build.
 	$(BIN)/pip install -q torch==2.13.0
-	$(BIN)/pip install -q -e ".[train,report,dev]"
+	$(BIN)/pip install -q -e ".[train,report,dev,ray]"
 	touch $(STAMP)
 
 .PHONY: report test lint bench

@@ -38,7 +38,7 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
         env_kwargs=parse_env_kwargs(args.env_kwargs or []),
         record_traces=args.traces,
     )
-    result = evaluate(request, progress=not args.quiet)
+    result = evaluate(request, progress=not args.quiet, workers=args.workers, ray=args.ray)
     out = Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text(json.dumps(result, indent=1))
@@ -51,7 +51,7 @@ def _cmd_report(args: argparse.Namespace) -> int:
     from agri_training.report import build_report, default_suite
 
     suite = default_suite(episodes=args.episodes, only_env=args.env)
-    path = build_report(suite, Path(args.out), progress=not args.quiet)
+    path = build_report(suite, Path(args.out), progress=not args.quiet, workers=args.workers, ray=args.ray)
     print(f"wrote {path} and {path.with_suffix('.html')}")
     return 0
 
@@ -76,6 +76,39 @@ def _cmd_list(args: argparse.Namespace) -> int:
     return 0
 
 
+def _workers(text: str) -> int:
+    try:
+        n = int(text)
+    except ValueError:
+        n = 0
+    if n < 1:
+        raise argparse.ArgumentTypeError(f"expects an integer >= 1, got {text!r}")
+    return n
+
+
+def add_scale_arguments(parser: argparse.ArgumentParser) -> None:
+    """Add ``--workers N`` (default: one per core) and ``--ray ADDRESS`` to a subcommand that runs episodes."""
+    import os
+
+    try:
+        cores = len(os.sched_getaffinity(0))
+    except AttributeError:  # not on Linux
+        cores = os.cpu_count() or 1
+    parser.add_argument(
+        "--workers",
+        type=_workers,
+        default=max(1, cores),
+        help=f"worker processes running episodes (default: one per core, here {cores}); 1 runs in this process",
+    )
+    parser.add_argument(
+        "--ray",
+        default=None,
+        metavar="ADDRESS",
+        help="run episodes as Ray tasks: 'local' (a private Ray instance for this run), 'auto' (the cluster "
+        "started here with 'ray start') or a cluster address HOST:PORT; needs the 'ray' extra",
+    )
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of ``agri``."""
     parser = argparse.ArgumentParser(prog="agri", description=__doc__)
@@ -90,12 +123,14 @@ def build_parser() -> argparse.ArgumentParser:
     ev.add_argument("--traces", type=int, default=1, help="episodes that record per-step traces")
     ev.add_argument("--out", required=True, help="output JSON file")
     ev.add_argument("--quiet", action="store_true", help="no progress bar")
+    add_scale_arguments(ev)
     ev.set_defaults(func=_cmd_evaluate)
     rp = sub.add_parser("report", help="evaluate every registered baseline and write a Markdown + HTML report")
     rp.add_argument("--out", default="reports/baselines", help="output folder")
     rp.add_argument("--episodes", type=int, default=None, help="override the episodes of every suite entry")
     rp.add_argument("--env", default=None, help="only this env id")
     rp.add_argument("--quiet", action="store_true")
+    add_scale_arguments(rp)
     rp.set_defaults(func=_cmd_report)
     ls = sub.add_parser("list", help="registered envs, scenarios and baselines")
     ls.set_defaults(func=_cmd_list)
@@ -110,6 +145,15 @@ def main(argv: list[str] | None = None) -> int:
     except ValueError as exc:  # users' mistakes: a clear message, no traceback
         print(f"agri: error: {exc}", file=sys.stderr)
         return 2
+    except RuntimeError as exc:
+        from agri_training.parallel import EpisodeError
+
+        if not isinstance(exc, EpisodeError):
+            raise
+        # A failing episode: where it failed (the worker's traceback), then which seed and why.
+        print(exc.remote_traceback, file=sys.stderr)
+        print(f"agri: error: {exc}", file=sys.stderr)
+        return 1
 
 
 if __name__ == "__main__":

@@ -16,7 +16,7 @@ from typing import Any
 
 from agri_baselines import list_policies
 from agri_envs.scenarios import Scenario, list_scenarios
-from agri_training.evaluate import EvalRequest, evaluate
+from agri_training.evaluate import EvalRequest, evaluate_many
 
 SECTION_HOOKS = {
     "agri_envs/GreenhouseNav-v1": "agri_training.plots_rover:report_section",
@@ -82,8 +82,13 @@ def summary_table(results: list[dict[str, Any]]) -> str:
     return "\n".join(rows)
 
 
-def build_report(suite: list[SuiteEntry], out_dir: Path, progress: bool = True) -> Path:
+def build_report(
+    suite: list[SuiteEntry], out_dir: Path, progress: bool = True, workers: int | None = 1, ray: str | None = None
+) -> Path:
     """Evaluate every suite entry and write ``results/*.json``, ``report.md``, ``report.html`` and plots.
+
+    The episodes of all entries run in one pool of ``workers`` processes (or as Ray tasks with ``ray``;
+    see :func:`agri_training.evaluate.evaluate_many`).
 
     Returns:
         Path of ``report.md``.
@@ -91,10 +96,9 @@ def build_report(suite: list[SuiteEntry], out_dir: Path, progress: bool = True) 
     out_dir.mkdir(parents=True, exist_ok=True)
     (out_dir / "results").mkdir(exist_ok=True)
     by_env: dict[str, list[dict[str, Any]]] = {}
-    for entry in suite:
-        result = evaluate(
-            EvalRequest(entry.env_id, entry.policy, entry.episodes, entry.seed, entry.scenario), progress=progress
-        )
+    requests = [EvalRequest(e.env_id, e.policy, e.episodes, e.seed, e.scenario) for e in suite]
+    all_results = evaluate_many(requests, progress=progress, workers=workers, ray=ray)
+    for entry, result in zip(suite, all_results, strict=True):
         name = f"{entry.env_id.split('/')[-1]}__{entry.scenario or 'default'}__{entry.policy}.json"
         (out_dir / "results" / name).write_text(json.dumps(result, indent=1))
         by_env.setdefault(entry.env_id, []).extend(result.get("levels", [result]))
