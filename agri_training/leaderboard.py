@@ -41,7 +41,6 @@ import re
 import sys
 import time
 from collections.abc import Iterable, Mapping, Sequence
-from concurrent.futures import ProcessPoolExecutor, as_completed
 from pathlib import Path
 from typing import Any
 
@@ -363,77 +362,33 @@ class Block:
     traces: int = 0
 
 
-def run_block(block: Block, progress: Any = False, first: int = 0, count: int | None = None) -> dict[str, Any]:
-    """Evaluate a block (or its episodes ``first`` .. ``first + count - 1``): the evaluator's level document."""
-    from agri_training.evaluate import EvalRequest, evaluate_level
+def run_blocks(
+    blocks: Sequence[Block], workers: int | None = 1, progress: bool = True, ray: str | None = None
+) -> list[dict[str, Any]]:
+    """Evaluate blocks and return the evaluator's level document of each, in order.
 
-    request = EvalRequest(
-        env_id=block.suite.env_id,
-        policy=block.policy,
-        episodes=block.suite.episodes - first if count is None else count,
-        seed=block.suite.seed_start + first,
-        scenario=block.suite.scenario,
-        record_traces=block.traces if first == 0 else 0,
-    )
-    return evaluate_level(request, block.env_kwargs, progress, block.label)
-
-
-def _merge_chunks(block: Block, parts: Sequence[dict[str, Any]]) -> dict[str, Any]:
-    """One level document from the documents of consecutive chunks of its seeds (as a serial run gives)."""
-    from agri_training.evaluate import _jsonable, summarize
-
-    doc = dict(parts[0])
-    doc["episodes"] = [e for p in parts for e in p["episodes"]]
-    doc["traces"] = [t for p in parts for t in p["traces"]]
-    doc["seed"] = block.suite.seed_start
-    doc["summary"] = _jsonable(summarize(doc["episodes"]))
-    return doc
-
-
-#: Episodes per task of the worker pool: small enough to balance long levels over the workers.
-CHUNK_EPISODES = 5
-
-
-def run_blocks(blocks: Sequence[Block], jobs: int = 1, progress: bool = True) -> list[dict[str, Any]]:
-    """Evaluate blocks, in order; one progress bar (block k of N, overall ETA).
-
-    With ``jobs > 1`` every block is cut into chunks of :data:`CHUNK_EPISODES` seeds that run in ``jobs``
-    worker processes. Results do not depend on ``jobs``: each episode is seeded by the suite wherever it
-    runs, and a level's summary is computed from its merged records exactly as in a serial run.
+    All episodes of all blocks go to one pool of ``workers`` processes (or Ray tasks; see
+    :func:`agri_training.evaluate.evaluate_many`) behind one progress bar (block k of N, overall ETA).
+    Results do not depend on where episodes run: each is seeded by the suite.
     """
-    from agri_training.evaluate import Progress
+    from agri_training.evaluate import EvalRequest, evaluate_many
 
-    total = sum(b.suite.episodes for b in blocks)
-    if jobs <= 1:
-        bar = Progress(total, len(blocks), progress)
-        try:
-            return [run_block(b, bar) for b in blocks]
-        finally:
-            bar.close()
-    tasks = [(i, first) for i, b in enumerate(blocks) for first in range(0, b.suite.episodes, CHUNK_EPISODES)]
-    bar = Progress(total, len(tasks), progress)
-    parts: dict[tuple[int, int], dict[str, Any]] = {}
-    try:
-        with ProcessPoolExecutor(max_workers=jobs) as pool:
-            futures = {
-                pool.submit(
-                    run_block, blocks[i], False, first, min(CHUNK_EPISODES, blocks[i].suite.episodes - first)
-                ): (i, first)
-                for i, first in tasks
-            }
-            for fut in as_completed(futures):
-                i, first = futures[fut]
-                parts[(i, first)] = fut.result()
-                n = len(parts[(i, first)]["episodes"])
-                bar.start_block(f"{blocks[i].policy} on {blocks[i].label}, seeds +{first}..+{first + n - 1} done")
-                for record in parts[(i, first)]["episodes"]:
-                    bar.episode_done(record)
-    finally:
-        bar.close()
-    return [
-        _merge_chunks(b, [parts[(i, f)] for f in range(0, b.suite.episodes, CHUNK_EPISODES)])
-        for i, b in enumerate(blocks)
+    requests = [
+        EvalRequest(
+            env_id=b.suite.env_id,
+            policy=b.policy,
+            episodes=b.suite.episodes,
+            seed=b.suite.seed_start,
+            env_kwargs=dict(b.env_kwargs),
+            record_traces=b.traces,
+            label=b.label,
+        )
+        for b in blocks
     ]
+    docs = evaluate_many(requests, progress=progress, workers=workers, ray=ray)
+    for b, doc in zip(blocks, docs, strict=True):
+        doc["scenario"] = b.suite.scenario
+    return docs
 
 
 def blocks_of(suite: Suite, policy: str, traces: int = 0) -> list[Block]:
@@ -474,7 +429,11 @@ def make_entry(
 
 
 def evaluate_entries(
-    pairs: Sequence[tuple[Suite, Mapping[str, Any]]], jobs: int = 1, progress: bool = True, command: str = ""
+    pairs: Sequence[tuple[Suite, Mapping[str, Any]]],
+    workers: int | None = 1,
+    progress: bool = True,
+    command: str = "",
+    ray: str | None = None,
 ) -> list[dict[str, Any]]:
     """Evaluate each (suite, policy reference) pair and return the entries, all blocks in one pool."""
     blocks: list[Block] = []
@@ -483,7 +442,7 @@ def evaluate_entries(
         bl = blocks_of(suite, _policy_argument(ref))
         spans.append((len(blocks), len(blocks) + len(bl)))
         blocks += bl
-    results = run_blocks(blocks, jobs, progress)
+    results = run_blocks(blocks, workers, progress, ray)
     return [make_entry(suite, ref, results[a:b], command) for (suite, ref), (a, b) in zip(pairs, spans, strict=True)]
 
 
@@ -580,9 +539,10 @@ _META_KEYS = ("git_commit", "command", "package_version", "_path")
 def verify_entries(
     entries: Sequence[Mapping[str, Any]],
     suites_dir: Path | str = SUITES_DIR,
-    jobs: int = 1,
+    workers: int | None = 1,
     rtol: float = 0.0,
     progress: bool = True,
+    ray: str | None = None,
 ) -> list[str]:
     """Re-evaluate entries on their pinned seeds and list every number that does not reproduce.
 
@@ -611,7 +571,7 @@ def verify_entries(
             continue
         pairs.append((suite, entry["policy"]))
         kept.append(entry)
-    fresh = evaluate_entries(pairs, jobs, progress)
+    fresh = evaluate_entries(pairs, workers, progress, ray=ray)
     for entry, new in zip(kept, fresh, strict=True):
         name = f"{entry['suite']['name']}/{entry['policy']['name']}"
         committed = {k: v for k, v in entry.items() if k not in _META_KEYS}

@@ -88,9 +88,10 @@ def collect_rows(
     suites: Sequence[lb.Suite],
     entries: Sequence[dict[str, Any]],
     out_dir: Path,
-    jobs: int = 1,
+    workers: int | None = 1,
     progress: bool = True,
     episodes: int | None = None,
+    ray: str | None = None,
 ) -> list[Row]:
     """Committed entries that are current, plus fresh evaluations for every missing or stale one.
 
@@ -98,9 +99,10 @@ def collect_rows(
         suites: The suites to report.
         entries: Committed entries (learned ones are reported on the suites they have entries for).
         out_dir: Fresh entries are written to ``out_dir/results``.
-        jobs: Worker processes for fresh evaluations.
+        workers: Worker processes for fresh evaluations.
         progress: Show the progress bar.
         episodes: Override the suites' episode counts (a quick look; then nothing committed is used).
+        ray: Run fresh episodes as Ray tasks (see :func:`agri_training.evaluate.evaluate_many`).
     """
     from agri_baselines import list_policies
 
@@ -120,7 +122,7 @@ def collect_rows(
                 todo.append((suite, dict(ref)))
     if todo:
         print(f"evaluating {len(todo)} missing or stale (suite, policy) pairs", file=sys.stderr)
-        fresh = lb.evaluate_entries(todo, jobs, progress, "agri report")
+        fresh = lb.evaluate_entries(todo, workers, progress, "agri report", ray)
         for (suite, _), entry in zip(todo, fresh, strict=True):
             lb.write_entry(entry, out_dir / "results")
             rows.append(Row(suite, entry, False))
@@ -480,8 +482,9 @@ def build_report(
     runs_dir: Path = Path("runs"),
     only_env: str | None = None,
     episodes: int | None = None,
-    jobs: int = 2,
+    workers: int | None = 2,
     progress: bool = True,
+    ray: str | None = None,
 ) -> Path:
     """Write ``report.md``, ``report.html`` and the PNG plots into ``out_dir``.
 
@@ -492,8 +495,9 @@ def build_report(
         runs_dir: Training runs (learning curves).
         only_env: Report one env id only.
         episodes: Override the suites' episode counts (a quick look; committed entries are then not used).
-        jobs: Worker processes for fresh evaluations.
+        workers: Worker processes for fresh evaluations.
         progress: Show progress bars.
+        ray: Run fresh episodes as Ray tasks.
 
     Returns:
         Path of ``report.md``.
@@ -505,7 +509,7 @@ def build_report(
     suites = [s for s in lb.load_suites(suites_dir) if not only_env or s.env_id == only_env]
     if not suites:
         raise ValueError(f"no suite in {suites_dir}" + (f" for {only_env}" if only_env else ""))
-    rows = collect_rows(suites, lb.load_entries(entries_dir), out_dir, jobs, progress, episodes)
+    rows = collect_rows(suites, lb.load_entries(entries_dir), out_dir, workers, progress, episodes, ray)
     results = level_results(rows, progress)
     runs = find_runs(runs_dir)
     env_ids = list(dict.fromkeys(s.env_id for s in suites))

@@ -81,7 +81,7 @@ def board(tmp_path_factory):
     root = tmp_path_factory.mktemp("board")
     suites, entries, md = root / "suites", root / "entries", root / "LEADERBOARD.md"
     suite = lb.load_suite(write_suite(suites, SUITE))
-    (entry,) = lb.evaluate_entries([(suite, lb.policy_reference("harik-apf-gt"))], jobs=1, progress=False)
+    (entry,) = lb.evaluate_entries([(suite, lb.policy_reference("harik-apf-gt"))], workers=1, progress=False)
     lb.write_entry(entry, entries)
     lb.write_markdown(md, entries, suites)
     return root
@@ -112,7 +112,7 @@ def test_entry_records_what_it_needs(board):
 
 def test_verify_passes_as_committed(board, tmp_path, capsys):
     suites, entries, md = copy_board(board, tmp_path)
-    assert cli(suites, entries, md, "verify", "--jobs", "1", "--quiet") == 0
+    assert cli(suites, entries, md, "verify", "--workers", "1", "--quiet") == 0
     assert "verified 1 entries exactly" in capsys.readouterr().out
 
 
@@ -122,7 +122,7 @@ def test_verify_fails_on_an_altered_number(board, tmp_path, capsys):
     doc = json.loads(path.read_text())
     doc["levels"][0]["episodes"][1]["path_length"] += 1e-9
     path.write_text(json.dumps(doc, indent=1))
-    assert cli(suites, entries, md, "verify", "--jobs", "1", "--quiet", "--no-markdown") == 1
+    assert cli(suites, entries, md, "verify", "--workers", "1", "--quiet", "--no-markdown") == 1
     err = capsys.readouterr().err
     assert "levels[0].episodes[1].path_length" in err and "tiny-rover/harik-apf-gt" in err
     # the summary too
@@ -139,7 +139,7 @@ def test_verify_fails_on_a_stale_leaderboard_page(board, tmp_path, capsys):
     suites, entries, md = copy_board(board, tmp_path)
     md.write_text(md.read_text().replace("1.00 [", "0.99 ["))
     assert not lb.leaderboard_is_current(md, entries, suites)
-    assert cli(suites, entries, md, "verify", "--jobs", "1", "--quiet") == 1
+    assert cli(suites, entries, md, "verify", "--workers", "1", "--quiet") == 1
     assert "is stale" in capsys.readouterr().err
     assert cli(suites, entries, md, "render") == 0 and lb.leaderboard_is_current(md, entries, suites)
 
@@ -180,17 +180,18 @@ def test_committed_leaderboard_covers_every_baseline_and_is_current():
 
 @pytest.mark.slow
 def test_committed_entries_reproduce():
-    assert lb.verify_entries(lb.load_entries(), jobs=2, progress=False) == []
+    assert lb.verify_entries(lb.load_entries(), workers=2, progress=False) == []
 
 
 def test_worker_pool_gives_the_serial_result(board):
     suite = lb.load_suite(board / "suites" / "tiny-rover.yaml")
-    suite = lb.Suite(**{**suite.__dict__, "episodes": 7})  # two chunks of 5 and 2 seeds
-    serial = lb.run_blocks(lb.blocks_of(suite, "harik-apf-gt"), jobs=1, progress=False)
-    pooled = lb.run_blocks(lb.blocks_of(suite, "harik-apf-gt"), jobs=2, progress=False)
-    assert [e["seed"] for e in pooled[0]["episodes"]] == list(range(100000, 100007))
+    suite = lb.Suite(**{**suite.__dict__, "episodes": 3})
+    serial = lb.run_blocks(lb.blocks_of(suite, "harik-apf-gt"), workers=1, progress=False)
+    pooled = lb.run_blocks(lb.blocks_of(suite, "harik-apf-gt"), workers=2, progress=False)
+    assert [e["seed"] for e in pooled[0]["episodes"]] == list(range(100000, 100003))
     assert lb.compare_documents(serial[0]["episodes"], pooled[0]["episodes"]) == []
     assert lb.compare_documents(serial[0]["summary"], pooled[0]["summary"]) == []
+    assert pooled[0]["label"] == "tiny-rover" and pooled[0]["env_kwargs"]["full_scan"] is True
 
 
 def test_learned_policy_reference_pins_the_weights(tmp_path):

@@ -56,7 +56,7 @@ def test_report_from_entries_and_fresh_runs(tmp_path, capsys):
             str(entries),
             "--runs",
             str(runs),
-            "--jobs",
+            "--workers",
             "1",
             "--quiet",
         ]
