@@ -123,3 +123,18 @@ def test_find_runs(tmp_path):
 def test_markdown_to_html_escapes_and_links():
     html = markdown_to_html("# T\n\nsee [x](#y) and `a<b>`\n\n- one\n  more\n", "t")
     assert '<a href="#y">x</a>' in html and "<code>a&lt;b&gt;</code>" in html and "<li>one more</li>" in html
+
+
+def test_progress_names_the_block_and_prints_no_rows_per_episode(capsys):
+    from agri_training.evaluate import EvalRequest, evaluate_many
+
+    kwargs = {"n_rows": 1, "row_length": 3, "n_people": 0}
+    requests = [
+        EvalRequest("agri_envs/GreenhouseNav-v1", "harik-apf-gt", 2, 100000, env_kwargs=kwargs, label="a"),
+        EvalRequest("agri_envs/GreenhouseNav-v1", "harik-apf-gt", 2, 100002, env_kwargs=kwargs, label="b"),
+    ]
+    docs = evaluate_many(requests, progress=True, workers=1)
+    err = capsys.readouterr().err
+    assert "[1/2] harik-apf-gt on GreenhouseNav-v1 [a]" in err and "[2/2] harik-apf-gt on GreenhouseNav-v1 [b]" in err
+    assert "4/4" in err and "success 2/2 of 2" in err  # one bar over the whole run (its ETA), per-block counts
+    assert "seed" not in err and [d["label"] for d in docs] == ["a", "b"]
