@@ -723,9 +723,14 @@ def timed(fn: Any, *args: Any, **kwargs: Any) -> tuple[Any, float]:
     return out, time.perf_counter() - t0
 
 
-def print_problems(problems: Sequence[str], limit: int = 40) -> None:
-    """Print verify's problems to stderr (the first ``limit`` of them)."""
-    for line in problems[:limit]:
-        print(f"  {line}", file=sys.stderr)
-    if len(problems) > limit:
-        print(f"  ... and {len(problems) - limit} more", file=sys.stderr)
+def print_problems(problems: Sequence[str], per_entry: int = 5) -> None:
+    """Print verify's problems to stderr: how many per entry, and the first ``per_entry`` of each."""
+    groups: dict[str, list[str]] = {}
+    for line in problems:
+        groups.setdefault(line.split(": ", 1)[0], []).append(line)
+    for name, lines in groups.items():
+        print(f"  {name}: {len(lines)} difference(s)", file=sys.stderr)
+        for line in lines[:per_entry]:
+            print(f"    {line}", file=sys.stderr)
+        if len(lines) > per_entry:
+            print(f"    ... and {len(lines) - per_entry} more", file=sys.stderr)

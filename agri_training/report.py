@@ -187,15 +187,22 @@ def _level_document(row: Row, k: int, seeds: list[int], bar: Any) -> dict[str, A
     bar.start_block(f"traces: {doc['policy']} on {doc['label']}")
     env = gym.make(doc["env_id"], **doc["env_kwargs"])
     try:
-        policy = load_policy(lb._policy_argument(entry["policy"]), env)
+        name = lb._policy_argument(entry["policy"])
         keys = tuple(env.unwrapped.metadata.get("trace_keys", ()))
         for seed in seeds:
-            ep = run_episode(env, policy, seed, keys)
+            # a fresh policy per episode, as the evaluator's workers build it: the re-run is the counted episode
+            ep = run_episode(env, load_policy(name, env), seed, keys)
+            if ep["record"]["is_success"] != _record_of(level, seed).get("is_success"):
+                print(f"warning: {doc['policy']} seed {seed} did not reproduce its recorded outcome", file=sys.stderr)
             doc["traces"].append({"seed": seed, "data": ep["trace"], "is_success": ep["record"]["is_success"]})
             bar.episode_done(ep["record"])
     finally:
         env.close()
     return doc
+
+
+def _record_of(level: Mapping[str, Any], seed: int) -> dict[str, Any]:
+    return next((e for e in level["episodes"] if e["seed"] == seed), {})
 
 
 # ---------------------------------------------------------------- comparisons
