@@ -391,8 +391,8 @@ def learning_curves(env_id: str, runs: list[dict[str, Any]], rows: Sequence[Row]
     mine = [r for r in runs if r["env_id"] == env_id]
     if not mine:
         return [
-            "No training runs with a learning curve were found for this env (looked for `curve.csv` or `progress.csv` under the "
-            "runs folder). Train one with `agri train` and rebuild the report."
+            "No training runs with a learning curve were found for this env (looked for `curve.csv` or "
+            "`progress.csv` under the runs folder). Train one with `agri train` and rebuild the report."
         ]
     import matplotlib
 
