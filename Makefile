@@ -9,18 +9,28 @@ $(STAMP): pyproject.toml
 	$(BIN)/pip install -q --upgrade pip
 	# CPU build of torch first: a bare torch requirement would pull a multi-GB CUDA build.
 	$(BIN)/pip install -q torch==2.13.0
-	$(BIN)/pip install -q -e ".[train,report,dev]"
+	$(BIN)/pip install -q -e ".[train,report,dev,ray]"
 	touch $(STAMP)
 
-.PHONY: report test lint bench
+.PHONY: report test lint bench leaderboard verify
 
+# The report page from the committed leaderboard entries, plus fresh runs of whatever is missing or stale.
 report: $(STAMP)
-	$(BIN)/agri report --out reports/baselines
+	$(BIN)/agri report --out reports/latest
 
+# Static checks, the tests, then the leaderboard's verify (re-runs every entry on its pinned seeds).
 test: $(STAMP)
 	$(BIN)/ruff check .
 	$(BIN)/mypy
 	SDL_VIDEODRIVER=dummy SDL_AUDIODRIVER=dummy $(BIN)/python -m pytest -n 2 -q
+	$(BIN)/agri leaderboard verify
+
+verify: $(STAMP)
+	$(BIN)/agri leaderboard verify
+
+# Regenerate the entry of every registered baseline on every suite of its env, and LEADERBOARD.md.
+leaderboard: $(STAMP)
+	$(BIN)/agri leaderboard submit --all
 
 bench: $(STAMP)
 	$(BIN)/pip install -q -e ".[bench]"

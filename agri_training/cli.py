@@ -38,7 +38,7 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
         env_kwargs=parse_env_kwargs(args.env_kwargs or []),
         record_traces=args.traces,
     )
-    result = evaluate(request, progress=not args.quiet)
+    result = evaluate(request, progress=not args.quiet, workers=args.workers, ray=args.ray)
     out = Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text(json.dumps(result, indent=1))
@@ -48,11 +48,83 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
 
 
 def _cmd_report(args: argparse.Namespace) -> int:
-    from agri_training.report import build_report, default_suite
+    from agri_training.report import build_report
 
-    suite = default_suite(episodes=args.episodes, only_env=args.env)
-    path = build_report(suite, Path(args.out), progress=not args.quiet)
+    path = build_report(
+        Path(args.out),
+        suites_dir=Path(args.suites),
+        entries_dir=Path(args.entries),
+        runs_dir=Path(args.runs),
+        only_env=args.env,
+        episodes=args.episodes,
+        workers=args.workers,
+        ray=args.ray,
+        progress=not args.quiet,
+    )
     print(f"wrote {path} and {path.with_suffix('.html')}")
+    return 0
+
+
+def _cmd_leaderboard(args: argparse.Namespace) -> int:
+    from agri_training import leaderboard as lb
+
+    suites_dir = Path(args.suites)
+    entries_dir = Path(args.entries)
+    md = Path(args.markdown)
+    if args.action == "suites":
+        for s in lb.load_suites(suites_dir):
+            levels = len(s.levels())
+            print(f"{s.name} v{s.version}  {s.env_id}  seeds {s.seed_start}+{s.episodes} x {levels} level(s)")
+        return 0
+    if args.action == "render":
+        lb.write_markdown(md, entries_dir, suites_dir)
+        print(f"wrote {md}")
+        return 0
+    if args.action == "submit":
+        suites = lb.load_suites(suites_dir)
+        if args.all:
+            pairs = lb.all_baseline_pairs(s for s in suites if not args.env or s.env_id == args.env)
+        else:
+            if not args.suite or not args.policy:
+                raise ValueError("submit needs --suite and --policy (or --all for every baseline on every suite)")
+            names = args.suite
+            chosen = [lb.find_suite(n, suites_dir) for n in names] if names != ["all"] else suites
+            if Path(args.policy).is_dir():  # an `agri train` run: its config names the env
+                ref = lb.policy_reference(args.policy, args.name)
+                env_id = yaml.safe_load((Path(args.policy) / "config.yaml").read_text())["env_id"]
+                chosen = [s for s in chosen if s.env_id == env_id] if names == ["all"] else chosen
+            else:
+                ref = lb.policy_reference(args.policy)
+                from agri_baselines import policy_spec
+
+                env_id = policy_spec(args.policy).env_id
+                chosen = [s for s in chosen if s.env_id == env_id] if names == ["all"] else chosen
+            pairs = [(s, ref) for s in chosen]
+        command = "agri leaderboard " + " ".join(sys.argv[2:] if len(sys.argv) > 2 else [])
+        entries, seconds = lb.timed(lb.evaluate_entries, pairs, args.workers, not args.quiet, command, args.ray)
+        for entry in entries:
+            print(f"wrote {lb.write_entry(entry, entries_dir)}")
+        lb.write_markdown(md, entries_dir, suites_dir)
+        print(f"wrote {md} ({len(entries)} entries evaluated in {seconds:.0f} s with {args.workers} worker(s))")
+        return 0
+    # verify
+    entries = lb.load_entries(entries_dir)
+    if args.entries_named:
+        wanted = {str(Path(e).resolve()) for e in args.entries_named}
+        entries = [e for e in entries if str(Path(e["_path"]).resolve()) in wanted]
+        if len(entries) != len(wanted):
+            raise ValueError(f"not an entry under {entries_dir}: {sorted(wanted)}")
+    problems, seconds = lb.timed(
+        lb.verify_entries, entries, suites_dir, args.workers, args.rtol, not args.quiet, args.ray
+    )
+    if not args.no_markdown and not lb.leaderboard_is_current(md, entries_dir, suites_dir):
+        problems.append(f"{md} is stale: run `agri leaderboard render` and commit it")
+    if problems:
+        print(f"agri leaderboard verify: {len(problems)} problem(s) in {len(entries)} entries:", file=sys.stderr)
+        lb.print_problems(problems)
+        return 1
+    tol = "exactly" if args.rtol == 0 else f"within rtol {args.rtol:g}"
+    print(f"verified {len(entries)} entries {tol} in {seconds:.0f} s ({args.workers} worker(s)); {md.name} is current")
     return 0
 
 
@@ -76,6 +148,39 @@ def _cmd_list(args: argparse.Namespace) -> int:
     return 0
 
 
+def _workers(text: str) -> int:
+    try:
+        n = int(text)
+    except ValueError:
+        n = 0
+    if n < 1:
+        raise argparse.ArgumentTypeError(f"expects an integer >= 1, got {text!r}")
+    return n
+
+
+def add_scale_arguments(parser: argparse.ArgumentParser) -> None:
+    """Add ``--workers N`` (default: one per core) and ``--ray ADDRESS`` to a subcommand that runs episodes."""
+    import os
+
+    try:
+        cores = len(os.sched_getaffinity(0))
+    except AttributeError:  # not on Linux
+        cores = os.cpu_count() or 1
+    parser.add_argument(
+        "--workers",
+        type=_workers,
+        default=max(1, cores),
+        help=f"worker processes running episodes (default: one per core, here {cores}); 1 runs in this process",
+    )
+    parser.add_argument(
+        "--ray",
+        default=None,
+        metavar="ADDRESS",
+        help="run episodes as Ray tasks: 'local' (a private Ray instance for this run), 'auto' (the cluster "
+        "started here with 'ray start') or a cluster address HOST:PORT; needs the 'ray' extra",
+    )
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of ``agri``."""
     parser = argparse.ArgumentParser(prog="agri", description=__doc__)
@@ -90,13 +195,43 @@ def build_parser() -> argparse.ArgumentParser:
     ev.add_argument("--traces", type=int, default=1, help="episodes that record per-step traces")
     ev.add_argument("--out", required=True, help="output JSON file")
     ev.add_argument("--quiet", action="store_true", help="no progress bar")
+    add_scale_arguments(ev)
     ev.set_defaults(func=_cmd_evaluate)
-    rp = sub.add_parser("report", help="evaluate every registered baseline and write a Markdown + HTML report")
-    rp.add_argument("--out", default="reports/baselines", help="output folder")
-    rp.add_argument("--episodes", type=int, default=None, help="override the episodes of every suite entry")
+    rp = sub.add_parser(
+        "report",
+        help="one Markdown + HTML page over the leaderboard entries (fresh runs where stale) and training runs",
+    )
+    rp.add_argument("--out", default="reports/latest", help="output folder")
+    rp.add_argument("--suites", default="leaderboard/suites", help="folder of suite YAML files")
+    rp.add_argument("--entries", default="leaderboard/entries", help="folder of leaderboard entries")
+    rp.add_argument("--runs", default="runs", help="folder of training runs (learning curves)")
+    rp.add_argument("--episodes", type=int, default=None, help="quick look: override every suite's episodes")
     rp.add_argument("--env", default=None, help="only this env id")
     rp.add_argument("--quiet", action="store_true")
+    add_scale_arguments(rp)
     rp.set_defaults(func=_cmd_report)
+    lb = sub.add_parser("leaderboard", help="pinned suites, leaderboard entries, LEADERBOARD.md (docs/leaderboard.md)")
+    lb.add_argument("--suites", default="leaderboard/suites", help="folder of suite YAML files")
+    lb.add_argument("--entries", default="leaderboard/entries", help="folder of entry JSON files")
+    lb.add_argument("--markdown", default="LEADERBOARD.md", help="the generated leaderboard page")
+    lbsub = lb.add_subparsers(dest="action", required=True)
+    lbsub.add_parser("suites", help="list the pinned suites")
+    lbsub.add_parser("render", help="regenerate LEADERBOARD.md from the entries")
+    su = lbsub.add_parser("submit", help="evaluate a policy on suites and write its entries (and LEADERBOARD.md)")
+    su.add_argument("--suite", nargs="+", help="suite names, or 'all' (every suite of the policy's env)")
+    su.add_argument("--policy", help="registered policy name, or an `agri train` run folder")
+    su.add_argument("--name", default=None, help="display name of a learned policy")
+    su.add_argument("--all", action="store_true", help="every registered baseline on every suite of its env")
+    su.add_argument("--env", default=None, help="with --all: only this env id")
+    add_scale_arguments(su)
+    su.add_argument("--quiet", action="store_true")
+    ve = lbsub.add_parser("verify", help="re-evaluate entries on their pinned seeds; fail on any difference")
+    ve.add_argument("entries_named", nargs="*", metavar="ENTRY", help="entry JSON files (default: all)")
+    add_scale_arguments(ve)
+    ve.add_argument("--rtol", type=float, default=0.0, help="relative tolerance for floats (default 0: exact)")
+    ve.add_argument("--no-markdown", action="store_true", help="do not check that LEADERBOARD.md is current")
+    ve.add_argument("--quiet", action="store_true")
+    lb.set_defaults(func=_cmd_leaderboard)
     ls = sub.add_parser("list", help="registered envs, scenarios and baselines")
     ls.set_defaults(func=_cmd_list)
     return parser
@@ -110,6 +245,15 @@ def main(argv: list[str] | None = None) -> int:
     except ValueError as exc:  # users' mistakes: a clear message, no traceback
         print(f"agri: error: {exc}", file=sys.stderr)
         return 2
+    except RuntimeError as exc:
+        from agri_training.parallel import EpisodeError
+
+        if not isinstance(exc, EpisodeError):
+            raise
+        # A failing episode: where it failed (the worker's traceback), then which seed and why.
+        print(exc.remote_traceback, file=sys.stderr)
+        print(f"agri: error: {exc}", file=sys.stderr)
+        return 1
 
 
 if __name__ == "__main__":

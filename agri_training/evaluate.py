@@ -13,7 +13,7 @@ import math
 import subprocess
 import sys
 import time
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any
 
@@ -23,7 +23,8 @@ import numpy as np
 import agri_envs
 from agri_baselines import list_policies, make_policy, policy_spec
 from agri_envs.scenarios import scenario as get_scenario
-from agri_training.stats import bootstrap_ci
+from agri_training.parallel import EpisodeJob, run_episodes
+from agri_training.stats import format_interval, iqm, rate_interval, stratified_bootstrap_ci
 
 
 @dataclasses.dataclass(frozen=True)
@@ -38,6 +39,7 @@ class EvalRequest:
         scenario: Name of an env-argument preset (``agri_envs.scenarios``), or None.
         env_kwargs: Extra env arguments (override the scenario's; must not contradict the policy's needs).
         record_traces: How many episodes record per-step traces.
+        label: Name of the evaluation in progress displays and in the result (default: the scenario's).
     """
 
     env_id: str
@@ -47,6 +49,7 @@ class EvalRequest:
     scenario: str | None = None
     env_kwargs: Mapping[str, Any] = dataclasses.field(default_factory=dict)
     record_traces: int = 1
+    label: str | None = None
 
 
 def resolve_env_kwargs(request: EvalRequest, base: Mapping[str, Any] | None = None) -> tuple[dict[str, Any], bool]:
@@ -195,25 +198,55 @@ def localization_errors(truth: np.ndarray, estimate: np.ndarray) -> dict[str, fl
     }
 
 
-def summarize(episodes: list[dict[str, Any]]) -> dict[str, Any]:
-    """Success and collision rates, means of every numeric metric, with 95 % bootstrap intervals."""
+#: Per-episode keys that measure the computer, not the policy (wall-clock and planning times): they are
+#: summarised but never expected to reproduce, so the leaderboard's verify skips them.
+TIMING_KEYS = frozenset({"wall_time_s", "planning_time_ms"})
+
+
+def is_timing_key(key: str) -> bool:
+    """True for a record or summary key derived from wall-clock time (see :data:`TIMING_KEYS`)."""
+    return any(t in key for t in TIMING_KEYS)
+
+
+#: How the summary's intervals are computed (printed under every table).
+INTERVALS_NOTE = (
+    "95 % intervals: Wilson score intervals for rates; stratified percentile bootstrap (2000 resamples, "
+    "seed 0, strata = scenario levels) for means and interquartile means (IQM)."
+)
+
+
+def summarize(episodes: list[dict[str, Any]], strata: list[str] | None = None) -> dict[str, Any]:
+    """Rates with Wilson intervals; mean and IQM of every numeric metric with stratified bootstrap intervals.
+
+    Args:
+        episodes: Per-episode records.
+        strata: Optional label per episode (the scenario level it ran in) for the stratified bootstrap.
+
+    Returns:
+        ``episodes``, ``success_rate`` (+ ``_ci``), ``collision_rate`` (+ ``_ci``), ``mean_KEY`` and
+        ``iqm_KEY`` (+ ``_ci``) for every numeric key, and the shortcuts ``mean_time``,
+        ``mean_time_successful``, ``ate_rmse`` and ``min_clearance`` (the worst episode's) where they apply.
+    """
     summary: dict[str, Any] = {"episodes": len(episodes)}
     if not episodes:
         return summary
-    success = np.array([e["is_success"] for e in episodes], dtype=float)
-    summary["success_rate"] = float(success.mean())
-    summary["success_rate_ci"] = bootstrap_ci(success)
+    success = [bool(e["is_success"]) for e in episodes]
+    summary["success_rate"] = float(np.mean(success))
+    summary["success_rate_ci"] = rate_interval(success)
     if "collision" in episodes[0]:
-        col = np.array([bool(e["collision"]) for e in episodes], dtype=float)
-        summary["collision_rate"] = float(col.mean())
-        summary["collision_rate_ci"] = bootstrap_ci(col)
+        col = [bool(e["collision"]) for e in episodes]
+        summary["collision_rate"] = float(np.mean(col))
+        summary["collision_rate_ci"] = rate_interval(col)
     skip = {"seed", "is_success", "collision", "truncated"}
     for key, value in episodes[0].items():
         if key in skip or isinstance(value, bool) or not isinstance(value, (int, float)):
             continue
         vals = np.array([e[key] if e.get(key) is not None else np.nan for e in episodes], dtype=float)
-        summary[f"mean_{key}"] = float(np.nanmean(vals)) if np.any(np.isfinite(vals)) else None
-        summary[f"mean_{key}_ci"] = bootstrap_ci(vals)
+        finite = np.any(np.isfinite(vals))
+        summary[f"mean_{key}"] = float(np.nanmean(vals)) if finite else None
+        summary[f"mean_{key}_ci"] = stratified_bootstrap_ci(vals, np.mean, strata)
+        summary[f"iqm_{key}"] = iqm(vals) if finite else None
+        summary[f"iqm_{key}_ci"] = stratified_bootstrap_ci(vals, iqm, strata)
     if "episode_time" in episodes[0]:
         ok = [e["episode_time"] for e in episodes if e["is_success"]]
         summary["mean_time"] = summary["mean_episode_time"]
@@ -226,64 +259,185 @@ def summarize(episodes: list[dict[str, Any]]) -> dict[str, Any]:
     return summary
 
 
-def evaluate(request: EvalRequest, progress: bool = True) -> dict[str, Any]:
+@dataclasses.dataclass(frozen=True)
+class EpisodeProgress:
+    """What :func:`evaluate_many` reports after each finished episode (for progress displays and ETAs).
+
+    Attributes:
+        request: Index of the request in the list evaluated.
+        level: Index of the level (sweep value) within the request.
+        episode: Index of the episode within the level (seed = request seed + episode).
+        done: Episodes finished so far, over all requests.
+        total: Episodes in the whole run.
+        elapsed_s: Wall time since the run started.
+        record: The episode's record.
+    """
+
+    request: int
+    level: int
+    episode: int
+    done: int
+    total: int
+    elapsed_s: float
+    record: dict[str, Any]
+
+
+@dataclasses.dataclass
+class _Level:
+    request_index: int
+    level_index: int
+    request: EvalRequest
+    label: str | None
+    kwargs: dict[str, Any]
+    privileged: bool
+    jobs: list[EpisodeJob]
+
+
+def _plan(requests: list[EvalRequest]) -> list[_Level]:
+    levels = []
+    for r, request in enumerate(requests):
+        if request.episodes < 1:
+            raise ValueError(f"episodes must be >= 1, got {request.episodes}")
+        sc = get_scenario(request.env_id, request.scenario) if request.scenario else None
+        bases: list[tuple[str | None, Mapping[str, Any] | None]] = (
+            [(None, None)] if sc is None or sc.sweep is None else list(sc.levels())
+        )
+        for k, (label, base) in enumerate(bases):
+            kwargs, privileged = resolve_env_kwargs(request, base)
+            jobs = [
+                EpisodeJob(request.env_id, kwargs, request.policy, request.seed + i, i < request.record_traces)
+                for i in range(request.episodes)
+            ]
+            levels.append(_Level(r, k, request, label or request.label, kwargs, privileged, jobs))
+    return levels
+
+
+def evaluate(
+    request: EvalRequest, progress: bool = True, workers: int | None = 1, ray: str | None = None
+) -> dict[str, Any]:
     """Run the request and return the result document.
 
     For a scenario that sweeps an argument the document holds one result per value under ``levels`` (and
-    the ``summary`` of all levels pooled); otherwise it is a single result.
+    the ``summary`` of all levels pooled); otherwise it is a single result. ``workers`` and ``ray`` choose
+    where the episodes run (see :func:`evaluate_many`); the document is the same wherever they run.
     """
-    sc = get_scenario(request.env_id, request.scenario) if request.scenario else None
-    if sc is None or sc.sweep is None:
-        return evaluate_level(request, None, progress)
-    levels = [evaluate_level(request, kwargs, progress, label) for label, kwargs in sc.levels()]
-    pooled = [e for level in levels for e in level["episodes"]]
-    doc = {k: v for k, v in levels[0].items() if k not in ("episodes", "traces", "summary", "env_kwargs", "label")}
-    doc.update(
-        sweep={"parameter": sc.sweep[0], "values": list(sc.sweep[1])},
-        levels=levels,
-        summary=_jsonable(summarize(pooled)),
-    )
-    return doc
+    return evaluate_many([request], progress, workers, ray)[0]
+
+
+def evaluate_many(
+    requests: list[EvalRequest],
+    progress: bool = True,
+    workers: int | None = 1,
+    ray: str | None = None,
+    on_episode: Callable[[EpisodeProgress], None] | None = None,
+) -> list[dict[str, Any]]:
+    """Evaluate several requests in one run of episodes, and return one result document per request.
+
+    All episodes of all requests go to one worker pool (or one Ray session), so the cores stay busy
+    across requests. Episode ``i`` of a request is seeded ``seed + i`` wherever it runs, and the documents
+    equal those of a serial run (``workers=1``) in everything but the episodes' ``wall_time_s``.
+
+    Args:
+        requests: What to evaluate.
+        progress: Show one progress bar (level k of N, overall ETA; nothing per episode).
+        workers: Worker processes (1: in this process; None: one per core; see
+            :func:`agri_training.parallel.run_episodes`).
+        ray: Run the episodes as Ray tasks: ``"local"``, ``"auto"`` or a cluster address.
+        on_episode: Called after each finished episode (in completion order) with an
+            :class:`EpisodeProgress`.
+
+    Raises:
+        ValueError: For bad arguments (unknown scenario, policy, env argument, ``workers < 1``).
+        agri_training.parallel.EpisodeError: When an episode raises; it names the seed and the exception.
+    """
+    levels = _plan(requests)
+    jobs = [job for level in levels for job in level.jobs]
+    where = [(level, i) for level in levels for i in range(len(level.jobs))]
+    display = _OrderedDisplay(where, progress)
+    t0 = time.perf_counter()
+    done = 0
+
+    def on_result(index: int, job: EpisodeJob, out: dict[str, Any]) -> None:
+        nonlocal done
+        done += 1
+        display.finished(index, out["record"])
+        if on_episode is not None:
+            level, i = where[index]
+            on_episode(
+                EpisodeProgress(
+                    level.request_index, level.level_index, i, done, len(jobs), time.perf_counter() - t0, out["record"]
+                )
+            )
+
+    try:
+        outs = run_episodes(jobs, workers=workers, ray=ray, on_result=on_result)
+    finally:
+        display.close()
+    docs: list[list[dict[str, Any]]] = [[] for _ in requests]
+    start = 0
+    for level in levels:
+        level_outs = outs[start : start + len(level.jobs)]
+        start += len(level.jobs)
+        docs[level.request_index].append(_level_doc(level, level_outs))
+    results = []
+    for request, level_docs in zip(requests, docs, strict=True):
+        sc = get_scenario(request.env_id, request.scenario) if request.scenario else None
+        if sc is None or sc.sweep is None:
+            results.append(level_docs[0])
+            continue
+        pooled = [e for level_doc in level_docs for e in level_doc["episodes"]]
+        drop = ("episodes", "traces", "summary", "env_kwargs", "label")
+        doc = {k: v for k, v in level_docs[0].items() if k not in drop}
+        doc.update(
+            sweep={"parameter": sc.sweep[0], "values": list(sc.sweep[1])},
+            levels=level_docs,
+            summary=_jsonable(summarize(pooled, [d["label"] for d in level_docs for _ in d["episodes"]])),
+        )
+        results.append(doc)
+    return results
 
 
 def evaluate_level(
-    request: EvalRequest, base: Mapping[str, Any] | None, progress: bool = True, label: str | None = None
+    request: EvalRequest,
+    base: Mapping[str, Any] | None,
+    progress: bool = True,
+    label: str | None = None,
+    workers: int | None = 1,
+    ray: str | None = None,
 ) -> dict[str, Any]:
     """Evaluate one set of env arguments (one level of a scenario)."""
     kwargs, privileged = resolve_env_kwargs(request, base)
-    env = gym.make(request.env_id, **kwargs)
+    jobs = [
+        EpisodeJob(request.env_id, kwargs, request.policy, request.seed + i, i < request.record_traces)
+        for i in range(request.episodes)
+    ]
+    level = _Level(0, 0, request, label, kwargs, privileged, jobs)
+    display = _OrderedDisplay([(level, i) for i in range(len(jobs))], progress)
     try:
-        policy = load_policy(request.policy, env)
-        trace_keys = tuple(env.unwrapped.metadata.get("trace_keys", ()))
-        episodes: list[dict[str, Any]] = []
-        traces: list[dict[str, Any]] = []
-        bar = _progress(request.episodes, f"{request.policy} on {request.env_id}", progress)
-        if progress:
-            _print_row(bar, None)
-        for i in range(request.episodes):
-            seed = request.seed + i
-            out = run_episode(env, policy, seed, trace_keys if i < request.record_traces else None)
-            episodes.append(out["record"])
-            if out["trace"] is not None:
-                traces.append({"seed": seed, "data": out["trace"]})
-            if progress:
-                _print_row(bar, out["record"])
-            if bar is not None:
-                rate = np.mean([e["is_success"] for e in episodes])
-                bar.set_postfix(success=f"{rate:.0%}")
-                bar.update(1)
-        if bar is not None:
-            bar.close()
+        outs = run_episodes(
+            jobs, workers=workers, ray=ray, on_result=lambda k, _, out: display.finished(k, out["record"])
+        )
     finally:
-        env.close()
+        display.close()
+    return _level_doc(level, outs)
+
+
+def _level_doc(level: _Level, outs: list[dict[str, Any]]) -> dict[str, Any]:
+    request = level.request
+    episodes = [out["record"] for out in outs]
+    traces = [
+        {"seed": job.seed, "data": out["trace"]}
+        for job, out in zip(level.jobs, outs, strict=True)
+        if out["trace"] is not None
+    ]
     return {
         "env_id": request.env_id,
         "scenario": request.scenario,
-        "label": label or request.scenario,
+        "label": level.label or request.scenario,
         "policy": request.policy,
-        "privileged": privileged,
+        "privileged": level.privileged,
         "seed": request.seed,
-        "env_kwargs": _jsonable(kwargs),
+        "env_kwargs": _jsonable(level.kwargs),
         "package_version": agri_envs.__version__,
         "git_commit": git_commit(),
         "command": " ".join(sys.argv),
@@ -293,57 +447,120 @@ def evaluate_level(
     }
 
 
-def _progress(total: int, desc: str, enabled: bool) -> Any:
-    if not enabled:
-        return None
-    try:
-        from tqdm import tqdm
-    except ImportError:
-        return None
-    return tqdm(total=total, desc=desc, unit="ep", leave=False, file=sys.stderr)
+class Progress:
+    """One progress bar over a whole job of evaluation blocks (a policy on one scenario level each).
+
+    The bar counts episodes over all blocks, so tqdm's remaining time is the ETA of the whole job; its
+    label says which block runs (``[k/N] policy on env [level]``) and the success rate so far in it.
+    Nothing is printed per episode.
+
+    Args:
+        total_episodes: Episodes of the whole job.
+        total_blocks: Blocks of the whole job (1 for a single evaluation).
+        enabled: False for no output at all (also when tqdm is missing).
+    """
+
+    def __init__(self, total_episodes: int, total_blocks: int = 1, enabled: bool = True) -> None:
+        self.total_blocks = total_blocks
+        self.block = 0
+        self._successes = 0
+        self._done = 0
+        self._bar: Any = None
+        if enabled:
+            try:
+                from tqdm import tqdm
+            except ImportError:
+                return
+            self._bar = tqdm(total=total_episodes, unit="ep", file=sys.stderr, dynamic_ncols=True)
+
+    def start_block(self, desc: str) -> None:
+        """Announce the next block."""
+        self.block += 1
+        self._successes = self._done = 0
+        if self._bar is not None:
+            self._bar.set_description(f"[{self.block}/{self.total_blocks}] {desc}")
+
+    def episode_done(self, record: Mapping[str, Any]) -> None:
+        """Count one finished episode of the current block."""
+        self._done += 1
+        self._successes += bool(record.get("is_success"))
+        if self._bar is not None:
+            self._bar.set_postfix_str(f"success {self._successes}/{self._done}", refresh=False)
+            self._bar.update(1)
+
+    def advance(self, block: int, desc: str, postfix: str) -> None:
+        """Count one finished episode of block ``block`` (1-based), whichever block runs now."""
+        self.block = block
+        if self._bar is not None:
+            self._bar.set_description(f"[{block}/{self.total_blocks}] {desc}", refresh=False)
+            self._bar.set_postfix_str(postfix, refresh=False)
+            self._bar.update(1)
+
+    def skip(self, episodes: int, desc: str) -> None:
+        """Count a block that needs no run (e.g. a leaderboard entry that is up to date)."""
+        self.start_block(desc)
+        if self._bar is not None:
+            self._bar.update(episodes)
+
+    def close(self) -> None:
+        """Close the bar."""
+        if self._bar is not None:
+            self._bar.close()
+            self._bar = None
 
 
-_COLUMNS = (
-    ("seed", "{:>5}"),
-    ("is_success", "{!s:>7}"),
-    ("collision", "{!s:>9}"),
-    ("steps", "{:>6}"),
-    ("episode_time", "{:>8.1f}"),
-    ("path_length", "{:>8.2f}"),
-    ("min_clearance", "{:>9.3f}"),
-)
+class _OrderedDisplay:
+    """The display of a run of episodes: one :class:`Progress` bar, nothing per episode.
+
+    The bar's label names the level whose episode finished last (``[k/N] policy on env [level]``) with
+    its successes so far; its remaining time is the whole run's ETA. Episodes may finish out of order.
+    """
+
+    def __init__(self, where: list[tuple[_Level, int]], enabled: bool) -> None:
+        self.where = where
+        order = list(dict.fromkeys(id(level) for level, _ in where))
+        self._block = {lid: k + 1 for k, lid in enumerate(order)}
+        self._counts: dict[int, tuple[int, int]] = {}
+        self.bar = Progress(len(where), len(order), enabled)
+
+    def finished(self, index: int, record: dict[str, Any]) -> None:
+        level, _ = self.where[index]
+        done, ok = self._counts.get(id(level), (0, 0))
+        done, ok = done + 1, ok + bool(record.get("is_success"))
+        self._counts[id(level)] = (done, ok)
+        where = level.label or level.request.scenario or "default"
+        desc = f"{level.request.policy} on {level.request.env_id.split('/')[-1]} [{where}]"
+        self.bar.advance(self._block[id(level)], desc, f"success {ok}/{done} of {len(level.jobs)}")
+
+    def close(self) -> None:
+        self.bar.close()
 
 
-def _print_row(bar: Any, record: dict[str, Any] | None) -> None:
-    if record is None:
-        line = f"{'seed':>5} {'success':>7} {'collision':>9} {'steps':>6} {'time[s]':>8} {'path[m]':>8} {'clear[m]':>9}"
-    else:
-        cells = []
-        for name, fmt in _COLUMNS:
-            v = record.get(name)
-            width = len(fmt.format(0)) if "f" in fmt or ":>" in fmt else 8
-            cells.append(fmt.format(v) if v is not None else f"{'-':>{width}}")
-        line = " ".join(cells)
-    (bar.write if bar is not None else print)(line)
+_FORMATS = {"episode_time": "{:.1f}", "path_length": "{:.2f}", "min_clearance": "{:.3f}", "return": "{:.1f}"}
 
 
 def format_summary(result: dict[str, Any]) -> str:
-    """Human-readable summary lines of a result document."""
+    """Human-readable summary: rates with Wilson intervals, means and IQMs with bootstrap intervals."""
     s = result["summary"]
     lines = [
         f"{result['policy']} on {result['env_id']}"
         + (f" [{result['scenario']}]" if result["scenario"] else "")
         + (" (privileged)" if result["privileged"] else "")
+        + f", {s['episodes']} episodes",
+        f"  {'metric':<24} {'value [95 % CI]':<30} IQM [95 % CI]",
     ]
     for key in ("success_rate", "collision_rate"):
         if key in s:
-            lo, hi = s[f"{key}_ci"]
-            lines.append(f"  {key:<22} {s[key]:.2f}  [{lo:.2f}, {hi:.2f}]")
+            lines.append(f"  {key:<24} {format_interval(s[key], s.get(key + '_ci'))}")
     for key, value in s.items():
-        if key.startswith("mean_") and not key.endswith("_ci") and isinstance(value, float):
-            lines.append(f"  {key:<22} {value:.3f}")
+        if key.startswith("mean_") and not key.endswith("_ci") and f"{key}_ci" in s:
+            name = key[len("mean_") :]
+            fmt = _FORMATS.get(name, "{:.3g}")
+            iqm_text = format_interval(s.get(f"iqm_{name}"), s.get(f"iqm_{name}_ci"), fmt)
+            lines.append(f"  {name:<24} {format_interval(value, s.get(key + '_ci'), fmt):<30} {iqm_text}")
     if s.get("min_clearance") is not None:
-        lines.append(f"  {'min_clearance':<22} {s['min_clearance']:.3f}")
+        lines.append(f"  {'min_clearance (worst)':<24} {s['min_clearance']:.3f}")
+    lines.append("  " + INTERVALS_NOTE)
     return "\n".join(lines)
 
 

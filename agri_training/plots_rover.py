@@ -50,15 +50,8 @@ def scene_of(result: dict[str, Any], seed: int) -> Any:
     return env
 
 
-def plot_trace(
-    result: dict[str, Any], trace: dict[str, Any], out_dir: Path, stem: str, curves: bool = True
-) -> list[str]:
-    """Save the trajectory map (and with ``curves`` the d(t) / alpha(t) figure) of one episode; return file names."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
+def _trajectory_axes(ax: Any, result: dict[str, Any], trace: dict[str, Any], legend: bool = True) -> None:
+    """Draw the scene, the true path, the pose estimate, waypoints, start and (for a failure) the end."""
     data = trace["data"]
     env = scene_of(result, trace["seed"])
     e = env.unwrapped
@@ -66,48 +59,118 @@ def plot_trace(
     waypoints = e.layout.waypoints
     env.close()
     x, y = np.array(data["x"], float), np.array(data["y"], float)
-    fig, ax = plt.subplots(figsize=(8, 5.5))
     draw_geometry(ax, geometry)
-    ax.plot(x, y, color="#2859c8", lw=1.6, label="robot (true pose)")
+    ax.plot(x, y, color="#2859c8", lw=1.4, label="robot (true pose)")
     for kx, ky, what in (("est_x", "est_y", "odometry"), ("slam_x", "slam_y", "SLAM")):
         est_x = np.array([np.nan if v is None else v for v in data.get(kx, [])], float)
         if est_x.size and np.any(np.isfinite(est_x)) and not np.allclose(est_x, x[: est_x.size], equal_nan=True):
             est_y = np.array([np.nan if v is None else v for v in data[ky]], float)
             ax.plot(est_x, est_y, color="#d08020", lw=1.0, ls="--", label=f"pose estimate ({what})")
-    ax.scatter(waypoints[:, 0], waypoints[:, 1], color="#d21e1e", zorder=5, s=30)
+    ax.scatter(waypoints[:, 0], waypoints[:, 1], color="#d21e1e", zorder=5, s=24, label="waypoints")
     for i, (wx, wy) in enumerate(waypoints):
-        ax.annotate(str(i), (wx, wy), textcoords="offset points", xytext=(5, 5), color="#a01010", fontsize=10)
-    ax.plot(x[:1], y[:1], marker="o", color="#2859c8", ms=8)
+        ax.annotate(str(i), (wx, wy), textcoords="offset points", xytext=(4, 4), color="#a01010", fontsize=8)
+    ax.plot(x[:1], y[:1], marker="o", color="#2859c8", ms=7, ls="", label="start")
+    if not trace.get("is_success", True):
+        ax.plot(x[-1:], y[-1:], marker="X", color="#e00000", ms=11, ls="", zorder=6, label="end (failed)")
     ax.set_xlabel("x [m]")
     ax.set_ylabel("y [m]")
-    label = result.get("label") or result["scenario"] or "default env"
-    ax.set_title(f"{result['policy']} on {label}: trajectory, seed {trace['seed']}")
-    ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.1), ncol=2, fontsize=8, frameon=False)
-    traj_name = f"{stem}_trajectory.png"
-    fig.tight_layout()
-    fig.savefig(out_dir / traj_name, dpi=110)
+    if legend:
+        # outside the axes, right of the map: never on top of the x label or the path
+        ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8, frameon=False)
+
+
+def _where(result: dict[str, Any]) -> str:
+    return str(result.get("label") or result.get("suite") or result["scenario"] or "default env")
+
+
+def plot_trace(
+    result: dict[str, Any], trace: dict[str, Any], out_dir: Path, stem: str, curves: bool = True
+) -> list[str]:
+    """Save the trajectory map (and with ``curves`` the d(t) / alpha(t) figure) of one episode; return file names.
+
+    Every title names the policy, the suite level and the seed.
+    """
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    data = trace["data"]
+    fig, ax = plt.subplots(figsize=(9, 5.5))
+    _trajectory_axes(ax, result, trace)
+    outcome = "" if trace.get("is_success", True) else " (failed)"
+    ax.set_title(f"{result['policy']} on {_where(result)}, seed {trace['seed']}{outcome}: trajectory")
+    traj_name = f"{stem}_seed{trace['seed']}_trajectory.png"
+    fig.savefig(out_dir / traj_name, dpi=110, bbox_inches="tight")
     plt.close(fig)
     if not curves:
         return [traj_name]
 
     dt = float(result["env_kwargs"].get("control_period", 1 / 15))
-    t = dt * np.arange(len(x))
-    d = np.array(data["distance_to_waypoint"], float)
-    alpha = np.degrees(np.array(data["bearing_to_waypoint"], float))
-    fig, axes = plt.subplots(2, 1, figsize=(8, 5), sharex=True)
+    d = np.array([np.nan if v is None else v for v in data["distance_to_waypoint"]], float)
+    alpha = np.degrees(np.array([np.nan if v is None else v for v in data["bearing_to_waypoint"]], float))
+    t = dt * np.arange(len(d))
+    fig, axes = plt.subplots(2, 1, figsize=(9, 5), sharex=True)
     axes[0].plot(t, d, color="#2859c8")
     axes[0].set_ylabel("d [m]")
-    axes[0].set_title("distance to the current waypoint (Fig. 7) and angle alpha (Fig. 8)")
+    axes[0].set_title(
+        f"{result['policy']} on {_where(result)}, seed {trace['seed']}: distance d to the current waypoint "
+        "(Harik Fig. 7) and its bearing alpha (Fig. 8)",
+        fontsize=9,
+    )
     axes[1].plot(t, alpha, color="#c83c28")
     axes[1].set_ylabel("alpha [deg]")
     axes[1].set_xlabel("time [s]")
+    if "waypoint_index" in data:  # mark where each waypoint was reached: the jumps of d are not glitches
+        wi = np.array([np.nan if v is None else v for v in data["waypoint_index"]], float)
+        for k in np.flatnonzero(np.diff(wi) > 0):
+            for a in axes:
+                a.axvline(t[k + 1], color="#999999", lw=0.6, ls=":")
     for a in axes:
         a.grid(alpha=0.3)
-    curves_name = f"{stem}_d_alpha.png"
+    curves_name = f"{stem}_seed{trace['seed']}_d_alpha.png"
     fig.tight_layout()
     fig.savefig(out_dir / curves_name, dpi=110)
     plt.close(fig)
     return [traj_name, curves_name]
+
+
+def plot_panels(
+    items: list[tuple[dict[str, Any], dict[str, Any], str]], out_dir: Path, name: str, title: str, ncols: int = 3
+) -> str:
+    """One figure with a trajectory panel per ``(result, trace, panel title)``; returns the file name."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import textwrap
+
+    import matplotlib.pyplot as plt
+
+    n = len(items)
+    cols = min(ncols, n)
+    rows = (n + cols - 1) // cols
+    xmin, ymin, xmax, ymax = scene_of(items[0][0], items[0][1]["seed"]).unwrapped.layout.geometry.bounds
+    aspect = (ymax - ymin + 0.4) / (xmax - xmin + 0.4)
+    width = 6.0 if cols > 1 else 9.0
+    fig, axes = plt.subplots(
+        rows, cols, figsize=(width * cols, (width * aspect + 1.2) * rows + 0.8), squeeze=False, layout="constrained"
+    )
+    for ax, (result, trace, panel) in zip(axes.ravel(), items, strict=False):
+        _trajectory_axes(ax, result, trace, legend=False)
+        ax.set_title(textwrap.fill(panel, 70), fontsize=9)
+    for ax in axes.ravel()[n:]:
+        ax.axis("off")
+    handles, labels = axes.ravel()[0].get_legend_handles_labels()
+    for ax in axes.ravel()[1:n]:  # collect the failure marker if only a later panel has it
+        for h, lab in zip(*ax.get_legend_handles_labels(), strict=True):
+            if lab not in labels:
+                handles.append(h)
+                labels.append(lab)
+    fig.legend(handles, labels, loc="outside lower center", ncol=len(labels), fontsize=8, frameon=False)
+    fig.suptitle(textwrap.fill(title, 100), fontsize=11)
+    fig.savefig(out_dir / name, dpi=100)
+    plt.close(fig)
+    return name
 
 
 #: What a reader needs to know to compare the rover policies (printed under the policy list).
@@ -198,53 +261,90 @@ def lead_result(results: list[dict[str, Any]]) -> dict[str, Any]:
     return next((r for r in results if not r["privileged"]), results[0])
 
 
-#: Scenarios whose traced episode gets the d(t) and alpha(t) curves of Harik Figs. 7-8 and 14-15.
-CURVE_SCENARIOS = (None, "sim-loop", "sim-loop-people", "corridor", "corridor-people")
+def _slug(text: str) -> str:
+    return "".join(c if c.isalnum() or c in "-_." else "_" for c in text)
 
 
 def report_section(results: list[dict[str, Any]], out_dir: Path) -> str:
-    """Markdown (with PNG plots written to ``out_dir``) for the GreenhouseNav-v1 results, one part per scenario.
+    """Markdown (with PNG plots written to ``out_dir``) for the GreenhouseNav-v1 results, one part per suite.
 
     Each part has a table of the policies (failures counted by cause, safety stops, localization error
-    with 95 % bootstrap intervals), the failed seeds, and plots of one episode of the lead policy: the
-    trajectory with its pose estimate (Harik Figs. 9, 11, 16), d(t) and alpha(t) (Figs. 7-8, 14-15) for
-    single missions, and the overlay of the cycles with the drift per cycle (Fig. 17) for repeated ones.
+    with 95 % intervals), the failed seeds, and plots: for a single mission the lead policy's trajectory
+    with its pose estimate (Harik Figs. 9, 16) and d(t) / alpha(t) (Figs. 7-8, 14-15); for a sweep one panel
+    figure with a trajectory per level (Figs. 10-12); for repeated missions the overlay of the cycles and
+    the drift per cycle (Fig. 17); and one panel figure of failed episodes, one per policy and level.
     """
     from agri_baselines import policy_spec
-    from agri_envs.scenarios import scenario
 
-    by_label: dict[str, list[dict[str, Any]]] = {}
-    for r in results:
-        by_label.setdefault(r.get("label") or r["scenario"] or "default", []).append(r)
     parts: list[str] = ["Policies:", ""]
     for name in dict.fromkeys(r["policy"] for r in results):
         try:
             parts.append(f"- `{name}`: {policy_spec(name).description}.")
-        except ValueError:  # a checkpoint, not a registered baseline
-            parts.append(f"- `{name}`: a trained policy.")
+        except ValueError:  # a learned policy, not a registered baseline
+            parts.append(f"- `{name}`: a learned policy.")
     parts += ["", ROVER_NOTES, ""]
-    described: set[str] = set()
-    for label, group in by_label.items():
-        name = group[0]["scenario"]
-        parts.append(f"### {label}")
-        if name and name not in described:
-            parts += ["", scenario(group[0]["env_id"], name).description]
-            described.add(name)
-        parts += [""] + policy_table(group) + [""]
-        for r in group:
-            failed = failure_lines(r)
-            if failed != ["No failures."]:
-                parts += [f"{r['policy']}:", ""] + failed[2:] + [""]
-        lead = lead_result(group)
-        stem = f"greenhouse_{label.replace(' ', '_').replace('=', '')}_{lead['policy']}"
-        traces = lead.get("traces", [])[:1]
-        if int(lead["env_kwargs"].get("mission_cycles", 1)) > 1:
-            parts += [f"Episode of {lead['policy']}:", ""] + repeatability_section(lead, out_dir, stem)
-        for trace in traces if int(lead["env_kwargs"].get("mission_cycles", 1)) == 1 else []:
-            names = plot_trace(lead, trace, out_dir, stem, curves=name in CURVE_SCENARIOS)
-            parts += [f"![{n}]({n})" for n in names]
-        parts.append("")
+    by_suite: dict[str, list[dict[str, Any]]] = {}
+    for r in results:
+        by_suite.setdefault(str(r.get("suite") or r["scenario"] or "default"), []).append(r)
+    for suite, group in by_suite.items():
+        parts += [f"#### {suite}", ""]
+        labels = list(dict.fromkeys(_where(r) for r in group))
+        for label in labels:
+            level = [r for r in group if _where(r) == label]
+            if len(labels) > 1:
+                parts += [f"{label}:", ""]
+            parts += policy_table(level) + [""]
+            for r in level:
+                failed = failure_lines(r)
+                if failed != ["No failures."]:
+                    parts += [f"`{r['policy']}`: " + failed[0], ""] + failed[2:] + [""]
+        cycles = int(group[0]["env_kwargs"].get("mission_cycles", 1))
+        leads = [lead_result([r for r in group if _where(r) == label]) for label in labels]
+        first = [
+            (r, r["traces"][0]) for r in leads if r["traces"] and r["traces"][0]["seed"] == r["episodes"][0]["seed"]
+        ]
+        if cycles > 1:
+            for r, _ in first[:1]:
+                parts += [f"Episode of `{r['policy']}`:", ""] + repeatability_section(
+                    r, out_dir, _slug(f"greenhouse_{suite}_{r['policy']}")
+                )
+        elif len(labels) > 1 and first:
+            name = plot_panels(
+                [(r, t, f"{_where(r)}, seed {t['seed']}") for r, t in first],
+                out_dir,
+                _slug(f"greenhouse_{suite}_{first[0][0]['policy']}_levels.png"),
+                f"{first[0][0]['policy']}: one episode per level of {suite}",
+            )
+            parts += [f"![{name}]({name})", ""]
+        else:
+            for r, t in first:
+                names = plot_trace(r, t, out_dir, _slug(f"greenhouse_{suite}_{r['policy']}"))
+                parts += [f"![{n}]({n})" for n in names] + [""]
+        fails = [
+            (r, t, f"{r['policy']} on {_where(r)}, seed {t['seed']}: {failure_cause(_record(r, t['seed']))}")
+            for r in group
+            for t in r["traces"]
+            if not t.get("is_success", True)
+        ]
+        if fails and cycles == 1:
+            shown = fails[:6]
+            name = plot_panels(
+                shown,
+                out_dir,
+                _slug(f"greenhouse_{suite}_failures.png"),
+                f"Failed episodes on {suite} (the first of each policy and level"
+                + (f"; {len(shown)} of {len(fails)} shown)" if len(fails) > len(shown) else ")"),
+            )
+            parts += ["Failed episodes (the red cross is where each ended):", "", f"![{name}]({name})", ""]
+        elif fails:
+            for r, t, panel in fails[:2]:
+                names = plot_trace(r, t, out_dir, _slug(f"greenhouse_{suite}_{r['policy']}_failed"), curves=False)
+                parts += [f"Failed episode, {panel}:", ""] + [f"![{n}]({n})" for n in names] + [""]
     return "\n".join(parts)
+
+
+def _record(result: dict[str, Any], seed: int) -> dict[str, Any]:
+    return next((e for e in result["episodes"] if e["seed"] == seed), {})
 
 
 def cycle_ends(waypoint_index: np.ndarray, per_cycle: int) -> list[int]:
@@ -291,7 +391,7 @@ def repeatability_stats(result: dict[str, Any], trace: dict[str, Any]) -> dict[s
 def plot_repeatability(
     result: dict[str, Any], trace: dict[str, Any], stats: dict[str, Any], out_dir: Path, stem: str
 ) -> str:
-    """Overlay of every cycle's trajectory on the map (Harik Fig. 17); returns the file name."""
+    """Every cycle's trajectory on the map in its own colour (Harik Fig. 17), and the drift / spread per cycle."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -300,18 +400,42 @@ def plot_repeatability(
     env = scene_of(result, trace["seed"])
     geometry = env.unwrapped.layout.geometry
     env.close()
-    fig, ax = plt.subplots(figsize=(8, 5.5))
+    fig, (ax, bx) = plt.subplots(1, 2, figsize=(13, 5.2), gridspec_kw={"width_ratios": [1.7, 1]})
     draw_geometry(ax, geometry)
-    colours = plt.get_cmap("viridis")(np.linspace(0, 1, max(1, len(stats["paths"]))))
+    n = len(stats["paths"])
+    colours = plt.get_cmap("tab10")(np.arange(max(1, n)) % 10)
+    styles = ["-", "--", ":", "-."]
+    # Cycle 1 drawn thickest and underneath, each later one thinner on top: where the cycles coincide (the
+    # point of the experiment) every colour still shows as a band edge.
+    widths = np.linspace(5.0, 0.8, max(1, n))
     for c, (p, col) in enumerate(zip(stats["paths"], colours, strict=True)):
-        ax.plot(
-            p[:, 0], p[:, 1], color=col, lw=1.0, label=f"cycle {c + 1}" if c in (0, len(stats["paths"]) - 1) else None
-        )
-    ax.legend(loc="upper right", fontsize=8)
-    ax.set_title(f"{result['policy']}: {len(stats['paths'])} cycles without re-initialisation (Harik Fig. 17)")
+        ax.plot(p[:, 0], p[:, 1], color=col, lw=widths[c], ls=styles[(c // 10) % 4], label=f"cycle {c + 1}")
+    ax.set_xlabel("x [m]")
+    ax.set_ylabel("y [m]")
+    spread = max((w for _, w in stats["spread"]), default=0.0)
+    ax.set_title(
+        f"{result['policy']} on {_where(result)}, seed {trace['seed']}: {n} cycles without re-initialisation\n"
+        f"(true path; later cycles stay within {spread:.2f} m of cycle 1)",
+        fontsize=10,
+    )
+    ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8, frameon=False)
+    cyc = np.arange(1, n + 1)
+    if stats["has_estimate"] and stats["drift"]:
+        bx.plot(cyc[: len(stats["drift"])], stats["drift"], "o-", color="#d08020", label="pose drift at cycle end")
+    if stats["spread"]:
+        means = [m for m, _ in stats["spread"]]
+        worst = [w for _, w in stats["spread"]]
+        bx.plot(cyc[1 : len(means) + 1], means, "s-", color="#2859c8", label="mean distance to cycle 1 path")
+        bx.plot(cyc[1 : len(worst) + 1], worst, "^:", color="#2859c8", label="largest distance to cycle 1 path")
+    bx.set_xlabel("cycle")
+    bx.set_ylabel("distance [m]")
+    bx.set_xticks(cyc)
+    bx.set_title("drift and spread per cycle (Harik Fig. 17)", fontsize=10)
+    bx.grid(alpha=0.3)
+    bx.legend(fontsize=8)
     name = f"{stem}_cycles.png"
     fig.tight_layout()
-    fig.savefig(out_dir / name, dpi=110)
+    fig.savefig(out_dir / name, dpi=110, bbox_inches="tight")
     plt.close(fig)
     return name
 

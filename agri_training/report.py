@@ -1,152 +1,632 @@
-"""The baseline evaluation report: run a suite of (env, scenario, policy) entries, write JSON, Markdown, HTML.
+"""The evaluation report: one Markdown + HTML page over every suite, baseline and learned policy.
 
-Each env contributes its own section (plots of trajectories, paper comparisons) through a hook named in
-:data:`SECTION_HOOKS`: ``report_section(results, out_dir) -> markdown``.
+The page is built from the committed leaderboard entries (``leaderboard/entries``); an entry that is
+missing or stale (its suite changed) is evaluated afresh and written under ``OUT/results``. The episodes
+that are plotted (the first seed of the lead policy and the first failure of every policy, per level) are
+re-run with per-step traces: every episode is deterministic under its seed, so the re-run is the episode
+the entry counted.
+
+Per-env sections come from builders named in :data:`SECTION_HOOKS` (``"module:function"``, called as
+``function(results, out_dir) -> markdown``, where ``results`` are the evaluator's per-level result
+documents with traces). An env with another layout (the chain's PettingZoo env, the coverage env) adds
+its builder there with one line.
 """
 
 from __future__ import annotations
 
+import csv
 import dataclasses
 import html
 import importlib
 import json
+import math
 import re
+import sys
+import time
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
-from agri_baselines import list_policies
-from agri_envs.scenarios import Scenario, list_scenarios
-from agri_training.evaluate import EvalRequest, evaluate
+from agri_training import leaderboard as lb
+from agri_training.stats import newcombe_interval, paired_comparison, wilson_interval
 
-SECTION_HOOKS = {
+#: Per-env report sections: env id -> ``"module:function"`` (see the module docstring).
+SECTION_HOOKS: dict[str, str] = {
     "agri_envs/GreenhouseNav-v1": "agri_training.plots_rover:report_section",
     "agri_envs/GrapeHarvest-v1": "agri_training.plots_arm:report_section",
 }
 
+#: Success rates the papers report, as (successes, trials, source), per suite name: our rate is compared
+#: with theirs by an interval of the difference, not by eye.
+PAPER_RATES: dict[str, tuple[int, int, str]] = {
+    "grape-table2": (9, 10, "Luo et al. 2018, Table 2"),
+}
 
-@dataclasses.dataclass(frozen=True)
-class SuiteEntry:
-    """One evaluation of the report: a policy on an env (scenario) over ``episodes`` seeds from ``seed``."""
+#: The suite whose baseline results are drawn as bands on an env's learning curves (default: its first).
+CURVE_SUITES: dict[str, str] = {
+    "agri_envs/GreenhouseNav-v1": "greenhouse-sim-loop",
+    "agri_envs/GrapeHarvest-v1": "grape-table2",
+}
 
-    env_id: str
-    policy: str
-    scenario: str | None = None
-    episodes: int = 20
-    seed: int = 0
+#: Equivalence margins for "matches": rates within +-0.10; other metrics within +-5 % of the reference mean.
+RATE_MARGIN = 0.10
+RELATIVE_MARGIN = 0.05
+
+INTRO = """\
+This page compares every policy of `agri_envs` on pinned evaluation suites: the scripted controllers of
+the papers the envs reproduce (*baselines*) and policies trained with reinforcement learning (*learned*).
+Each suite fixes an env, its arguments and the seeds (100000 and up, which training never uses); every
+policy runs the same episodes, so their results can be compared seed by seed.
+
+How to read the numbers:
+
+- Every number comes with a 95 % interval in brackets: `0.95 [0.76, 0.99]`. Rates (success, collision) use
+  Wilson score intervals, so 20 successes in 20 episodes read `1.00 [0.84, 1.00]`: the data are consistent
+  with a true rate as low as 84 %. Means use a percentile bootstrap over episodes.
+- A policy *beats* another only where the paired comparison's interval of the difference excludes zero; it
+  *matches* only where that interval lies within a small margin (0.10 for rates, 5 % of the other's mean
+  for times and lengths). Everything else is *not distinguishable* with these episodes.
+- **P** marks *privileged* policies: they use what a real robot would not have (such as the true pose),
+  so they show what the controller could do with perfect localization, not what the robot does.
+"""
 
 
-def default_suite(episodes: int | None = None, only_env: str | None = None) -> list[SuiteEntry]:
-    """Every registered baseline on every scenario registered for its env (the plain env when there is none).
+@dataclasses.dataclass
+class Row:
+    """One policy on one suite: its entry and whether it came from the committed leaderboard."""
+
+    suite: lb.Suite
+    entry: dict[str, Any]
+    committed: bool
+
+
+def _entry_is_current(entry: Mapping[str, Any], suite: lb.Suite) -> bool:
+    return entry["suite"]["sha256"] == suite.sha256 and entry["suite"]["version"] == suite.version
+
+
+def collect_rows(
+    suites: Sequence[lb.Suite],
+    entries: Sequence[dict[str, Any]],
+    out_dir: Path,
+    workers: int | None = 1,
+    progress: bool = True,
+    episodes: int | None = None,
+    ray: str | None = None,
+) -> list[Row]:
+    """Committed entries that are current, plus fresh evaluations for every missing or stale one.
 
     Args:
-        episodes: Override of each entry's episode count (None: the scenario's default, else 20).
-        only_env: Keep only this env id.
+        suites: The suites to report.
+        entries: Committed entries (learned ones are reported on the suites they have entries for).
+        out_dir: Fresh entries are written to ``out_dir/results``.
+        workers: Worker processes for fresh evaluations.
+        progress: Show the progress bar.
+        episodes: Override the suites' episode counts (a quick look; then nothing committed is used).
+        ray: Run fresh episodes as Ray tasks (see :func:`agri_training.evaluate.evaluate_many`).
     """
-    entries = []
-    for spec in list_policies():
-        if only_env and spec.env_id != only_env:
+    from agri_baselines import list_policies
+
+    rows: list[Row] = []
+    todo: list[tuple[lb.Suite, dict[str, Any]]] = []
+    for suite in suites:
+        if episodes is not None:
+            suite = dataclasses.replace(suite, episodes=episodes)
+        have = {e["policy"]["name"]: e for e in entries if e["suite"]["name"] == suite.name}
+        refs = [lb.policy_reference(spec.name) for spec in list_policies(suite.env_id)]
+        refs += [e["policy"] for e in have.values() if e["policy"]["kind"] == "learned"]
+        for ref in refs:
+            entry = have.get(ref["name"])
+            if episodes is None and entry is not None and _entry_is_current(entry, suite):
+                rows.append(Row(suite, entry, True))
+            else:
+                todo.append((suite, dict(ref)))
+    if todo:
+        print(f"evaluating {len(todo)} missing or stale (suite, policy) pairs", file=sys.stderr)
+        fresh = lb.evaluate_entries(todo, workers, progress, "agri report", ray)
+        for (suite, _), entry in zip(todo, fresh, strict=True):
+            lb.write_entry(entry, out_dir / "results")
+            rows.append(Row(suite, entry, False))
+    order = {s.name: i for i, s in enumerate(suites)}
+    rows.sort(key=lambda r: (order[r.suite.name], r.entry["policy"]["name"]))
+    return rows
+
+
+def level_results(rows: Sequence[Row], progress: bool = True) -> list[dict[str, Any]]:
+    """The evaluator's per-level result documents of the rows, with traces of the episodes to be plotted.
+
+    Traced: per level, the first seed of the lead policy (the first unprivileged one) and the first failed
+    seed of every policy.
+    """
+    from agri_training.evaluate import Progress
+
+    plan: list[tuple[Row, int, list[int]]] = []
+    for suite_name in dict.fromkeys(r.suite.name for r in rows):
+        group = [r for r in rows if r.suite.name == suite_name]
+        lead = next((r for r in group if not r.entry.get("privileged")), group[0])
+        for r in group:
+            for k, level in enumerate(r.entry["levels"]):
+                seeds = [level["episodes"][0]["seed"]] if r is lead and r.suite.traces > 0 and level["episodes"] else []
+                failed = [e["seed"] for e in level["episodes"] if not e["is_success"]]
+                if failed and failed[0] not in seeds:
+                    seeds.append(failed[0])
+                plan.append((r, k, seeds))
+    total = sum(len(s) for _, _, s in plan)
+    bar = Progress(total, sum(1 for _, _, s in plan if s), progress)
+    out = []
+    try:
+        for r, k, seeds in plan:
+            out.append(_level_document(r, k, seeds, bar))
+    finally:
+        bar.close()
+    return out
+
+
+def _level_document(row: Row, k: int, seeds: list[int], bar: Any) -> dict[str, Any]:
+    entry, level = row.entry, row.entry["levels"][k]
+    doc = {
+        "env_id": entry["env_id"],
+        "scenario": row.suite.scenario,
+        "suite": row.suite.name,
+        "label": level["label"],
+        "policy": entry["policy"]["name"],
+        "privileged": bool(entry.get("privileged")),
+        "seed": row.suite.seed_start,
+        "env_kwargs": level["env_kwargs"],
+        "package_version": entry["package_version"],
+        "git_commit": entry["git_commit"],
+        "summary": level["summary"],
+        "episodes": level["episodes"],
+        "traces": [],
+    }
+    if not seeds:
+        return doc
+    import gymnasium as gym
+
+    from agri_training.evaluate import load_policy, run_episode
+
+    bar.start_block(f"traces: {doc['policy']} on {doc['label']}")
+    env = gym.make(doc["env_id"], **doc["env_kwargs"])
+    try:
+        name = lb._policy_argument(entry["policy"])
+        keys = tuple(env.unwrapped.metadata.get("trace_keys", ()))
+        for seed in seeds:
+            # a fresh policy per episode, as the evaluator's workers build it: the re-run is the counted episode
+            ep = run_episode(env, load_policy(name, env), seed, keys)
+            if ep["record"]["is_success"] != _record_of(level, seed).get("is_success"):
+                print(f"warning: {doc['policy']} seed {seed} did not reproduce its recorded outcome", file=sys.stderr)
+            doc["traces"].append({"seed": seed, "data": ep["trace"], "is_success": ep["record"]["is_success"]})
+            bar.episode_done(ep["record"])
+    finally:
+        env.close()
+    return doc
+
+
+def _record_of(level: Mapping[str, Any], seed: int) -> dict[str, Any]:
+    return next((e for e in level["episodes"] if e["seed"] == seed), {})
+
+
+# ---------------------------------------------------------------- comparisons
+
+
+def _margin(metric: str, reference: float) -> float:
+    return RATE_MARGIN if metric.endswith("_rate") else RELATIVE_MARGIN * abs(reference)
+
+
+def compare(x: Mapping[str, Any], y: Mapping[str, Any], metric: str, higher_is_better: bool) -> Any:
+    """Paired comparison of entry ``x`` with entry ``y`` on a suite metric, with the report's margins."""
+    vx, binary = lb._episode_values(x, metric)
+    vy, _ = lb._episode_values(y, metric)
+    if not vx or len(vx) != len(vy):
+        return None
+    finite = [float(v) for v in vy if v is not None and math.isfinite(float(v))]
+    if not finite:
+        return None
+    ref = sum(finite) / len(finite)
+    try:
+        return paired_comparison(vx, vy, metric, higher_is_better, binary=binary, margin=_margin(metric, ref))
+    except ValueError:
+        return None
+
+
+_UNITS = {"episode_time": "s", "path_length": "m", "min_clearance": "m", "ate_rmse": "m", "final_position_error": "m"}
+
+
+def _metric_name(metric: str) -> str:
+    key = metric.replace("mean_", "").replace("iqm_", "")
+    name = ("IQM " if metric.startswith("iqm_") else "") + key.replace("_", " ")
+    name = {"episode time": "time", "success rate": "success", "collision rate": "collisions"}.get(name, name)
+    return f"{name} [{_UNITS[key]}]" if key in _UNITS else name
+
+
+def _pairs(group: Sequence[Row]) -> list[tuple[Row, Row]]:
+    """Which pairs a suite compares.
+
+    Every learned policy against every baseline; without learned ones, every pair of baselines (the
+    unprivileged before the privileged).
+    """
+    learned = [r for r in group if r.entry["policy"]["kind"] == "learned"]
+    base = [r for r in group if r.entry["policy"]["kind"] != "learned"]
+    if learned:
+        return [(a, b) for a in learned for b in base]
+    base = sorted(base, key=lambda r: (bool(r.entry.get("privileged")), r.entry["policy"]["name"]))
+    return [(base[i], base[j]) for i in range(len(base)) for j in range(i + 1, len(base))]
+
+
+def comparison_table(group: Sequence[Row]) -> tuple[list[str], list[str]]:
+    """Markdown table of the paired comparisons of one suite, and sentences for the claims it supports."""
+    suite = group[0].suite
+    head = ["X vs Y"] + [_metric_name(r.metric) for r in suite.rank_by]
+    lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    claims: list[str] = []
+    for a, b in _pairs(group):
+        na, nb = a.entry["policy"]["name"], b.entry["policy"]["name"]
+        cells = [f"`{na}` vs `{nb}`"]
+        wins: list[str] = []
+        losses: list[str] = []
+        same: list[str] = []
+        for rk in suite.rank_by:
+            c = compare(a.entry, b.entry, rk.metric, rk.higher_is_better)
+            if c is None:
+                cells.append("n/a")
+                continue
+            fmt = "{:+" + lb._metric_format(rk.metric)[2:]
+            word = {"better": "**X better**", "worse": "**X worse**", "matches": "match", "inconclusive": "-"}
+            cells.append(
+                f"{fmt.format(c.difference)} [{fmt.format(c.ci[0])}, {fmt.format(c.ci[1])}], "
+                f"P(X better) {c.prob_improvement:.2f}; {word[c.verdict]}"
+            )
+            text = (
+                f"{_metric_name(rk.metric)} ({fmt.format(c.difference)} [{fmt.format(c.ci[0])}, {fmt.format(c.ci[1])}])"
+            )
+            {"better": wins, "worse": losses, "matches": same}.get(c.verdict, []).append(text)
+        lines.append("| " + " | ".join(cells) + " |")
+        parts = []
+        if wins:
+            parts.append(f"`{na}` beats `{nb}` on " + ", ".join(wins))
+        if losses:
+            parts.append(("it" if wins else f"`{na}`") + f" is worse than `{nb}` on " + ", ".join(losses))
+        if same:
+            parts.append(("it" if wins or losses else f"`{na}`") + f" matches `{nb}` on " + ", ".join(same))
+        if parts:
+            claims.append(f"{suite.name}: " + "; ".join(parts) + ".")
+        else:
+            claims.append(f"{suite.name}: `{na}` and `{nb}` are not distinguishable on any ranking metric.")
+    return lines, claims
+
+
+def paper_rate_line(row: Row) -> str | None:
+    """Our success rate against the paper's, with the interval of the difference (None when not reported)."""
+    ref = PAPER_RATES.get(row.suite.name)
+    if ref is None:
+        return None
+    k_ref, n_ref, source = ref
+    eps = [e for lv in row.entry["levels"] for e in lv["episodes"]]
+    k, n = sum(bool(e["is_success"]) for e in eps), len(eps)
+    lo, hi = newcombe_interval(k, n, k_ref, n_ref)
+    ours, theirs = wilson_interval(k, n), wilson_interval(k_ref, n_ref)
+    if lo > 0:
+        verdict = "higher than the paper's, and the interval supports it"
+    elif hi < 0:
+        verdict = "lower than the paper's, and the interval supports it"
+    else:
+        verdict = "not distinguishable from the paper's (the interval of the difference includes 0)"
+    return (
+        f"`{row.entry['policy']['name']}` succeeds in {k} of {n} episodes, {k / n:.2f} [{ours[0]:.2f}, {ours[1]:.2f}]; "
+        f"{source} reports {k_ref} of {n_ref}, {k_ref / n_ref:.2f} [{theirs[0]:.2f}, {theirs[1]:.2f}]. Difference "
+        f"{k / n - k_ref / n_ref:+.2f} [{lo:+.2f}, {hi:+.2f}]: {verdict}."
+    )
+
+
+# ---------------------------------------------------------------- learning curves
+
+
+def find_runs(runs_dir: Path) -> list[dict[str, Any]]:
+    """Training runs under ``runs_dir`` that have a learning curve.
+
+    A run is a folder holding ``progress.csv`` (stable-baselines3's CSV logger) or ``*curve*.csv``, and a
+    config (``config.yaml``, ``config.yml``, ``config.json``, ``run.json`` or ``meta.json``) naming its env
+    (``env_id`` or ``env``). Runs without a readable env id are skipped.
+    """
+    import yaml
+
+    runs: list[dict[str, Any]] = []
+    if not runs_dir.is_dir():
+        return runs
+    csvs = sorted(set(runs_dir.rglob("progress.csv")) | set(runs_dir.rglob("*curve*.csv")))
+    for path in csvs:
+        env_id = None
+        for folder in (path.parent, path.parent.parent):
+            for name in ("config.yaml", "config.yml", "config.json", "run.json", "meta.json"):
+                cfg = folder / name
+                if cfg.exists():
+                    try:
+                        doc = yaml.safe_load(cfg.read_text())
+                    except yaml.YAMLError:
+                        continue
+                    if isinstance(doc, Mapping):
+                        env_id = doc.get("env_id") or doc.get("env")
+                if env_id:
+                    break
+            if env_id:
+                break
+        if not isinstance(env_id, str):
             continue
-        scenarios: list[Scenario | None] = list(list_scenarios(spec.env_id)) or [None]
-        for sc in scenarios:
-            n = episodes if episodes is not None else (sc.default_episodes if sc else 20)
-            entries.append(SuiteEntry(spec.env_id, spec.name, sc.name if sc else None, n))
-    return entries
+        with open(path, newline="") as f:
+            rows = list(csv.DictReader(f))
+        if rows:
+            runs.append({"env_id": env_id, "name": str(path.parent.relative_to(runs_dir)), "rows": rows})
+    return runs
 
 
-def _fmt_ci(summary: dict[str, Any], key: str, fmt: str = "{:.2f}") -> str:
-    if summary.get(key) is None:
-        return "-"
-    lo, hi = summary.get(f"{key}_ci", (None, None))
-    if lo is None or hi is None:
-        return fmt.format(summary[key])
-    return f"{fmt.format(summary[key])} [{fmt.format(lo)}, {fmt.format(hi)}]"
+_X_KEYS = ("time/total_timesteps", "total_timesteps", "timesteps", "timestep", "step")
+_Y_KEYS = (
+    ("eval/success_rate", "success rate (evaluation)"),
+    ("success_rate", "success rate"),
+    ("rollout/success_rate", "success rate (training episodes)"),
+    ("eval/mean_reward", "mean return (evaluation)"),
+    ("rollout/ep_rew_mean", "mean return (training episodes)"),
+    ("mean_reward", "mean return"),
+)
 
 
-def summary_table(results: list[dict[str, Any]]) -> str:
-    """Markdown table of the results' headline numbers with 95 % bootstrap intervals."""
-    rows = [
-        "| policy | scenario | privileged | episodes | success | collisions | time [s] | path [m] | "
-        "min clearance [m] |",
-        "|---|---|---|---|---|---|---|---|---|",
+def _curve(rows: list[dict[str, str]]) -> tuple[str, str, list[float], list[float]] | None:
+    keys = rows[0].keys()
+    xk = next((k for k in _X_KEYS if k in keys), None)
+    if xk is None:
+        return None
+    for yk, label in _Y_KEYS:
+        if yk in keys:
+            pts = [(float(r[xk]), float(r[yk])) for r in rows if r.get(xk) and r.get(yk)]
+            if pts:
+                return yk, label, [p[0] for p in pts], [p[1] for p in pts]
+    return None
+
+
+def learning_curves(env_id: str, runs: list[dict[str, Any]], rows: Sequence[Row], out_dir: Path) -> list[str]:
+    """Markdown: learning curves of the env's runs with each baseline as a horizontal band (its 95 % interval).
+
+    Success-rate curves get the baselines' success rates on the env's first suite; return curves get their
+    mean returns (the same reward only when the run trained on the suite's arguments: said in the caption).
+    """
+    mine = [r for r in runs if r["env_id"] == env_id]
+    if not mine:
+        return [
+            "No training runs with a learning curve were found for this env (looked for `curve.csv` or "
+            "`progress.csv` under the runs folder). Train one with `agri train` and rebuild the report."
+        ]
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    curves: list[tuple[dict[str, Any], tuple[str, str, list[float], list[float]]]] = []
+    for run in mine:
+        c = _curve(run["rows"])
+        if c is not None:
+            curves.append((run, c))
+    if not curves:
+        return ["Training runs were found, but none logs a success rate or a return."]
+    env_suites = [r.suite for r in rows if r.suite.env_id == env_id]
+    first_suite = next((su for su in env_suites if su.name == CURVE_SUITES.get(env_id)), None) or next(
+        iter(env_suites), None
+    )
+    base = [
+        r for r in rows if first_suite and r.suite.name == first_suite.name and r.entry["policy"]["kind"] == "baseline"
     ]
-    for r in results:
-        s = r["summary"]
-        clearance = f"{s['min_clearance']:.3f}" if s.get("min_clearance") is not None else "-"
-        label = r.get("label") or r["scenario"] or "default"
-        rows.append(
-            f"| {r['policy']} | {label} | {'yes' if r['privileged'] else 'no'} | "
-            f"{s['episodes']} | {_fmt_ci(s, 'success_rate')} | {_fmt_ci(s, 'collision_rate')} | "
-            f"{_fmt_ci(s, 'mean_episode_time', '{:.1f}')} | {_fmt_ci(s, 'mean_path_length', '{:.1f}')} | "
-            f"{clearance} |"
+    out = []
+    for kind in ("success", "return"):
+        sel = [(run, c) for run, c in curves if (kind == "success") == ("success" in c[0])]
+        if not sel:
+            continue
+        fig, ax = plt.subplots(figsize=(8, 4.5))
+        colours = plt.get_cmap("tab10")
+        for i, b in enumerate(base):
+            s = b.entry["summary"]
+            key = "success_rate" if kind == "success" else "mean_return"
+            if s.get(key) is None:
+                continue
+            lo, hi = s.get(f"{key}_ci") or (s[key], s[key])
+            col = colours(i + 5)
+            ax.axhspan(lo, hi, color=col, alpha=0.18, lw=0)
+            ax.axhline(s[key], color=col, ls="--", lw=1.2, label=f"{b.entry['policy']['name']} (baseline, 95 % CI)")
+        for i, (run, (_, label, xs, ys)) in enumerate(sel):
+            ax.plot(xs, ys, color=colours(i), lw=1.6, label=f"{run['name']} ({label})")
+        if kind == "success":
+            ax.set_ylim(-0.03, 1.03)
+        ax.set_xlabel("environment steps")
+        ax.set_ylabel("success rate" if kind == "success" else "episode return")
+        ax.set_title(f"{env_id}: learning curves, baselines as bands ({first_suite.name if first_suite else ''})")
+        ax.grid(alpha=0.3)
+        ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8, frameon=False)
+        name = f"{env_id.split('/')[-1]}_learning_{kind}.png"
+        fig.savefig(out_dir / name, dpi=110, bbox_inches="tight")
+        plt.close(fig)
+        out += [f"![{name}]({name})", ""]
+    if any("success" not in c[0] for _, c in sel):
+        out.append(
+            "Return curves are comparable with the baseline bands only where the run trained on the suite's "
+            "env arguments."
         )
-    return "\n".join(rows)
+    return out
 
 
-def build_report(suite: list[SuiteEntry], out_dir: Path, progress: bool = True) -> Path:
-    """Evaluate every suite entry and write ``results/*.json``, ``report.md``, ``report.html`` and plots.
+# ---------------------------------------------------------------- the page
+
+
+def _env_blurb(env_id: str) -> str:
+    """The first paragraph of the env class's docstring (its Description), or ''."""
+    import gymnasium as gym
+
+    try:
+        entry = gym.spec(env_id).entry_point
+        if not isinstance(entry, str):
+            return ""
+        module, attr = entry.split(":")
+        doc = getattr(importlib.import_module(module), attr).__doc__ or ""
+    except Exception:  # noqa: BLE001 - a missing description must not break the report
+        return ""
+    text = re.sub(r"^#+ *Description\s*", "", doc.strip())
+    return " ".join(text.split("\n\n")[0].split())
+
+
+def leaderboard_table(group: Sequence[Row]) -> list[str]:
+    """The suite's ranked table with intervals (as in LEADERBOARD.md) plus where each number came from."""
+    md = lb.render_markdown([r.entry for r in group], [group[0].suite])
+    body = md.split(f"### {group[0].suite.name} (v{group[0].suite.version})", 1)[1].strip().splitlines()
+    fresh = [r.entry["policy"]["name"] for r in group if not r.committed]
+    if fresh:
+        body += [
+            "",
+            "Evaluated for this report (no current leaderboard entry): " + ", ".join(f"`{n}`" for n in fresh) + ".",
+        ]
+    return body
+
+
+def build_report(
+    out_dir: Path,
+    suites_dir: Path = lb.SUITES_DIR,
+    entries_dir: Path = lb.ENTRIES_DIR,
+    runs_dir: Path = Path("runs"),
+    only_env: str | None = None,
+    episodes: int | None = None,
+    workers: int | None = 2,
+    progress: bool = True,
+    ray: str | None = None,
+) -> Path:
+    """Write ``report.md``, ``report.html`` and the PNG plots into ``out_dir``.
+
+    Args:
+        out_dir: Output folder.
+        suites_dir: Pinned suites.
+        entries_dir: Committed leaderboard entries.
+        runs_dir: Training runs (learning curves).
+        only_env: Report one env id only.
+        episodes: Override the suites' episode counts (a quick look; committed entries are then not used).
+        workers: Worker processes for fresh evaluations.
+        progress: Show progress bars.
+        ray: Run fresh episodes as Ray tasks.
 
     Returns:
         Path of ``report.md``.
     """
+    from agri_training.evaluate import INTERVALS_NOTE, git_commit
+
+    t0 = time.perf_counter()
     out_dir.mkdir(parents=True, exist_ok=True)
-    (out_dir / "results").mkdir(exist_ok=True)
-    by_env: dict[str, list[dict[str, Any]]] = {}
-    for entry in suite:
-        result = evaluate(
-            EvalRequest(entry.env_id, entry.policy, entry.episodes, entry.seed, entry.scenario), progress=progress
-        )
-        name = f"{entry.env_id.split('/')[-1]}__{entry.scenario or 'default'}__{entry.policy}.json"
-        (out_dir / "results" / name).write_text(json.dumps(result, indent=1))
-        by_env.setdefault(entry.env_id, []).extend(result.get("levels", [result]))
-    parts = [
-        "# agri_envs baseline report",
+    suites = [s for s in lb.load_suites(suites_dir) if not only_env or s.env_id == only_env]
+    if not suites:
+        raise ValueError(f"no suite in {suites_dir}" + (f" for {only_env}" if only_env else ""))
+    rows = collect_rows(suites, lb.load_entries(entries_dir), out_dir, workers, progress, episodes, ray)
+    results = level_results(rows, progress)
+    runs = find_runs(runs_dir)
+    env_ids = list(dict.fromkeys(s.env_id for s in suites))
+
+    parts = ["# agri_envs evaluation report", "", INTRO, "Envs in this report:", ""]
+    parts += [f"- [{e}](#{_anchor(e)})" for e in env_ids]
+    parts += ["", "## Who wins where", ""]
+    claims_all = []
+    for env_id in env_ids:
+        for suite in (s for s in suites if s.env_id == env_id):
+            group = [r for r in rows if r.suite.name == suite.name]
+            if len(group) > 1:
+                claims_all += comparison_table(group)[1]
+            for r in group:
+                line = paper_rate_line(r)
+                if line:
+                    claims_all.append(f"{suite.name}: {line}")
+    parts += [f"- {c}" for c in claims_all] or ["Only one policy per suite so far: nothing to compare."]
+    parts += [
         "",
-        "Every registered scripted baseline, evaluated on seeds 0, 1, ... of its env (and of each of the "
-        "env's scenarios). Intervals are 95 % percentile-bootstrap intervals of the mean over episodes. "
-        "*Privileged* policies use information a real robot would not have (e.g. the ground-truth pose).",
+        "No learned policy has an entry yet: the comparisons are between the baselines. Submit one with "
+        "`agri leaderboard submit --suite all --policy RUN_DIR` (docs/leaderboard.md)."
+        if not any(r.entry["policy"]["kind"] == "learned" for r in rows)
+        else "",
         "",
     ]
-    for env_id, results in by_env.items():
-        parts += [f"## {env_id}", "", summary_table(results), ""]
+    for env_id in env_ids:
+        env_suites = [s for s in suites if s.env_id == env_id]
+        parts += [f"## {env_id}", "", _env_blurb(env_id), ""]
+        parts += ["### Leaderboard", "", INTERVALS_NOTE, ""]
+        for suite in env_suites:
+            group = [r for r in rows if r.suite.name == suite.name]
+            parts += [f"#### {suite.name} (v{suite.version})", "", *leaderboard_table(group), ""]
+            if len(group) > 1:
+                table, _ = comparison_table(group)
+                parts += [
+                    "Paired comparisons on the same seeds: difference X - Y of the means (or rates) with its "
+                    "95 % interval, the probability that X does better than Y on a random pair of episodes, "
+                    "and what the interval supports.",
+                    "",
+                    *table,
+                    "",
+                ]
+        parts += ["### Learning curves", "", *learning_curves(env_id, runs, rows, out_dir), ""]
         hook = SECTION_HOOKS.get(env_id)
         if hook:
             module, attr = hook.split(":")
+            env_results = [r for r in results if r["env_id"] == env_id]
             try:
-                section = getattr(importlib.import_module(module), attr)(results, out_dir)
+                section = getattr(importlib.import_module(module), attr)(env_results, out_dir)
             except ImportError as exc:
                 section = f"(plots unavailable: {exc})"
-            parts += [section, ""]
-        first = results[0]
-        parts += [f"Package {first['package_version']}, commit `{first['git_commit'][:10]}`.", ""]
+            parts += ["### Paper reproduction and plots", "", section, ""]
+    commits = sorted({r.entry["git_commit"][:10] for r in rows})
+    parts += [
+        "## How this report was made",
+        "",
+        f"`agri report` at commit `{git_commit()[:10]}` in {time.perf_counter() - t0:.0f} s: "
+        f"{sum(r.committed for r in rows)} committed leaderboard entries (made at commits "
+        f"{', '.join(f'`{c}`' for c in commits)}), {sum(not r.committed for r in rows)} evaluated afresh "
+        f"(written to `{out_dir / 'results'}`), plotted episodes re-run from their seeds. Suites: "
+        f"`{suites_dir}`; training runs: `{runs_dir}`.",
+        "",
+    ]
     md_path = out_dir / "report.md"
     md = "\n".join(parts)
     md_path.write_text(md)
-    md_path.with_suffix(".html").write_text(markdown_to_html(md, title="agri_envs baseline report"))
+    md_path.with_suffix(".html").write_text(markdown_to_html(md, title="agri_envs evaluation report"))
+    (out_dir / "summary.json").write_text(
+        json.dumps(
+            [{"suite": r.suite.name, "policy": r.entry["policy"], "summary": r.entry["summary"]} for r in rows],
+            indent=1,
+        )
+    )
     return md_path
 
 
+def _anchor(text: str) -> str:
+    return re.sub(r"[^a-z0-9]+", "-", text.lower()).strip("-")
+
+
 def markdown_to_html(md: str, title: str) -> str:
-    """Render the report's small Markdown subset (headings, tables, images, lists, paragraphs) as HTML."""
+    """Render the report's small Markdown subset (headings, tables, images, lists, links, paragraphs) as HTML."""
 
     def inline(text: str) -> str:
-        text = html.escape(text)
+        text = html.escape(text, quote=False)
         text = re.sub(r"!\[([^\]]*)\]\(([^)]+)\)", r'<img alt="\1" src="\2" style="max-width:100%">', text)
+        text = re.sub(r"\[([^\]]+)\]\(([^)]+)\)", r'<a href="\2">\1</a>', text)
         text = re.sub(r"`([^`]+)`", r"<code>\1</code>", text)
         text = re.sub(r"\*\*([^*]+)\*\*", r"<b>\1</b>", text)
-        return re.sub(r"\*([^*]+)\*", r"<i>\1</i>", text)
+        return re.sub(r"(?<![\w*])\*([^*\s][^*]*)\*", r"<i>\1</i>", text)
 
     out = [
         f"<!doctype html><html><head><meta charset='utf-8'><title>{html.escape(title)}</title>",
-        "<style>body{font-family:sans-serif;max-width:1100px;margin:auto;padding:1em}"
-        "table{border-collapse:collapse}td,th{border:1px solid #bbb;padding:3px 8px}</style></head><body>",
+        "<style>body{font-family:sans-serif;max-width:1150px;margin:auto;padding:1em;line-height:1.4}"
+        "table{border-collapse:collapse;margin:0.5em 0}td,th{border:1px solid #bbb;padding:3px 8px;font-size:0.9em}"
+        "th{background:#eee}code{background:#f4f4f4;padding:0 2px}img{display:block;margin:0.5em 0}</style>"
+        "</head><body>",
     ]
     lines = md.splitlines()
     i = 0
     while i < len(lines):
         line = lines[i]
+        if line.startswith("<!--"):
+            i += 1
+            continue
         if line.startswith("#"):
             level = len(line) - len(line.lstrip("#"))
-            out.append(f"<h{level}>{inline(line[level:].strip())}</h{level}>")
+            text = line[level:].strip()
+            out.append(f"<h{level} id='{_anchor(text)}'>{inline(text)}</h{level}>")
         elif line.startswith("|"):
             rows = []
             while i < len(lines) and lines[i].startswith("|"):
@@ -163,12 +643,24 @@ def markdown_to_html(md: str, title: str) -> str:
         elif line.startswith("- "):
             out.append("<ul>")
             while i < len(lines) and lines[i].startswith("- "):
-                out.append(f"<li>{inline(lines[i][2:])}</li>")
+                item = lines[i][2:]
                 i += 1
+                while i < len(lines) and lines[i].startswith("  ") and lines[i].strip():
+                    item += " " + lines[i].strip()
+                    i += 1
+                out.append(f"<li>{inline(item)}</li>")
             out.append("</ul>")
             continue
         elif line.strip():
-            out.append(f"<p>{inline(line)}</p>")
+            para = [line]
+            i += 1
+            while i < len(lines) and lines[i].strip() and not lines[i].startswith(("#", "|", "- ", "![", "<!--")):
+                if para[-1].startswith("!["):
+                    break
+                para.append(lines[i])
+                i += 1
+            out.append(f"<p>{inline(' '.join(para))}</p>")
+            continue
         i += 1
     out.append("</body></html>")
     return "\n".join(out)

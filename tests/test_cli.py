@@ -85,17 +85,6 @@ def test_evaluate_errors_are_clear(tmp_path, capsys):
     assert rc == 2 and "unknown policy" in capsys.readouterr().err
 
 
-def test_report_has_tables_and_plots(tmp_path):
-    rc = main(["report", "--out", str(tmp_path), "--episodes", "1", "--env", "agri_envs/GreenhouseNav-v1", "--quiet"])
-    assert rc == 0
-    md = (tmp_path / "report.md").read_text()
-    assert "| harik-apf-gt |" in md and "_trajectory.png" in md and "_d_alpha.png" in md
-    for line in md.splitlines():
-        if line.startswith("!["):
-            assert (tmp_path / line.split("(")[1].rstrip(")")).stat().st_size > 10_000
-    assert "<table>" in (tmp_path / "report.html").read_text()
-
-
 def test_failures_are_counted_by_cause():
     from agri_training.plots_rover import failure_cause, failure_lines
 

@@ -1,0 +1,212 @@
+"""Pinned suites, leaderboard entries, verify (passes as committed, fails on an altered number or a stale
+LEADERBOARD.md) and the generated page."""
+
+import json
+import shutil
+from pathlib import Path
+
+import pytest
+import yaml
+
+from agri_training import leaderboard as lb
+
+SUITE = {
+    "name": "tiny-rover",
+    "version": 1,
+    "env_id": "agri_envs/GreenhouseNav-v1",
+    "description": "two short rows",
+    "env_kwargs": {"n_rows": 1, "row_length": 3, "n_people": 0},
+    "seeds": {"start": 100000, "episodes": 2},
+    "rank_by": [
+        {"metric": "success_rate", "higher_is_better": True},
+        {"metric": "mean_episode_time", "higher_is_better": False},
+    ],
+}
+
+
+def write_suite(folder: Path, doc: dict) -> Path:
+    folder.mkdir(parents=True, exist_ok=True)
+    path = folder / f"{doc['name']}.yaml"
+    path.write_text(yaml.safe_dump(doc))
+    return path
+
+
+def test_committed_suites_are_valid_and_held_out():
+    suites = lb.load_suites()
+    assert {s.env_id for s in suites} >= {"agri_envs/GreenhouseNav-v1", "agri_envs/GrapeHarvest-v1"}
+    for s in suites:
+        assert s.seed_start >= lb.HELD_OUT_SEED and s.episodes >= lb.MIN_EPISODES
+        assert len(s.sha256) == 64 and s.rank_by
+
+
+def test_suite_loader(tmp_path):
+    suite = lb.load_suite(write_suite(tmp_path, SUITE))
+    assert suite.seeds == [100000, 100001] and suite.env_version == "v1"
+    assert suite.levels() == [("tiny-rover", SUITE["env_kwargs"])]
+    swept = lb.parse_suite({**SUITE, "sweep": {"parameter": "growth", "values": [0.0, 1.0]}})
+    assert [label for label, _ in swept.levels()] == ["tiny-rover growth=0.0", "tiny-rover growth=1.0"]
+    assert swept.levels()[1][1]["growth"] == 1.0
+
+
+@pytest.mark.parametrize(
+    "change,message",
+    [
+        ({"seeds": {"start": 99999, "episodes": 2}}, "held out"),
+        ({"seeds": {"start": 100000}}, "seeds must"),
+        ({"version": 0}, "version"),
+        ({"rank_by": []}, "rank_by"),
+        ({"episodes": 3}, "unknown suite keys"),
+        ({"name": "Bad Name"}, "name"),
+        ({"sweep": {"parameter": "n_rows", "values": [1]}}, "sweep"),
+        ({"rank_by": [{"metric": "success rate"}]}, "rank_by metric"),
+    ],
+)
+def test_bad_suites_are_rejected(change, message):
+    with pytest.raises(ValueError, match=message):
+        lb.parse_suite({**SUITE, **change})
+
+
+def test_suite_name_must_match_file(tmp_path):
+    path = write_suite(tmp_path, SUITE)
+    path.rename(tmp_path / "other.yaml")
+    with pytest.raises(ValueError, match="match the file name"):
+        lb.load_suite(tmp_path / "other.yaml")
+    with pytest.raises(ValueError, match="unknown suite"):
+        lb.find_suite("nope", tmp_path)
+
+
+@pytest.fixture(scope="module")
+def board(tmp_path_factory):
+    """A tiny leaderboard in a temp folder: one suite, one baseline entry, its LEADERBOARD.md."""
+    root = tmp_path_factory.mktemp("board")
+    suites, entries, md = root / "suites", root / "entries", root / "LEADERBOARD.md"
+    suite = lb.load_suite(write_suite(suites, SUITE))
+    (entry,) = lb.evaluate_entries([(suite, lb.policy_reference("harik-apf-gt"))], workers=1, progress=False)
+    lb.write_entry(entry, entries)
+    lb.write_markdown(md, entries, suites)
+    return root
+
+
+def copy_board(board: Path, tmp_path: Path) -> tuple[Path, Path, Path]:
+    shutil.copytree(board, tmp_path / "b")
+    return tmp_path / "b" / "suites", tmp_path / "b" / "entries", tmp_path / "b" / "LEADERBOARD.md"
+
+
+def cli(suites: Path, entries: Path, md: Path, *args: str) -> int:
+    from agri_training.cli import main
+
+    return main(["leaderboard", "--suites", str(suites), "--entries", str(entries), "--markdown", str(md), *args])
+
+
+def test_entry_records_what_it_needs(board):
+    (entry,) = lb.load_entries(board / "entries")
+    assert entry["suite"]["name"] == "tiny-rover" and len(entry["suite"]["sha256"]) == 64
+    assert entry["policy"] == {"kind": "baseline", "name": "harik-apf-gt", "privileged": True}
+    assert entry["env_version"] == "v1" and entry["package_version"] and entry["git_commit"]
+    assert [e["seed"] for e in entry["levels"][0]["episodes"]] == [100000, 100001]
+    lo, hi = entry["summary"]["success_rate_ci"]
+    assert 0.0 < lo < hi <= 1.0  # Wilson: never a point interval at 2/2 or 0/2
+    md = (board / "LEADERBOARD.md").read_text()
+    assert "`harik-apf-gt` **P**" in md and "tiny-rover (v1)" in md
+
+
+def test_verify_passes_as_committed(board, tmp_path, capsys):
+    suites, entries, md = copy_board(board, tmp_path)
+    assert cli(suites, entries, md, "verify", "--workers", "1", "--quiet") == 0
+    assert "verified 1 entries exactly" in capsys.readouterr().out
+
+
+def test_verify_fails_on_an_altered_number(board, tmp_path, capsys):
+    suites, entries, md = copy_board(board, tmp_path)
+    path = next(entries.glob("*/*.json"))
+    doc = json.loads(path.read_text())
+    doc["levels"][0]["episodes"][1]["path_length"] += 1e-9
+    path.write_text(json.dumps(doc, indent=1))
+    assert cli(suites, entries, md, "verify", "--workers", "1", "--quiet", "--no-markdown") == 1
+    err = capsys.readouterr().err
+    assert "levels[0].episodes[1].path_length" in err and "tiny-rover/harik-apf-gt" in err
+    # the summary too
+    doc = json.loads((board / "entries" / "tiny-rover" / "harik-apf-gt.json").read_text())
+    doc["summary"]["mean_episode_time"] = 1.0
+    path.write_text(json.dumps(doc, indent=1))
+    assert lb.verify_entries(lb.load_entries(entries), suites, progress=False) == [
+        f"tiny-rover/harik-apf-gt: summary.mean_episode_time: committed 1.0 != reproduced "
+        f"{doc['levels'][0]['summary']['mean_episode_time']!r}"
+    ]
+
+
+def test_verify_fails_on_a_stale_leaderboard_page(board, tmp_path, capsys):
+    suites, entries, md = copy_board(board, tmp_path)
+    md.write_text(md.read_text().replace("1.00 [", "0.99 ["))
+    assert not lb.leaderboard_is_current(md, entries, suites)
+    assert cli(suites, entries, md, "verify", "--workers", "1", "--quiet") == 1
+    assert "is stale" in capsys.readouterr().err
+    assert cli(suites, entries, md, "render") == 0 and lb.leaderboard_is_current(md, entries, suites)
+
+
+def test_verify_fails_when_the_suite_changed(board, tmp_path):
+    suites, entries, md = copy_board(board, tmp_path)
+    write_suite(suites, {**SUITE, "env_kwargs": {**SUITE["env_kwargs"], "n_people": 1}})
+    problems = lb.verify_entries(lb.load_entries(entries), suites, progress=False)
+    assert len(problems) == 1 and "stale" in problems[0]
+
+
+def test_compare_documents_tolerance():
+    committed = {"a": 1.0, "b": [1, 2.5], "wall_time_s": 3.0, "mean_planning_time_ms": 1.0, "s": "x"}
+    assert lb.compare_documents(committed, {**committed, "wall_time_s": 9.0, "mean_planning_time_ms": 7.0}) == []
+    near = {**committed, "a": 1.0 + 1e-12}
+    assert lb.compare_documents(committed, near) == ["a: committed 1.0 != reproduced 1.000000000001"]
+    assert lb.compare_documents(committed, near, rtol=1e-9) == []
+    assert lb.compare_documents(committed, {**committed, "a": 1.1}, rtol=1e-9) != []
+    assert lb.compare_documents(committed, {**committed, "b": [1, 2.5, 3]}) == ["b: 2 items committed, 3 reproduced"]
+    assert lb.compare_documents(committed, {**committed, "b": [2, 2.5]}, rtol=0.9) == [
+        "b[0]: committed 1 != reproduced 2"
+    ]
+    assert lb.compare_documents({"x": True}, {"x": 1}) != []
+    with pytest.raises(ValueError, match="rtol"):
+        lb.compare_documents(1.0, 1.0, rtol=-1)
+
+
+def test_committed_leaderboard_covers_every_baseline_and_is_current():
+    from agri_baselines import list_policies
+
+    entries = lb.load_entries()
+    have = {(e["suite"]["name"], e["policy"]["name"]) for e in entries}
+    for suite in lb.load_suites():
+        for spec in list_policies(suite.env_id):
+            assert (suite.name, spec.name) in have, f"no entry for {spec.name} on {suite.name}"
+    assert lb.leaderboard_is_current()
+
+
+@pytest.mark.slow
+def test_committed_entries_reproduce():
+    assert lb.verify_entries(lb.load_entries(), workers=2, progress=False) == []
+
+
+def test_worker_pool_gives_the_serial_result(board):
+    suite = lb.load_suite(board / "suites" / "tiny-rover.yaml")
+    suite = lb.Suite(**{**suite.__dict__, "episodes": 3})
+    serial = lb.run_blocks(lb.blocks_of(suite, "harik-apf-gt"), workers=1, progress=False)
+    pooled = lb.run_blocks(lb.blocks_of(suite, "harik-apf-gt"), workers=2, progress=False)
+    assert [e["seed"] for e in pooled[0]["episodes"]] == list(range(100000, 100003))
+    assert lb.compare_documents(serial[0]["episodes"], pooled[0]["episodes"]) == []
+    assert lb.compare_documents(serial[0]["summary"], pooled[0]["summary"]) == []
+    assert pooled[0]["label"] == "tiny-rover" and pooled[0]["env_kwargs"]["full_scan"] is True
+
+
+def test_learned_policy_reference_pins_the_weights(tmp_path):
+    run = tmp_path / "ppo_nav"
+    run.mkdir()
+    (run / "config.yaml").write_text(yaml.safe_dump({"env_id": "agri_envs/GreenhouseNav-v1", "algo": "ppo"}))
+    (run / "policy.pt").write_bytes(b"weights v1")
+    ref = lb.policy_reference(str(run))
+    assert ref["kind"] == "learned" and ref["name"] == "ppo_nav" and ref["privileged"] is False
+    assert ref["sha256"] == lb.sha256_file(run / "policy.pt")
+    assert lb._policy_argument(ref) == str(run)
+    (run / "policy.pt").write_bytes(b"weights v2")
+    with pytest.raises(ValueError, match="changed"):
+        lb._policy_argument(ref)
+    (run / "policy.pt").unlink()
+    with pytest.raises(ValueError, match="not found"):
+        lb._policy_argument(ref)
+    assert lb.policy_reference("luo-apf") == {"kind": "baseline", "name": "luo-apf", "privileged": False}

@@ -1,0 +1,146 @@
+"""Episodes on worker processes and Ray tasks give the serial run's records; failures name their seed."""
+
+import json
+import sys
+
+import gymnasium as gym
+import pytest
+
+from agri_baselines import list_policies
+from agri_training import evaluate as evaluate_mod
+from agri_training import parallel
+from agri_training.cli import main
+from agri_training.evaluate import EvalRequest, evaluate, evaluate_many, load_policy, resolve_env_kwargs, run_episode
+from agri_training.parallel import EpisodeError, EpisodeJob, run_episodes, run_job
+
+NAV = "agri_envs/GreenhouseNav-v1"
+GRAPE = "agri_envs/GrapeHarvest-v1"
+SMALL_NAV = {"n_rows": 1, "row_length": 3}
+
+
+TIMINGS = ("wall_time_s", "planning_time_ms")  # wall-clock measurements: the only numbers allowed to differ
+
+
+def _without_wall_time(doc):
+    """The document without wall-clock timings (records, and their means and intervals in summaries)."""
+    if isinstance(doc, dict):
+        return {k: _without_wall_time(v) for k, v in doc.items() if not any(t in k for t in TIMINGS)}
+    if isinstance(doc, list):
+        return [_without_wall_time(v) for v in doc]
+    return doc
+
+
+def _requests():
+    return [
+        EvalRequest(NAV, "harik-apf-gt", episodes=4, seed=7, env_kwargs=SMALL_NAV, record_traces=2),
+        EvalRequest(GRAPE, "luo-apf", episodes=3, seed=2, record_traces=1),
+        EvalRequest(NAV, "harik-apf", episodes=3, seed=0, env_kwargs=SMALL_NAV, record_traces=3),
+        EvalRequest(NAV, "harik-apf-gt", episodes=1, seed=3, scenario="plant-development"),
+    ]
+
+
+def test_pool_documents_equal_serial():
+    serial = evaluate_many(_requests(), progress=False, workers=1)
+    pooled = evaluate_many(_requests(), progress=False, workers=2)
+    assert [[e["seed"] for e in d["episodes"]] for d in pooled[:3]] == [[7, 8, 9, 10], [2, 3, 4], [0, 1, 2]]
+    assert [lv["label"] for lv in pooled[3]["levels"]] == [lv["label"] for lv in serial[3]["levels"]]
+    assert _without_wall_time(pooled) == _without_wall_time(serial)
+    # the traces came back too, and are the first episodes' ones
+    assert [t["seed"] for t in pooled[0]["traces"]] == [7, 8] and len(pooled[2]["traces"]) == 3
+    assert all(e["wall_time_s"] > 0 for d in pooled[:3] for e in d["episodes"])
+
+
+@pytest.mark.parametrize("spec", list_policies(), ids=lambda s: s.name)
+def test_reused_env_equals_fresh_one(spec):
+    """A worker reuses its env across the seeds it is handed, in any order: nothing may leak between episodes."""
+    kwargs = {"max_clusters": 3} if spec.env_id == GRAPE else SMALL_NAV
+    kwargs, _ = resolve_env_kwargs(EvalRequest(spec.env_id, spec.name, env_kwargs=kwargs))
+    seeds = [5, 1, 5]
+    parallel.clear_cache()
+    try:
+        reused = [run_job(EpisodeJob(spec.env_id, kwargs, spec.name, s, trace=True)) for s in seeds]
+    finally:
+        parallel.clear_cache()
+    assert all(r["ok"] for r in reused), reused
+    for seed, r in zip(seeds, reused, strict=True):
+        env = gym.make(spec.env_id, **kwargs)
+        try:
+            keys = tuple(env.unwrapped.metadata.get("trace_keys", ()))
+            fresh = run_episode(env, load_policy(spec.name, env), seed, keys)
+        finally:
+            env.close()
+        assert _without_wall_time(r["out"]) == _without_wall_time(fresh)
+
+
+def test_episode_error_names_seed_and_exception(monkeypatch):
+    real = evaluate_mod.run_episode
+
+    def flaky(env, policy, seed, trace_keys):
+        if seed == 4:
+            raise FloatingPointError("pose became NaN")
+        return real(env, policy, seed, trace_keys)
+
+    monkeypatch.setattr(evaluate_mod, "run_episode", flaky)
+    kwargs, _ = resolve_env_kwargs(EvalRequest(NAV, "harik-apf-gt", env_kwargs=SMALL_NAV))
+    jobs = [EpisodeJob(NAV, kwargs, "harik-apf-gt", s) for s in (3, 4, 5)]
+    seen = []
+    with pytest.raises(EpisodeError) as info:
+        run_episodes(jobs, workers=1, on_result=lambda i, job, out: seen.append(job.seed))
+    msg = str(info.value)
+    assert "seed 4 of harik-apf-gt" in msg and "FloatingPointError: pose became NaN" in msg
+    assert "flaky" in info.value.remote_traceback and info.value.job.seed == 4
+    assert seen == [3]
+
+
+def test_worker_failure_names_seed(tmp_path):
+    """In a worker process: a checkpoint that is not there fails every job; the first one is named."""
+    bad = tmp_path / "broken.zip"
+    jobs = [EpisodeJob(NAV, SMALL_NAV, str(bad), s) for s in (11, 12)]
+    with pytest.raises(EpisodeError, match=r"episode with seed 1[12] of .*broken\.zip on agri_envs/GreenhouseNav-v1"):
+        run_episodes(jobs, workers=2)
+
+
+def test_build_value_error_stays_a_user_error():
+    jobs = [EpisodeJob(NAV, {"n_row": 2}, "harik-apf-gt", s) for s in (0, 1)]
+    with pytest.raises(ValueError, match="n_row"):
+        run_episodes(jobs, workers=2)
+
+
+def test_bad_arguments():
+    with pytest.raises(ValueError, match="workers must be an int >= 1"):
+        run_episodes([EpisodeJob(NAV, {}, "harik-apf-gt", 0)], workers=0)
+    with pytest.raises(ValueError, match="seed must be an int >= 0"):
+        EpisodeJob(NAV, {}, "harik-apf-gt", -1)
+    with pytest.raises(ValueError, match="episodes must be >= 1"):
+        evaluate(EvalRequest(NAV, "harik-apf-gt", episodes=0), progress=False)
+    assert run_episodes([], workers=2) == []
+
+
+def test_cli_workers_argument(tmp_path, capsys):
+    out = tmp_path / "ev.json"
+    args = ["evaluate", "--env", NAV, "--policy", "harik-apf-gt", "--episodes", "2", "--seed", "1", "--quiet"]
+    args += ["--env-kwargs", "n_rows=1", "row_length=3", "--out", str(out)]
+    with pytest.raises(SystemExit):
+        main([*args, "--workers", "0"])
+    assert "--workers: expects an integer >= 1" in capsys.readouterr().err
+    assert main([*args, "--workers", "2"]) == 0
+    doc = json.loads(out.read_text())
+    assert [e["seed"] for e in doc["episodes"]] == [1, 2]
+
+
+def test_ray_missing_names_the_extra(monkeypatch, tmp_path, capsys):
+    monkeypatch.setitem(sys.modules, "ray", None)  # import ray -> ImportError
+    args = ["evaluate", "--env", NAV, "--policy", "harik-apf-gt", "--episodes", "1", "--quiet"]
+    rc = main([*args, "--out", str(tmp_path / "x.json"), "--ray", "local"])
+    assert rc == 2 and 'pip install -e ".[ray]"' in capsys.readouterr().err
+
+
+def test_ray_local_equals_serial():
+    pytest.importorskip("ray")
+    requests = _requests()[:2]
+    serial = evaluate_many(requests, progress=False, workers=1)
+    on_ray = evaluate_many(requests, progress=False, workers=2, ray="local")
+    assert _without_wall_time(on_ray) == _without_wall_time(serial)
+    import ray
+
+    assert not ray.is_initialized()  # the private instance was shut down

@@ -1,0 +1,140 @@
+"""`agri report`: one page from committed entries plus fresh runs, with intervals, claims only where the
+interval supports them, learning curves with baseline bands, trajectory and failure plots."""
+
+import csv
+import json
+
+import yaml
+
+from agri_training import leaderboard as lb
+from agri_training.cli import main
+from agri_training.report import Row, comparison_table, find_runs, markdown_to_html
+
+SUITE = {
+    "name": "tiny-rover",
+    "version": 1,
+    "env_id": "agri_envs/GreenhouseNav-v1",
+    "scenario": "sim-loop",
+    "env_kwargs": {"n_rows": 1, "row_length": 3, "n_people": 0},
+    "seeds": {"start": 100000, "episodes": 2},
+    "rank_by": [
+        {"metric": "success_rate", "higher_is_better": True},
+        {"metric": "mean_episode_time", "higher_is_better": False},
+    ],
+}
+
+
+def fake_run(root, env_id="agri_envs/GreenhouseNav-v1"):
+    run = root / "ppo_nav_1"
+    run.mkdir(parents=True)
+    (run / "config.yaml").write_text(yaml.safe_dump({"env_id": env_id, "algo": "ppo"}))
+    with open(run / "progress.csv", "w", newline="") as f:
+        w = csv.writer(f)
+        w.writerow(["time/total_timesteps", "eval/success_rate", "rollout/ep_rew_mean"])
+        for k in range(1, 11):
+            w.writerow([k * 1000, k / 10, k * 3.0])
+    return run
+
+
+def test_report_from_entries_and_fresh_runs(tmp_path, capsys):
+    suites, entries, runs, out = tmp_path / "suites", tmp_path / "entries", tmp_path / "runs", tmp_path / "out"
+    suites.mkdir()
+    (suites / "tiny-rover.yaml").write_text(yaml.safe_dump(SUITE))
+    suite = lb.load_suite(suites / "tiny-rover.yaml")
+    # one committed entry; the other baselines are missing and get evaluated afresh
+    (entry,) = lb.evaluate_entries([(suite, lb.policy_reference("harik-apf-gt"))], progress=False)
+    lb.write_entry(entry, entries)
+    fake_run(runs)
+    rc = main(
+        [
+            "report",
+            "--out",
+            str(out),
+            "--suites",
+            str(suites),
+            "--entries",
+            str(entries),
+            "--runs",
+            str(runs),
+            "--workers",
+            "1",
+            "--quiet",
+        ]
+    )
+    assert rc == 0
+    md = (out / "report.md").read_text()
+    assert "## Who wins where" in md and "`harik-apf-gt` **P**" in md
+    assert "1.00 [0.34, 1.00]" in md  # 2 of 2 successes: a Wilson interval, not a point
+    assert "Evaluated for this report (no current leaderboard entry): `harik-apf`, `harik-apf-hector-plain`" in md
+    assert sorted(p.name for p in (out / "results" / "tiny-rover").glob("*.json")) == [
+        "harik-apf-hector-plain.json",
+        "harik-apf.json",
+    ]
+    assert "GreenhouseNav-v1_learning_success.png" in md and "_d_alpha.png" in md and "_trajectory.png" in md
+    for line in md.splitlines():
+        if line.startswith("!["):
+            assert (out / line.split("(")[1].rstrip(")")).stat().st_size > 10_000
+    html = (out / "report.html").read_text()
+    assert "<table>" in html and "<img" in html and "<h2 id='who-wins-where'>" in html
+    assert json.loads((out / "summary.json").read_text())[0]["suite"] == "tiny-rover"
+
+
+def _entry(name, successes, times, kind="baseline"):
+    eps = [
+        {"seed": 100000 + i, "is_success": s, "episode_time": t}
+        for i, (s, t) in enumerate(zip(successes, times, strict=True))
+    ]
+    return {"policy": {"kind": kind, "name": name}, "levels": [{"episodes": eps}], "privileged": False}
+
+
+def test_claims_only_where_the_interval_supports_them():
+    suite = lb.parse_suite(SUITE)
+    fast = _entry("fast", [True] * 20, [50.0 + 0.1 * i for i in range(20)])
+    slow = _entry("slow", [True] * 20, [80.0 + 0.1 * i for i in range(20)])
+    table, claims = comparison_table([Row(suite, fast, True), Row(suite, slow, True)])
+    # 20/20 against 20/20: no claim on success; 30 s faster on every seed: a supported claim on time
+    assert claims == ["tiny-rover: `fast` beats `slow` on time [s] (-30.0 [-30.0, -30.0])."]
+    assert "+0.00 [-0.16, +0.16]" in table[2]
+    near = _entry("near", [True] * 19 + [False], [50.0 + 0.1 * i for i in range(20)])
+    _, claims = comparison_table([Row(suite, near, True), Row(suite, fast, True)])
+    assert claims == ["tiny-rover: `fast` matches `near` on time [s] (+0.0 [+0.0, +0.0])."]  # nothing on success
+
+
+def test_learned_policies_are_compared_with_every_baseline():
+    suite = lb.parse_suite(SUITE)
+    rows = [
+        Row(suite, _entry("a", [True] * 20, [1.0] * 20), True),
+        Row(suite, _entry("b", [True] * 20, [1.0] * 20), True),
+        Row(suite, _entry("ppo", [True] * 20, [1.0] * 20, kind="learned"), True),
+    ]
+    table, _ = comparison_table(rows)
+    assert [r.split("|")[1].strip() for r in table[2:]] == ["`ppo` vs `a`", "`ppo` vs `b`"]
+
+
+def test_find_runs(tmp_path):
+    fake_run(tmp_path)
+    (tmp_path / "no_config").mkdir()
+    (tmp_path / "no_config" / "progress.csv").write_text("a,b\n1,2\n")
+    (run,) = find_runs(tmp_path)
+    assert run["env_id"] == "agri_envs/GreenhouseNav-v1" and len(run["rows"]) == 10
+    assert find_runs(tmp_path / "missing") == []
+
+
+def test_markdown_to_html_escapes_and_links():
+    html = markdown_to_html("# T\n\nsee [x](#y) and `a<b>`\n\n- one\n  more\n", "t")
+    assert '<a href="#y">x</a>' in html and "<code>a&lt;b&gt;</code>" in html and "<li>one more</li>" in html
+
+
+def test_progress_names_the_block_and_prints_no_rows_per_episode(capsys):
+    from agri_training.evaluate import EvalRequest, evaluate_many
+
+    kwargs = {"n_rows": 1, "row_length": 3, "n_people": 0}
+    requests = [
+        EvalRequest("agri_envs/GreenhouseNav-v1", "harik-apf-gt", 2, 100000, env_kwargs=kwargs, label="a"),
+        EvalRequest("agri_envs/GreenhouseNav-v1", "harik-apf-gt", 2, 100002, env_kwargs=kwargs, label="b"),
+    ]
+    docs = evaluate_many(requests, progress=True, workers=1)
+    err = capsys.readouterr().err
+    assert "[1/2] harik-apf-gt on GreenhouseNav-v1 [a]" in err and "[2/2] harik-apf-gt on GreenhouseNav-v1 [b]" in err
+    assert "4/4" in err and "success 2/2 of 2" in err  # one bar over the whole run (its ETA), per-block counts
+    assert "seed" not in err and [d["label"] for d in docs] == ["a", "b"]
