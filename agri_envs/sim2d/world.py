@@ -7,7 +7,11 @@ so) is split into substeps shorter than half the thinnest obstacle, and pymunk's
 robot at the last pose before contact.
 
 The world also keeps flat arrays of every circle and capsule (static ones followed by the moving ones)
-for the numba sensor kernels.
+for the numba sensor kernels. Every robot is an obstacle to every other robot: each one owns a row of
+:attr:`World2D.circles` (a round robot its disc, a rectangular one its circumscribed circle, a
+conservative stand-in for the other robots' sensors and clearance; contact between rectangles is still
+exact through pymunk). A robot never senses itself: its sensors sit inside its own circle, which the
+sensor kernels skip, and its clearance skips its own row.
 """
 
 from __future__ import annotations
@@ -20,7 +24,7 @@ import pymunk
 
 from agri_envs.sim2d.diff_drive import DiffDriveSpec, limit_velocity, unicycle_arc
 from agri_envs.sim2d.geometry import Geometry
-from agri_envs.sim2d.raycast import footprint_clearance
+from agri_envs.sim2d.raycast import disc_clearance, footprint_clearance
 
 # Pymunk collision categories: robots do not sense or hit themselves through these filters.
 _ROBOT_GROUP_BASE = 1000
@@ -36,7 +40,9 @@ class RobotBody:
         v: Achieved linear velocity (m/s).
         w: Achieved angular velocity (rad/s).
         body: The kinematic pymunk body.
-        shape: Its box shape.
+        shape: Its box (or disc) shape.
+        radius: Disc radius of a round robot (m); 0 for a rectangular one.
+        circle_index: Its row in :attr:`World2D.circles` (what the other robots sense).
     """
 
     spec: DiffDriveSpec
@@ -44,7 +50,9 @@ class RobotBody:
     v: float
     w: float
     body: pymunk.Body
-    shape: pymunk.Poly
+    shape: pymunk.Shape
+    radius: float = 0.0
+    circle_index: int = -1
 
 
 class World2D:
@@ -117,13 +125,41 @@ class World2D:
             rows[i, 1] = p.y
 
     # -- robots -----------------------------------------------------------------------------------------
-    def add_robot(self, spec: DiffDriveSpec, pose: np.ndarray) -> RobotBody:
-        """Add a kinematic rectangular robot at ``pose``."""
+    def add_robot(self, spec: DiffDriveSpec, pose: np.ndarray, radius: float | None = None) -> RobotBody:
+        """Add a kinematic robot at ``pose``: rectangular (``spec.length x spec.width``), or a disc.
+
+        Args:
+            spec: Size and limits.
+            pose: ``(x, y, yaw)``.
+            radius: Make the robot a disc of this radius (m) instead of a rectangle.
+
+        Raises:
+            ValueError: For a non-positive radius.
+        """
+        if radius is not None and not radius > 0:
+            raise ValueError(f"add_robot: radius must be > 0 (m), got {radius}")
         body = pymunk.Body(body_type=pymunk.Body.KINEMATIC)
-        shape = pymunk.Poly.create_box(body, (spec.length, spec.width))
+        shape: pymunk.Shape
+        if radius is None:
+            shape = pymunk.Poly.create_box(body, (spec.length, spec.width))
+            outline = spec.circumradius
+        else:
+            shape = pymunk.Circle(body, float(radius))
+            outline = float(radius)
         shape.filter = pymunk.ShapeFilter(group=_ROBOT_GROUP_BASE + len(self.robots))
         self.space.add(body, shape)
-        robot = RobotBody(spec=spec, pose=np.array(pose, dtype=np.float64), v=0.0, w=0.0, body=body, shape=shape)
+        index = len(self.circles)
+        self.circles = np.vstack([self.circles, [[float(pose[0]), float(pose[1]), outline]]])
+        robot = RobotBody(
+            spec=spec,
+            pose=np.array(pose, dtype=np.float64),
+            v=0.0,
+            w=0.0,
+            body=body,
+            shape=shape,
+            radius=0.0 if radius is None else float(radius),
+            circle_index=index,
+        )
         self._sync(robot, robot.pose)
         self.robots.append(robot)
         return robot
@@ -132,20 +168,43 @@ class World2D:
         robot.body.position = (float(pose[0]), float(pose[1]))
         robot.body.angle = float(pose[2])
         self.space.reindex_shapes_for_body(robot.body)
+        row = self.circles[robot.circle_index]
+        row[0] = pose[0]
+        row[1] = pose[1]
 
     def clearance(self, robot: RobotBody, pose: np.ndarray | None = None) -> float:
-        """Distance (m) between the robot's footprint and the nearest obstacle (<= 0: contact)."""
+        """Distance (m) between the robot's footprint and the nearest obstacle or other robot (<= 0: contact)."""
         p = robot.pose if pose is None else pose
+        if robot.radius > 0:
+            return float(
+                disc_clearance(float(p[0]), float(p[1]), robot.radius, self.circles, self.capsules, robot.circle_index)
+            )
         s = robot.spec
         return float(
             footprint_clearance(
-                float(p[0]), float(p[1]), float(p[2]), 0.5 * s.length, 0.5 * s.width, self.circles, self.capsules
+                float(p[0]),
+                float(p[1]),
+                float(p[2]),
+                0.5 * s.length,
+                0.5 * s.width,
+                self.circles,
+                self.capsules,
+                robot.circle_index,
             )
         )
 
     def _touches(self, robot: RobotBody, pose: np.ndarray) -> bool:
+        if robot.radius > 0:  # a disc's clearance is exact: no need to ask pymunk
+            return self.clearance(robot, pose) <= 0.0
         self._sync(robot, pose)
         return bool(self.space.shape_query(robot.shape))
+
+    @property
+    def robot_circles(self) -> np.ndarray:
+        """``(n_robots, 3)`` view of the robots' rows in :attr:`circles` (added last, in order)."""
+        if not self.robots:
+            return self.circles[:0]
+        return self.circles[self.robots[0].circle_index :]
 
     def drive(self, robot: RobotBody, v_cmd: float, w_cmd: float, dt: float) -> bool:
         """Drive a robot for ``dt`` seconds toward the commanded velocities; return True on contact.
@@ -154,7 +213,8 @@ class World2D:
         an existing overlap) and its velocities drop to zero.
         """
         v, w = limit_velocity(robot.spec, robot.v, robot.w, v_cmd, w_cmd, dt)
-        reach = abs(v) * dt + abs(w) * dt * robot.spec.circumradius
+        # A disc that turns in place sweeps no new area; a rectangle's corners do.
+        reach = abs(v) * dt + (0.0 if robot.radius > 0 else abs(w) * dt * robot.spec.circumradius)
         pose = robot.pose
         clear = self.clearance(robot)
         if clear > reach + 1e-6:
