@@ -283,7 +283,7 @@ class ApoorvaParams:
         kp_w: ``k_p^2`` of Alg. 2 (1/s): turn rate per radian of heading error.
         escape: Size of the tangential push that leaves an equipotential point (sec. 6.1).
         escape_below: Net force size under which the robot counts as stuck in an equipotential region.
-        trail_lag: Followers aim at the point of their predecessor's trail this far behind it (m).
+        lookahead: Followers aim this far ahead of themselves along their predecessor's trail (m).
         leader_wait: Relative gain of the follower's pull on the leader (Alg. 4b).
     """
 
@@ -301,7 +301,7 @@ class ApoorvaParams:
     kp_w: float = 2.5
     escape: float = 0.15
     escape_below: float = 0.05
-    trail_lag: float = 0.1
+    lookahead: float = 0.45
     leader_wait: float = 0.5
 
 
@@ -391,9 +391,11 @@ class ApoorvaChainPolicy:
                 if n > 1:
                     force += spacing_force(xy[k], xy[k + 1], p.d_s, p.leader_wait * p.epsilon, p.eta_rep, p.d_star)
             else:
-                target = self._trail_point(agents[k - 1], xy[k - 1], p.d_s - p.trail_lag)
-                force = p.spacing_gain * spacing_force(xy[k], target, p.trail_lag, p.epsilon, p.eta_rep, p.d_star)
-                force += spacing_force(xy[k], xy[k - 1], p.d_s, 0.0, p.eta_rep) + rep
+                # Alg. 5 (attraction to q_{i-1}, the printed q_2 is a slip), along q_{i-1}'s own trail.
+                target = self._trail_target(agents[k - 1], xy[k - 1], xy[k])
+                force = spacing_force(xy[k], xy[k - 1], p.d_s, 0.0, p.eta_rep) + rep
+                if target is not None:
+                    force += p.spacing_gain * attractive_force(xy[k], target, p.epsilon, p.d_star)
             force = force + strip[k]
             # Sec. 6.1: equipotential point (forces cancel, target not reached): a small tangential push.
             if near and math.hypot(*force) < p.escape_below:
@@ -405,21 +407,24 @@ class ApoorvaChainPolicy:
             actions[a] = np.array([v / spec["max_speed"], w / spec["max_turn_rate"]], dtype=np.float32)
         return actions, state
 
-    def _trail_point(self, agent: str, position: np.ndarray, lag: float) -> np.ndarray:
-        """The point of ``agent``'s recorded trail about ``lag`` metres (along the trail) behind it."""
+    def _trail_target(self, agent: str, position: np.ndarray, me: np.ndarray) -> np.ndarray | None:
+        """Where a follower aims on its predecessor's recorded trail (sec. 8: "fetching its previous position").
+
+        The follower's nearest trail point, moved ``lookahead`` metres on along the trail but never closer
+        than ``d_s`` (along the trail) to the predecessor; None when the follower is already that close.
+        """
+        p = self.params
         trail = self.trails.get(agent)
         if not trail:
-            return position
-        acc = 0.0
-        prev = position
-        for point in reversed(trail):
-            step = math.hypot(*(point - prev))
-            if acc + step >= lag:
-                t = (lag - acc) / step if step > 0 else 0.0
-                return prev + t * (point - prev)
-            acc += step
-            prev = point
-        return prev
+            return None
+        pts = np.vstack([np.array(trail), position[None, :]])
+        seg = np.hypot(*np.diff(pts, axis=0).T)
+        cum = np.concatenate([[0.0], np.cumsum(seg)])
+        near = int(np.argmin(np.hypot(pts[:, 0] - me[0], pts[:, 1] - me[1])))
+        s_target = min(cum[near] + p.lookahead, cum[-1] - p.d_s)
+        if s_target <= cum[near]:
+            return None
+        return Polyline(pts).at(float(s_target)) if len(pts) > 1 else None
 
 
 def make_apoorva_chain(env: Any) -> ApoorvaChainPolicy:
