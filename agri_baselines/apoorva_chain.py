@@ -16,11 +16,31 @@ returns per-agent dicts (the central system of sec. 6.2 computes every robot's c
 
 from __future__ import annotations
 
+import bisect
 import dataclasses
 import math
 from typing import Any
 
+import numba
 import numpy as np
+
+
+@numba.njit(cache=True)
+def _project(points: np.ndarray, cumulative: np.ndarray, x: float, y: float, k0: int, k1: int) -> float:
+    """Arc length of the point nearest to ``(x, y)`` on segments ``k0 .. k1 - 1`` of a polyline."""
+    best = math.inf
+    s_best = cumulative[k0]
+    for k in range(k0, k1):
+        ax, ay = points[k, 0], points[k, 1]
+        ex, ey = points[k + 1, 0] - ax, points[k + 1, 1] - ay
+        l2 = ex * ex + ey * ey
+        t = 0.0 if l2 <= 1e-12 else min(1.0, max(0.0, ((x - ax) * ex + (y - ay) * ey) / l2))
+        qx, qy = ax + t * ex - x, ay + t * ey - y
+        d = qx * qx + qy * qy
+        if d < best:
+            best = d
+            s_best = cumulative[k] + t * math.sqrt(l2)
+    return s_best
 
 
 class Polyline:
@@ -40,34 +60,32 @@ class Polyline:
         seg = np.hypot(*np.diff(p, axis=0).T)
         self.cumulative = np.concatenate([[0.0], np.cumsum(seg)])
         self.length = float(self.cumulative[-1])
+        self._cum = self.cumulative.tolist()
+        self._pts = [(float(a), float(b)) for a, b in p]
 
     def at(self, s: float) -> np.ndarray:
         """Point at arc length ``s`` (clamped to the ends)."""
+        x, y = self.xy_at(s)
+        return np.array([x, y])
+
+    def xy_at(self, s: float) -> tuple[float, float]:
+        """:meth:`at` as two floats."""
+        c = self._cum
         s = min(max(s, 0.0), self.length)
-        k = int(np.searchsorted(self.cumulative, s, side="right")) - 1
-        k = min(max(k, 0), len(self.points) - 2)
-        span = self.cumulative[k + 1] - self.cumulative[k]
-        t = 0.0 if span <= 0 else (s - self.cumulative[k]) / span
-        return self.points[k] + t * (self.points[k + 1] - self.points[k])
+        k = min(max(bisect.bisect_right(c, s) - 1, 0), len(c) - 2)
+        span = c[k + 1] - c[k]
+        t = 0.0 if span <= 0 else (s - c[k]) / span
+        (ax, ay), (bx, by) = self._pts[k], self._pts[k + 1]
+        return ax + t * (bx - ax), ay + t * (by - ay)
 
     def project(self, xy: np.ndarray, s_from: float, s_to: float) -> float:
         """Arc length of the point of the path nearest to ``xy``, searched between ``s_from`` and ``s_to``."""
-        c = self.cumulative
-        k0 = max(0, int(np.searchsorted(c, s_from, side="right")) - 1)
-        k1 = min(len(c) - 1, int(np.searchsorted(c, s_to, side="left")) + 1)
-        a = self.points[k0:k1]
-        b = self.points[k0 + 1 : k1 + 1]
-        n = min(len(a), len(b))
-        if n == 0:
+        c = self._cum
+        k0 = max(0, bisect.bisect_right(c, s_from) - 1)
+        k1 = min(len(c) - 1, bisect.bisect_left(c, s_to) + 1)
+        if k1 <= k0:
             return min(max(s_from, 0.0), self.length)
-        a, b = a[:n], b[:n]
-        e = b - a
-        l2 = np.einsum("ij,ij->i", e, e)
-        t = np.clip(np.einsum("ij,ij->i", np.asarray(xy)[None, :] - a, e) / np.maximum(l2, 1e-12), 0.0, 1.0)
-        q = a + t[:, None] * e
-        d = np.hypot(q[:, 0] - xy[0], q[:, 1] - xy[1])
-        m = int(np.argmin(d))
-        s = float(c[k0 + m] + t[m] * math.sqrt(l2[m]))
+        s = _project(self.points, self.cumulative, float(xy[0]), float(xy[1]), k0, k1)
         return min(max(s, s_from), s_to)
 
 
@@ -125,14 +143,19 @@ class GhostRobot:
         """The ghost's position ``g = tau_A(s)``."""
         return self.path.at(self.s)
 
+    @property
+    def xy(self) -> tuple[float, float]:
+        """:attr:`point` as two floats."""
+        return self.path.xy_at(self.s)
+
     def update(self, leader_xy: np.ndarray) -> np.ndarray:
         """Advance (``+v_F``), hold, or come back (``-v_B`` after ``T``), and return the new ``g``."""
         p = self.params
         xy = np.asarray(leader_xy, dtype=np.float64)
         # The leader's own place on the path, searched forward from where it was (delta(s) > 0).
         self.s_leader = self.path.project(xy, self.s_leader, self.s_leader + p.window)
-        g = self.path.at(self.s)
-        if math.hypot(g[0] - xy[0], g[1] - xy[1]) > p.eta:
+        gx, gy = self.path.xy_at(self.s)
+        if math.hypot(gx - xy[0], gy - xy[1]) > p.eta:
             if self._waited > p.patience:
                 self.s -= p.v_back * self.dt
             else:

@@ -22,10 +22,11 @@ from gymnasium import spaces
 from pettingzoo import ParallelEnv
 from pettingzoo.utils import parallel_to_aec, wrappers
 
-from agri_baselines.apoorva_chain import GhostParams, GhostRobot, Polyline, strip_distances
+from agri_baselines.apoorva_chain import GhostParams, GhostRobot, Polyline
 from agri_baselines.grid_astar import astar, distance_field
 from agri_envs._actions import checked_action
 from agri_envs._config import StrictConfig, param
+from agri_envs.chain._kernels import observe
 from agri_envs.chain.maps import ChainMap, OfficeParams, greenhouse_map, office_map, ros_map
 from agri_envs.rover.layout import LayoutParams
 from agri_envs.sim2d.diff_drive import DiffDriveSpec
@@ -383,12 +384,16 @@ class RobotChainEnv(ParallelEnv):  # type: ignore[misc]
         # Obstacle schedule: drop k when the leader has covered fraction f_k of the path.
         self._drop_at = np.sort(rng.uniform(0.15, 0.7, cfg.n_dynamic_obstacles)) * self.astar_length
         self._dropped = np.zeros(cfg.n_dynamic_obstacles, dtype=bool)
+        self._next_drop = 0
+        self._n_dropped = 0
         self.agents = list(self.possible_agents)
         self._poses = np.array([r.pose for r in self.robots])
         self._steps = 0
         self._collisions = 0
         self._collided_any = False
-        self._max_gap = float(self._gaps().max(initial=0.0))
+        self._obs_buf = np.zeros((n, OBS_SIZE))
+        self._stats = np.zeros(5)
+        self._cmd_scale = np.array([cfg.max_speed, cfg.max_turn_rate])
         self._strip_sum = 0.0
         self._strip_max = 0.0
         self._strip_count = 0
@@ -403,6 +408,7 @@ class RobotChainEnv(ParallelEnv):  # type: ignore[misc]
         self._done_success = False
         self._leader_arrived = False
         obs = self._observe()
+        self._max_gap = float(self._stats[2])
         infos = self._infos()
         if self.render_mode == "human":
             self.render()
@@ -509,47 +515,45 @@ class RobotChainEnv(ParallelEnv):  # type: ignore[misc]
             )
         cfg = self.config
         dt = cfg.control_period
-        cmd = np.array([checked_action(actions[a], 2) for a in self.agents])
+        cmd = self._actions_array(actions)
+        cmd *= self._cmd_scale
         world = self.world
-        self._drop_obstacles()
-        world.step(dt)
-        collided = np.zeros(len(self.robots), dtype=bool)
-        prev_leader = self._poses[0, :2].copy()
+        if self._next_drop < len(self._drop_at) and self.ghost.s_leader >= self._drop_at[self._next_drop]:
+            self._drop_obstacles()
+        if self._n_dropped:
+            world.step(dt)
+        lx, ly = self._poses[0, 0], self._poses[0, 1]
+        collided = world.drive_discs(self.robots, cmd, dt)
+        poses = self._poses
         for k, robot in enumerate(self.robots):
-            collided[k] = world.drive(robot, float(cmd[k, 0]) * cfg.max_speed, float(cmd[k, 1]) * cfg.max_turn_rate, dt)
-            self._poses[k] = robot.pose
+            poses[k] = robot.pose
             self._vel[k, 0] = robot.v
             self._vel[k, 1] = robot.w
         self._steps += 1
-        self._leader_path += math.hypot(self._poses[0, 0] - prev_leader[0], self._poses[0, 1] - prev_leader[1])
-        self._trail.append(self._poses[0, :2].copy())
+        self._leader_path += math.hypot(poses[0, 0] - lx, poses[0, 1] - ly)
+        if self.render_mode is not None:
+            self._trail.append(poses[0, :2].copy())
         self._last_collided = collided
         n_col = int(collided.sum())
         self._collisions += n_col
         self._collided_any = self._collided_any or n_col > 0
-        self.ghost.update(self._poses[0, :2])
-        # Reward terms (see Rewards).
+        self.ghost.update(poses[0, :2])
         s_new = self.ghost.s_leader
         progress = s_new - self._s_progress
         self._s_progress = s_new
-        gaps = self._gaps()
-        strip = strip_distances(self._poses[:, :2])
-        mean_strip = float(strip.mean()) if len(strip) else 0.0
-        self._max_gap = max(self._max_gap, float(gaps.max(initial=0.0)))
+        obs = self._observe()
+        mean_strip, max_strip, max_gap, n_break, spacing_err = self._stats.tolist()
+        self._max_gap = max(self._max_gap, max_gap)
         self._strip_sum += mean_strip
         self._strip_count += 1
-        self._strip_max = max(self._strip_max, float(strip.max(initial=0.0)))
-        n_break = int((gaps > cfg.max_gap).sum())
-        leader_xy = self._poses[0, :2]
-        arrived = math.hypot(leader_xy[0] - self.goal[0], leader_xy[1] - self.goal[1]) <= cfg.goal_radius
+        self._strip_max = max(self._strip_max, max_strip)
+        arrived = math.hypot(poses[0, 0] - self.goal[0], poses[0, 1] - self.goal[1]) <= cfg.goal_radius
         self._leader_arrived = arrived
         success = arrived and not self._collided_any and n_break == 0
         self._done_success = success
         terms = {
             "progress": cfg.reward_progress * progress,
-            "spacing": -cfg.reward_spacing * float(np.minimum(1.0, np.abs(gaps - cfg.spacing) / cfg.spacing).mean())
-            if len(gaps)
-            else 0.0,
+            "spacing": -cfg.reward_spacing * spacing_err,
             "strip": -cfg.reward_strip * mean_strip,
             "collision": -cfg.reward_collision * n_col,
             "break": -cfg.reward_break * n_break,
@@ -560,7 +564,6 @@ class RobotChainEnv(ParallelEnv):  # type: ignore[misc]
         reward = float(sum(terms.values()))
         terminated = arrived or (n_col > 0 and cfg.terminate_on_collision)
         truncated = (not terminated) and self._steps >= cfg.max_cycles
-        obs = self._observe()
         infos = self._infos()
         agents = self.agents
         rewards = dict.fromkeys(agents, reward)
@@ -572,23 +575,40 @@ class RobotChainEnv(ParallelEnv):  # type: ignore[misc]
             self.render()
         return obs, rewards, terminations, truncations, infos
 
-    def _gaps(self) -> np.ndarray:
-        """Distances (m) between neighbours in the chain."""
-        p = self._poses[:, :2]
-        return np.hypot(*np.diff(p, axis=0).T) if len(p) > 1 else np.zeros(0)
+    def _actions_array(self, actions: dict[str, Any]) -> np.ndarray:
+        """``(n, 2)`` float64 actions in agent order, clipped to [-1, 1] (the shared action contract)."""
+        agents = self.agents
+        if len(actions) != len(agents) or any(a not in actions for a in agents):
+            unknown = sorted(a for a in actions if a not in agents)
+            missing = sorted(a for a in agents if a not in actions)
+            raise ValueError(
+                f"actions must name every live agent exactly once: unknown {unknown}, missing {missing}"
+            )
+        try:
+            a = np.array([actions[name] for name in agents], dtype=np.float64)
+        except (ValueError, TypeError):
+            a = np.empty(0)
+        if a.shape != (len(agents), 2) or not math.isfinite(a.sum()):
+            # One of them is malformed: let the shared check name it and say why.
+            for name in agents:
+                try:
+                    checked_action(actions[name], 2)
+                except ValueError as exc:
+                    raise ValueError(f"{name}: {exc}") from None
+        np.clip(a, -1.0, 1.0, out=a)
+        return a
 
     def _drop_obstacles(self) -> None:
-        """Drop the next scheduled obstacle onto the path ahead of the leader once it has come far enough."""
+        """Drop the next scheduled obstacle onto the path ahead of the leader (retried each step until it fits)."""
         cfg = self.config
-        assert self.world is not None and self.chain_map is not None
-        for k in range(cfg.n_dynamic_obstacles):
-            if self._dropped[k] or self.ghost.s_leader < self._drop_at[k]:
-                continue
-            spot = self._drop_spot()
-            if spot is not None:
-                self.world.place_mover(k, float(spot[0]), float(spot[1]), cfg.obstacle_radius)
-                self._dropped[k] = True
-            break
+        assert self.world is not None
+        k = self._next_drop
+        spot = self._drop_spot()
+        if spot is not None:
+            self.world.place_mover(k, float(spot[0]), float(spot[1]), cfg.obstacle_radius)
+            self._dropped[k] = True
+            self._next_drop += 1
+            self._n_dropped += 1
 
     def _drop_spot(self) -> np.ndarray | None:
         """A point on the path 1.2-3 m ahead of the leader with room to pass it and clear of every robot."""
@@ -616,7 +636,6 @@ class RobotChainEnv(ParallelEnv):  # type: ignore[misc]
         cfg = self.config
         assert self.world is not None
         poses = self._poses
-        n = len(poses)
         out = self._sonar_out
         sonar_ranges_many(
             poses,
@@ -631,66 +650,42 @@ class RobotChainEnv(ParallelEnv):  # type: ignore[misc]
         ranges = out
         if cfg.sonar_noise_std > 0:
             ranges = out + cfg.sonar_noise_std * self.np_random.standard_normal(out.shape)
-        np.clip(ranges, self.sonar.min_range, cfg.sonar_range, out=ranges)
+            np.clip(ranges, self.sonar.min_range, cfg.sonar_range, out=ranges)
+        else:
+            np.maximum(ranges, self.sonar.min_range, out=ranges)
         self._last_sonar = ranges
-        obs = np.zeros((n, OBS_SIZE))
-        obs[:, 0:8] = ranges / cfg.sonar_range
-        lo = self._bounds[:2]
-        span = self._bounds[2:] - lo
-        obs[:, 8:10] = (poses[:, :2] - lo) / span
-        c = np.cos(poses[:, 2])
-        s = np.sin(poses[:, 2])
-        obs[:, 10] = s
-        obs[:, 11] = c
-        pred = np.empty((n, 2))
-        pred[0] = self.ghost.point
-        pred[1:] = poses[:-1, :2]
-        succ = np.zeros((n, 2))
-        succ[:-1] = poses[1:, :2]
-        scale = self.rel_scale
-        for cols, target in ((slice(12, 14), pred), (slice(14, 16), succ)):
-            dx = target[:, 0] - poses[:, 0]
-            dy = target[:, 1] - poses[:, 1]
-            obs[:, cols.start] = (c * dx + s * dy) / scale
-            obs[:, cols.start + 1] = (-s * dx + c * dy) / scale
-        obs[-1, 14:16] = 0.0
-        obs[:-1, 16] = 1.0
-        obs[:, 17] = self._signed_strip(poses[:, :2]) / scale
-        obs[0, 18] = 1.0
-        obs[:, 19] = self._vel[:, 0] / cfg.max_speed
-        obs[:, 20] = self._vel[:, 1] / cfg.max_turn_rate
-        dx = self.goal[0] - poses[:, 0]
-        dy = self.goal[1] - poses[:, 1]
-        obs[:, 21] = (c * dx + s * dy) / self.diagonal
-        obs[:, 22] = (-s * dx + c * dy) / self.diagonal
-        np.clip(obs, self._obs_space.low, self._obs_space.high, out=obs)
+        gx, gy = self.ghost.xy
+        obs = self._obs_buf
+        observe(
+            poses,
+            self._vel,
+            ranges,
+            gx,
+            gy,
+            float(self.goal[0]),
+            float(self.goal[1]),
+            self._bounds,
+            self.diagonal,
+            self.rel_scale,
+            cfg.sonar_range,
+            cfg.max_speed,
+            cfg.max_turn_rate,
+            cfg.spacing,
+            cfg.max_gap,
+            obs,
+            self._stats,
+        )
         obs32 = obs.astype(np.float32)
-        return {a: obs32[k] for k, a in enumerate(self.agents)}
-
-    @staticmethod
-    def _signed_strip(p: np.ndarray) -> np.ndarray:
-        """Signed distance to the first-last segment (+ on its left); 0 for fewer than 3 robots."""
-        if len(p) < 3:
-            return np.zeros(len(p))
-        a, b = p[0], p[-1]
-        e = b - a
-        l2 = float(e @ e)
-        if l2 < 1e-12:
-            return np.zeros(len(p))
-        t = np.clip(((p - a) @ e) / l2, 0.0, 1.0)
-        foot = a + t[:, None] * e
-        d = np.hypot(*(p - foot).T)
-        side = np.sign(e[0] * (p[:, 1] - a[1]) - e[1] * (p[:, 0] - a[0]))
-        return d * np.where(side == 0, 1.0, side)
+        return dict(zip(self.agents, obs32, strict=True))
 
     def _infos(self) -> dict[str, dict[str, Any]]:
         cfg = self.config
-        gaps = self._gaps()
-        strip = strip_distances(self._poses[:, :2])
+        stats = self._stats
+        gx, gy = self.ghost.xy
         shared = {
             "is_success": bool(self._done_success),
             "leader_at_goal": bool(self._leader_arrived),
-            "chain_intact": bool((gaps <= cfg.max_gap).all()),
+            "chain_intact": bool(stats[3] == 0),
             "collisions": int(self._collisions),
             "max_gap": float(self._max_gap),
             "mean_strip_distance": float(self._strip_sum / self._strip_count) if self._strip_count else 0.0,
@@ -699,27 +694,28 @@ class RobotChainEnv(ParallelEnv):  # type: ignore[misc]
             "astar_length": float(self.astar_length),
             "path_ratio": float(self._leader_path / self.astar_length) if self.astar_length > 0 else 1.0,
             "episode_time": self._steps * cfg.control_period,
-            "ghost_x": float(self.ghost.point[0]),
-            "ghost_y": float(self.ghost.point[1]),
-            "mean_strip_distance_now": float(strip.mean()) if len(strip) else 0.0,
-            "max_gap_now": float(gaps.max(initial=0.0)),
+            "ghost_x": gx,
+            "ghost_y": gy,
+            "mean_strip_distance_now": float(stats[0]),
+            "max_gap_now": float(stats[2]),
         }
         for name, value in self._terms.items():
-            shared[f"reward_{name}"] = float(value)
-        infos = {}
-        for k, a in enumerate(self.agents):
-            p = self._poses[k]
-            info = dict(shared)
-            info.update(
-                x=float(p[0]),
-                y=float(p[1]),
-                yaw=float(p[2]),
-                v=float(self._vel[k, 0]),
-                w=float(self._vel[k, 1]),
-                collision=bool(self._last_collided[k]),
-            )
-            infos[a] = info
-        return infos
+            shared["reward_" + name] = float(value)
+        rows = self._poses.tolist()
+        vel = self._vel.tolist()
+        col = self._last_collided.tolist()
+        return {
+            a: {
+                **shared,
+                "x": rows[k][0],
+                "y": rows[k][1],
+                "yaw": rows[k][2],
+                "v": vel[k][0],
+                "w": vel[k][1],
+                "collision": col[k],
+            }
+            for k, a in enumerate(self.agents)
+        }
 
     def state(self) -> np.ndarray:
         """Global state: every robot's ``x, y, yaw, v, omega``, the ghost and the goal, the obstacles' ``x, y, r``."""

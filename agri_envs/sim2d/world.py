@@ -18,7 +18,9 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from collections.abc import Sequence
 
+import numba
 import numpy as np
 import pymunk
 
@@ -28,6 +30,76 @@ from agri_envs.sim2d.raycast import disc_clearance, footprint_clearance
 
 # Pymunk collision categories: robots do not sense or hit themselves through these filters.
 _ROBOT_GROUP_BASE = 1000
+
+
+@numba.njit(cache=True)
+def _arc(x: float, y: float, th: float, v: float, w: float, dt: float) -> tuple[float, float, float]:
+    """:func:`~agri_envs.sim2d.diff_drive.unicycle_arc` on scalars."""
+    if abs(w) < 1e-9:
+        return x + v * dt * math.cos(th), y + v * dt * math.sin(th), th
+    th1 = th + w * dt
+    k = v / w
+    return (
+        x + k * (math.sin(th1) - math.sin(th)),
+        y - k * (math.cos(th1) - math.cos(th)),
+        math.atan2(math.sin(th1), math.cos(th1)),
+    )
+
+
+@numba.njit(cache=True)
+def _drive_discs(
+    poses: np.ndarray,
+    vel: np.ndarray,
+    cmd: np.ndarray,
+    limits: np.ndarray,
+    radius: np.ndarray,
+    rows: np.ndarray,
+    circles: np.ndarray,
+    capsules: np.ndarray,
+    dt: float,
+    max_substep: float,
+    contact: np.ndarray,
+) -> None:
+    """:meth:`World2D.drive` for many disc robots in turn (each sees the others where they already are)."""
+    for k in range(poses.shape[0]):
+        vmax, vrev, wmax, acc, wacc = limits[k, 0], limits[k, 1], limits[k, 2], limits[k, 3], limits[k, 4]
+        v_cmd = min(vmax, max(-vrev, cmd[k, 0]))
+        w_cmd = min(wmax, max(-wmax, cmd[k, 1]))
+        dv = acc * dt
+        dw = wacc * dt
+        v = vel[k, 0] + min(dv, max(-dv, v_cmd - vel[k, 0]))
+        w = vel[k, 1] + min(dw, max(-dw, w_cmd - vel[k, 1]))
+        x, y, th = poses[k, 0], poses[k, 1], poses[k, 2]
+        r = radius[k]
+        skip = rows[k]
+        reach = abs(v) * dt
+        clear = disc_clearance(x, y, r, circles, capsules, skip)
+        hit = False
+        if clear > reach + 1e-6:
+            x, y, th = _arc(x, y, th, v, w, dt)
+        else:
+            n_sub = max(1, math.ceil(reach / max_substep))
+            h = dt / n_sub
+            inside = clear <= 0.0
+            for _ in range(n_sub):
+                cx, cy, cth = _arc(x, y, th, v, w, h)
+                new_clear = disc_clearance(cx, cy, r, circles, capsules, skip)
+                if new_clear <= 0.0:
+                    if not inside or new_clear <= clear:
+                        hit = True
+                        break
+                    clear = new_clear
+                else:
+                    inside = False
+                x, y, th = cx, cy, cth
+        poses[k, 0], poses[k, 1], poses[k, 2] = x, y, th
+        if hit:
+            vel[k, 0], vel[k, 1] = 0.0, 0.0
+        else:
+            vel[k, 0], vel[k, 1] = v, w
+        contact[k] = hit
+        circles[skip, 0] = x
+        circles[skip, 1] = y
 
 
 @dataclasses.dataclass
@@ -90,6 +162,7 @@ class World2D:
             self.movers.append(body)
             self.circles[n_static + i, 2] = 0.2
         self.robots: list[RobotBody] = []
+        self._disc_cache: dict[tuple[int, ...], tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
         thin = [float(r) for r in geometry.circles[:, 2]] + [float(r) for r in geometry.capsules[:, 4] if r > 0]
         # Substep length: half the thinnest obstacle's half-thickness, so a substep can never jump over it.
         self.max_substep = max(0.002, 0.5 * min(thin, default=0.1))
@@ -205,6 +278,61 @@ class World2D:
         if not self.robots:
             return self.circles[:0]
         return self.circles[self.robots[0].circle_index :]
+
+    def drive_discs(self, robots: Sequence[RobotBody], cmd: np.ndarray, dt: float) -> np.ndarray:
+        """:meth:`drive` for many disc robots at once (one compiled call; robots move in list order).
+
+        Each robot sees the ones before it at their new poses and the ones after it at their old poses,
+        exactly as a loop of :meth:`drive` would. The robots' pymunk bodies are synced only when the world
+        also holds rectangular robots (the only users of pymunk queries).
+
+        Args:
+            robots: Disc robots of this world.
+            cmd: ``(n, 2)`` commanded ``v, omega`` (m/s, rad/s).
+            dt: Duration (s).
+
+        Returns:
+            ``(n,)`` bool, True for each robot that touched something (it stopped before the contact).
+
+        Raises:
+            ValueError: If a robot is not a disc or ``cmd`` has the wrong shape.
+        """
+        key = tuple(r.circle_index for r in robots)
+        cache = self._disc_cache.get(key)
+        if cache is None:
+            if any(r.radius <= 0 for r in robots):
+                raise ValueError("drive_discs: every robot must be a disc (add_robot(..., radius=r))")
+            limits = np.array(
+                [
+                    [
+                        r.spec.max_speed,
+                        r.spec.max_reverse_speed,
+                        r.spec.max_turn_rate,
+                        r.spec.max_accel,
+                        r.spec.max_angular_accel,
+                    ]
+                    for r in robots
+                ],
+                dtype=np.float64,
+            ).reshape(-1, 5)
+            cache = (limits, np.array([r.radius for r in robots]), np.array(key, dtype=np.int64))
+            self._disc_cache[key] = cache
+        limits, radius, rows = cache
+        c = np.asarray(cmd, dtype=np.float64)
+        if c.shape != (len(robots), 2):
+            raise ValueError(f"drive_discs: cmd must have shape ({len(robots)}, 2), got {c.shape}")
+        poses = np.array([r.pose for r in robots], dtype=np.float64).reshape(-1, 3)
+        vel = np.array([(r.v, r.w) for r in robots], dtype=np.float64).reshape(-1, 2)
+        contact = np.zeros(len(robots), dtype=np.bool_)
+        _drive_discs(poses, vel, c, limits, radius, rows, self.circles, self.capsules, dt, self.max_substep, contact)
+        sync = any(r.radius <= 0 for r in self.robots)
+        for k, r in enumerate(robots):
+            r.pose = poses[k]
+            r.v = float(vel[k, 0])
+            r.w = float(vel[k, 1])
+            if sync:
+                self._sync(r, r.pose)
+        return contact
 
     def drive(self, robot: RobotBody, v_cmd: float, w_cmd: float, dt: float) -> bool:
         """Drive a robot for ``dt`` seconds toward the commanded velocities; return True on contact.
