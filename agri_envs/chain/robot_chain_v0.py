@@ -380,6 +380,7 @@ class RobotChainEnv(ParallelEnv):  # type: ignore[misc]
             cfg.control_period,
         )
         self.ghost.reset(positions[0])
+        self._ghost_xy = self.ghost.xy
         self._s_progress = self.ghost.s_leader
         # Obstacle schedule: drop k when the leader has covered fraction f_k of the path.
         self._drop_at = np.sort(rng.uniform(0.15, 0.7, cfg.n_dynamic_obstacles)) * self.astar_length
@@ -523,12 +524,8 @@ class RobotChainEnv(ParallelEnv):  # type: ignore[misc]
         if self._n_dropped:
             world.step(dt)
         lx, ly = self._poses[0, 0], self._poses[0, 1]
-        collided = world.drive_discs(self.robots, cmd, dt)
         poses = self._poses
-        for k, robot in enumerate(self.robots):
-            poses[k] = robot.pose
-            self._vel[k, 0] = robot.v
-            self._vel[k, 1] = robot.w
+        collided = world.drive_discs(self.robots, cmd, dt, poses, self._vel)
         self._steps += 1
         self._leader_path += math.hypot(poses[0, 0] - lx, poses[0, 1] - ly)
         if self.render_mode is not None:
@@ -538,6 +535,7 @@ class RobotChainEnv(ParallelEnv):  # type: ignore[misc]
         self._collisions += n_col
         self._collided_any = self._collided_any or n_col > 0
         self.ghost.update(poses[0, :2])
+        self._ghost_xy = self.ghost.xy
         s_new = self.ghost.s_leader
         progress = s_new - self._s_progress
         self._s_progress = s_new
@@ -595,7 +593,8 @@ class RobotChainEnv(ParallelEnv):  # type: ignore[misc]
                     checked_action(actions[name], 2)
                 except ValueError as exc:
                     raise ValueError(f"{name}: {exc}") from None
-        np.clip(a, -1.0, 1.0, out=a)
+        np.minimum(a, 1.0, out=a)
+        np.maximum(a, -1.0, out=a)
         return a
 
     def _drop_obstacles(self) -> None:
@@ -654,7 +653,7 @@ class RobotChainEnv(ParallelEnv):  # type: ignore[misc]
         else:
             np.maximum(ranges, self.sonar.min_range, out=ranges)
         self._last_sonar = ranges
-        gx, gy = self.ghost.xy
+        gx, gy = self._ghost_xy
         obs = self._obs_buf
         observe(
             poses,
@@ -681,7 +680,7 @@ class RobotChainEnv(ParallelEnv):  # type: ignore[misc]
     def _infos(self) -> dict[str, dict[str, Any]]:
         cfg = self.config
         stats = self._stats
-        gx, gy = self.ghost.xy
+        gx, gy = self._ghost_xy
         shared = {
             "is_success": bool(self._done_success),
             "leader_at_goal": bool(self._leader_arrived),

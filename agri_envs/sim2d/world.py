@@ -279,7 +279,14 @@ class World2D:
             return self.circles[:0]
         return self.circles[self.robots[0].circle_index :]
 
-    def drive_discs(self, robots: Sequence[RobotBody], cmd: np.ndarray, dt: float) -> np.ndarray:
+    def drive_discs(
+        self,
+        robots: Sequence[RobotBody],
+        cmd: np.ndarray,
+        dt: float,
+        poses: np.ndarray | None = None,
+        vel: np.ndarray | None = None,
+    ) -> np.ndarray:
         """:meth:`drive` for many disc robots at once (one compiled call; robots move in list order).
 
         Each robot sees the ones before it at their new poses and the ones after it at their old poses,
@@ -290,6 +297,9 @@ class World2D:
             robots: Disc robots of this world.
             cmd: ``(n, 2)`` commanded ``v, omega`` (m/s, rad/s).
             dt: Duration (s).
+            poses: The robots' current poses ``(n, 3)`` float64, kept by the caller; updated in place (the
+                robots' ``pose`` become views of its rows). Gathered from the robots when None.
+            vel: Their ``(n, 2)`` float64 achieved ``v, omega``, likewise.
 
         Returns:
             ``(n,)`` bool, True for each robot that touched something (it stopped before the contact).
@@ -321,15 +331,17 @@ class World2D:
         c = np.asarray(cmd, dtype=np.float64)
         if c.shape != (len(robots), 2):
             raise ValueError(f"drive_discs: cmd must have shape ({len(robots)}, 2), got {c.shape}")
-        poses = np.array([r.pose for r in robots], dtype=np.float64).reshape(-1, 3)
-        vel = np.array([(r.v, r.w) for r in robots], dtype=np.float64).reshape(-1, 2)
+        if poses is None:
+            poses = np.array([r.pose for r in robots], dtype=np.float64).reshape(-1, 3)
+        if vel is None:
+            vel = np.array([(r.v, r.w) for r in robots], dtype=np.float64).reshape(-1, 2)
         contact = np.zeros(len(robots), dtype=np.bool_)
         _drive_discs(poses, vel, c, limits, radius, rows, self.circles, self.capsules, dt, self.max_substep, contact)
         sync = any(r.radius <= 0 for r in self.robots)
+        speeds = vel.tolist()
         for k, r in enumerate(robots):
             r.pose = poses[k]
-            r.v = float(vel[k, 0])
-            r.w = float(vel[k, 1])
+            r.v, r.w = speeds[k]
             if sync:
                 self._sync(r, r.pose)
         return contact
