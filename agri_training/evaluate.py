@@ -23,6 +23,8 @@ import numpy as np
 import agri_envs
 from agri_baselines import list_policies, make_policy, policy_spec
 from agri_envs.scenarios import scenario as get_scenario
+from agri_training.multiagent import is_multiagent, is_parallel_env, run_chain_episode
+from agri_training.multiagent import make_env as make_multiagent_env
 from agri_training.stats import bootstrap_ci
 
 
@@ -120,6 +122,8 @@ def _jsonable(v: Any) -> Any:
 
 def run_episode(env: gym.Env[Any, Any], policy: Any, seed: int, trace_keys: tuple[str, ...] | None) -> dict[str, Any]:
     """One episode from ``reset(seed=seed)``: return, steps, final info and optionally the trace."""
+    if is_parallel_env(env):  # PettingZoo envs (the robot chain): per-agent dicts
+        return run_chain_episode(env, policy, seed, trace_keys)
     obs, info = env.reset(seed=seed)
     start = True
     state = None
@@ -251,7 +255,8 @@ def evaluate_level(
 ) -> dict[str, Any]:
     """Evaluate one set of env arguments (one level of a scenario)."""
     kwargs, privileged = resolve_env_kwargs(request, base)
-    env = gym.make(request.env_id, **kwargs)
+    multi = is_multiagent(request.env_id)  # PettingZoo envs are not Gymnasium ids
+    env: Any = make_multiagent_env(request.env_id, kwargs) if multi else gym.make(request.env_id, **kwargs)
     try:
         policy = load_policy(request.policy, env)
         trace_keys = tuple(env.unwrapped.metadata.get("trace_keys", ()))

@@ -234,7 +234,7 @@ class RobotChainEnv(ParallelEnv):  # type: ignore[misc]
             "max_strip_distance",
             "max_gap",
         ),
-        "trace_keys": ("positions", "strip_distance", "mean_strip_distance_now", "max_gap_now"),
+        "trace_keys": ("positions", "mean_strip_distance_now", "max_gap_now", "ghost_x", "ghost_y"),
     }
 
     def __init__(self, render_mode: str | None = None, **kwargs: Any) -> None:
