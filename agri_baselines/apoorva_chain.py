@@ -26,20 +26,29 @@ import numpy as np
 
 
 @numba.njit(cache=True)
-def _project(points: np.ndarray, cumulative: np.ndarray, x: float, y: float, k0: int, k1: int) -> float:
-    """Arc length of the point nearest to ``(x, y)`` on segments ``k0 .. k1 - 1`` of a polyline."""
+def _project(
+    points: np.ndarray, cumulative: np.ndarray, x: float, y: float, k0: int, k1: int, s_from: float, s_to: float
+) -> float:
+    """Arc length in ``[s_from, s_to]`` of the path point nearest to ``(x, y)`` (segments ``k0 .. k1 - 1``)."""
     best = math.inf
-    s_best = cumulative[k0]
+    s_best = max(s_from, cumulative[k0])
     for k in range(k0, k1):
         ax, ay = points[k, 0], points[k, 1]
         ex, ey = points[k + 1, 0] - ax, points[k + 1, 1] - ay
         l2 = ex * ex + ey * ey
-        t = 0.0 if l2 <= 1e-12 else min(1.0, max(0.0, ((x - ax) * ex + (y - ay) * ey) / l2))
+        length = math.sqrt(l2)
+        if length <= 1e-12:
+            continue
+        t_lo = max(0.0, (s_from - cumulative[k]) / length)
+        t_hi = min(1.0, (s_to - cumulative[k]) / length)
+        if t_lo > t_hi:
+            continue
+        t = min(t_hi, max(t_lo, ((x - ax) * ex + (y - ay) * ey) / l2))
         qx, qy = ax + t * ex - x, ay + t * ey - y
         d = qx * qx + qy * qy
         if d < best:
             best = d
-            s_best = cumulative[k] + t * math.sqrt(l2)
+            s_best = cumulative[k] + t * length
     return s_best
 
 
@@ -85,7 +94,7 @@ class Polyline:
         k1 = min(len(c) - 1, bisect.bisect_left(c, s_to) + 1)
         if k1 <= k0:
             return min(max(s_from, 0.0), self.length)
-        s = _project(self.points, self.cumulative, float(xy[0]), float(xy[1]), k0, k1)
+        s = _project(self.points, self.cumulative, float(xy[0]), float(xy[1]), k0, k1, s_from, s_to)
         return min(max(s, s_from), s_to)
 
 

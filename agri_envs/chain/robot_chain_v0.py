@@ -12,7 +12,6 @@ PettingZoo module: ``parallel_env`` (the native :class:`RobotChainEnv`), ``raw_e
 from __future__ import annotations
 
 import dataclasses
-import functools
 import math
 from pathlib import Path
 from typing import Any
@@ -280,14 +279,12 @@ class RobotChainEnv(ParallelEnv):  # type: ignore[misc]
         self.state_space = spaces.Box(-np.inf, np.inf, (5 * cfg.n_robots + 4 + 3 * n_dyn,), np.float32)
 
     # -- spaces ----------------------------------------------------------------------------------------
-    @functools.lru_cache(maxsize=None)  # noqa: B019 - the same space object for every agent (PettingZoo idiom)
     def observation_space(self, agent: str) -> spaces.Box:
-        """The observation space, shared by every agent."""
+        """The observation space, the same object for every agent (parameter sharing)."""
         return self._obs_space
 
-    @functools.lru_cache(maxsize=None)  # noqa: B019
     def action_space(self, agent: str) -> spaces.Box:
-        """The action space, shared by every agent."""
+        """The action space, the same object for every agent."""
         return self._act_space
 
     @property
@@ -323,11 +320,12 @@ class RobotChainEnv(ParallelEnv):  # type: ignore[misc]
     def reset(
         self, seed: int | None = None, options: dict[str, Any] | None = None
     ) -> tuple[dict[str, np.ndarray], dict[str, dict[str, Any]]]:
-        """New map (unless fixed), start, goal, A* path, chain placement and obstacle schedule."""
+        """New map (unless fixed), start, goal, A* path, chain placement and obstacle schedule.
+
+        ``options`` is accepted for API compatibility and unused (PettingZoo's API test passes some).
+        """
         if seed is not None or not hasattr(self, "np_random"):
             self.np_random = np.random.default_rng(seed)
-        if options:
-            raise ValueError(f"reset options {sorted(options)} unknown; robot_chain_v0 takes none")
         cfg = self.config
         rng = self.np_random
         inflation = cfg.robot_radius + cfg.planning_margin
