@@ -105,4 +105,7 @@ def run_chain_episode(env: Any, policy: Any, seed: int, trace_keys: tuple[str, .
         raw = env.unwrapped
         if hasattr(raw, "path"):
             trace["astar_path"] = np.round(raw.path.points, 4).tolist()
+        if getattr(raw, "world", None) is not None:  # obstacles dropped during the episode
+            movers = raw.world.mover_circles
+            trace["obstacles"] = movers[np.abs(movers[:, 0]) < 1e5].tolist()
     return {"record": _jsonable(record), "trace": _jsonable(trace) if trace else None}
