@@ -11,7 +11,8 @@ for the numba sensor kernels. Every robot is an obstacle to every other robot: e
 :attr:`World2D.circles` (a round robot its disc, a rectangular one its circumscribed circle, a
 conservative stand-in for the other robots' sensors and clearance; contact between rectangles is still
 exact through pymunk). A robot never senses itself: its sensors sit inside its own circle, which the
-sensor kernels skip, and its clearance skips its own row.
+sensor kernels skip, and its clearance skips its own row. A world with a single robot has no robot row at
+all, so single-robot envs pay nothing for this.
 """
 
 from __future__ import annotations
@@ -98,8 +99,9 @@ def _drive_discs(
         else:
             vel[k, 0], vel[k, 1] = v, w
         contact[k] = hit
-        circles[skip, 0] = x
-        circles[skip, 1] = y
+        if skip >= 0:
+            circles[skip, 0] = x
+            circles[skip, 1] = y
 
 
 @dataclasses.dataclass
@@ -114,7 +116,8 @@ class RobotBody:
         body: The kinematic pymunk body.
         shape: Its box (or disc) shape.
         radius: Disc radius of a round robot (m); 0 for a rectangular one.
-        circle_index: Its row in :attr:`World2D.circles` (what the other robots sense).
+        circle_index: Its row in :attr:`World2D.circles` (what the other robots sense); -1 while it is the
+            world's only robot.
     """
 
     spec: DiffDriveSpec
@@ -215,14 +218,10 @@ class World2D:
         shape: pymunk.Shape
         if radius is None:
             shape = pymunk.Poly.create_box(body, (spec.length, spec.width))
-            outline = spec.circumradius
         else:
             shape = pymunk.Circle(body, float(radius))
-            outline = float(radius)
         shape.filter = pymunk.ShapeFilter(group=_ROBOT_GROUP_BASE + len(self.robots))
         self.space.add(body, shape)
-        index = len(self.circles)
-        self.circles = np.vstack([self.circles, [[float(pose[0]), float(pose[1]), outline]]])
         robot = RobotBody(
             spec=spec,
             pose=np.array(pose, dtype=np.float64),
@@ -231,19 +230,27 @@ class World2D:
             body=body,
             shape=shape,
             radius=0.0 if radius is None else float(radius),
-            circle_index=index,
         )
-        self._sync(robot, robot.pose)
         self.robots.append(robot)
+        # A lone robot needs no row (nobody else could sense it): a one-robot world keeps exactly the
+        # arrays it had before robots could see each other. The second robot brings rows for everyone.
+        if len(self.robots) >= 2:
+            for r in self.robots:
+                if r.circle_index < 0:
+                    r.circle_index = len(self.circles)
+                    outline = r.radius if r.radius > 0 else r.spec.circumradius
+                    self.circles = np.vstack([self.circles, [[float(r.pose[0]), float(r.pose[1]), outline]]])
+        self._sync(robot, robot.pose)
         return robot
 
     def _sync(self, robot: RobotBody, pose: np.ndarray) -> None:
         robot.body.position = (float(pose[0]), float(pose[1]))
         robot.body.angle = float(pose[2])
         self.space.reindex_shapes_for_body(robot.body)
-        row = self.circles[robot.circle_index]
-        row[0] = pose[0]
-        row[1] = pose[1]
+        if robot.circle_index >= 0:
+            row = self.circles[robot.circle_index]
+            row[0] = pose[0]
+            row[1] = pose[1]
 
     def clearance(self, robot: RobotBody, pose: np.ndarray | None = None) -> float:
         """Distance (m) between the robot's footprint and the nearest obstacle or other robot (<= 0: contact)."""
@@ -274,8 +281,8 @@ class World2D:
 
     @property
     def robot_circles(self) -> np.ndarray:
-        """``(n_robots, 3)`` view of the robots' rows in :attr:`circles` (added last, in order)."""
-        if not self.robots:
+        """``(n_robots, 3)`` view of the robots' rows in :attr:`circles` (added last, in order; empty for one robot)."""
+        if len(self.robots) < 2:
             return self.circles[:0]
         return self.circles[self.robots[0].circle_index :]
 
