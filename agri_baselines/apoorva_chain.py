@@ -1,5 +1,4 @@
-"""Apoorva, Gautam & Kala 2018: a chain of robots driven by A*, a ghost robot, sonar potential fields and
-an elastic strip.
+"""Apoorva, Gautam & Kala 2018: a robot chain driven by A*, a ghost robot, sonar potential fields, a strip.
 
 The pure parts (no Gymnasium, no PettingZoo):
 
@@ -418,7 +417,8 @@ class ApoorvaChainPolicy:
             rep = sonar_repulsion(ranges[k], angles, heading[k], p.eta_rep, p.q_star, offset) if near else np.zeros(2)
             if k == 0:
                 # Alg. 4: the ghost (predecessor slot) attracts; the follower pulls or pushes.
-                ghost = xy[k] + np.array([c * rel_pred[k, 0] - s * rel_pred[k, 1], s * rel_pred[k, 0] + c * rel_pred[k, 1]])
+                rx, ry = rel_pred[k]
+                ghost = xy[k] + np.array([c * rx - s * ry, s * rx + c * ry])
                 force = attractive_force(xy[k], ghost, p.epsilon, p.d_star) + rep
                 if n > 1:
                     force += spacing_force(xy[k], xy[k + 1], p.d_s, p.leader_wait * p.epsilon, p.eta_rep, p.d_star)

@@ -30,8 +30,11 @@ def _less(f_a: float, h_a: float, f_b: float, h_b: float) -> bool:
 
 @numba.njit(cache=True)
 def _astar_kernel(blocked: np.ndarray, start: int, goal: int, parent: np.ndarray, g: np.ndarray) -> float:
-    """A* from flat cell ``start`` to ``goal``; fills ``parent`` and ``g`` (filled with inf by the caller)
-    and returns the path cost (inf: no path). ``goal = -1`` expands everything (Dijkstra, h = 0)."""
+    """A* from flat cell ``start`` to ``goal``; returns the path cost (inf: no path).
+
+    Fills ``parent`` and ``g`` (which the caller fills with inf). ``goal = -1`` expands every reachable cell
+    (Dijkstra, h = 0).
+    """
     h_rows, w_cols = blocked.shape
     n = h_rows * w_cols
     flat = blocked.ravel()

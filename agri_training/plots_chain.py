@@ -1,5 +1,7 @@
-"""Report section of robot_chain_v0: formation snapshots (Apoorva Fig. 8), straightness with and without the
-elastic strip, and the A* path on the map."""
+"""Report section of robot_chain_v0: formation snapshots (Fig. 8), straightness, the A* path on the map.
+
+Straightness is compared with and without the elastic strip (the two registered policies).
+"""
 
 from __future__ import annotations
 
@@ -75,8 +77,9 @@ def report_section(results: list[dict[str, Any]], out_dir: Path) -> str:
 
     for r in results:
         s = r["summary"]
+        label = r.get("label") or r.get("scenario") or "default"
         lines.append(
-            f"| {r['policy']} | {r.get('label') or r.get('scenario') or 'default'} | {fmt(s, 'success_rate', '{:.2f}')} "
+            f"| {r['policy']} | {label} | {fmt(s, 'success_rate', '{:.2f}')} "
             f"| {fmt(s, 'mean_mean_strip_distance')} | {fmt(s, 'mean_max_strip_distance')} | "
             f"{fmt(s, 'mean_max_gap')} | {fmt(s, 'mean_path_ratio')} | {fmt(s, 'mean_episode_time', '{:.1f}')} |"
         )

@@ -168,7 +168,8 @@ def main() -> None:
     print(f"{'VMAS navigation, 4 agents, 1 env, CPU':<48}{peer:>10.0f}{1.0:>8.1f}x")
     print()
     print(f"A* on 1000 x 1000 grids, (0, 0) -> (999, 999), best of {args.runs}: ms, path cost (cells), ours / peer")
-    print(f"{'grid':<22}{'ours ms':>10}{'cost':>9}{'tcod ms':>10}{'cost':>9}{'ratio':>9}{'MCP ms':>10}{'cost':>9}{'ratio':>9}")
+    head = ("ours ms", "cost", "tcod ms", "cost", "ratio", "MCP ms", "cost", "ratio")
+    print(f"{'grid':<22}" + "".join(f"{h:>{10 if 'ms' in h else 9}}" for h in head))
     for line in astar_table(args.runs):
         print(line)
     print(f"median of {args.runs} runs of {args.seconds} s; numpy {np.__version__}")

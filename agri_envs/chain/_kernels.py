@@ -51,8 +51,11 @@ def observe(
     out: np.ndarray,
     stats: np.ndarray,
 ) -> None:
-    """Fill ``out`` (n, 23) with every agent's observation (layout in the env docstring) and ``stats`` with
-    ``mean |strip distance|, max |strip distance|, max gap, gaps > max_gap, mean min(1, |gap - d_s| / d_s)``."""
+    """Fill ``out`` (n, 23) with every agent's observation (layout in the env docstring) and ``stats``.
+
+    ``stats``: mean and max distance to the strip, max gap, number of gaps above ``max_gap``, and the mean
+    of ``min(1, |gap - d_s| / d_s)``.
+    """
     n = poses.shape[0]
     signed = np.empty(n)
     strip_geometry(poses, signed)

@@ -92,7 +92,8 @@ class RobotChainConfig(StrictConfig):
         if self.scene == "map":
             if not self.map_yaml or not Path(self.map_yaml).is_file():
                 raise ValueError(
-                    f"RobotChainConfig: scene='map' needs map_yaml, an existing ROS map YAML file (got {self.map_yaml!r})."
+                    "RobotChainConfig: scene='map' needs map_yaml, an existing ROS map YAML file "
+                    f"(got {self.map_yaml!r})."
                 )
         elif self.map_yaml:
             raise ValueError("RobotChainConfig: map_yaml applies only to scene='map'.")
@@ -138,7 +139,7 @@ class RobotChainEnv(ParallelEnv):  # type: ignore[misc]
 
     | index | meaning | bounds |
     |---|---|---|
-    | 0-7 | sonar ranges / ``sonar_range``: left, left front, front left, front right, right front, right, right rear, left rear | [0, 1] |
+    | 0-7 | sonar ranges / ``sonar_range`` at 90, 41, 15, -15, -41, -90, -145, 145 deg | [0, 1] |
     | 8-9 | position ``(x, y)`` normalised by the map's bounds | [0, 1] |
     | 10-11 | ``sin(yaw)``, ``cos(yaw)`` | [-1, 1] |
     | 12-13 | predecessor in the robot's frame / 3 m (leader: the ghost) | [-1, 1] |
@@ -237,8 +238,8 @@ class RobotChainEnv(ParallelEnv):  # type: ignore[misc]
     }
 
     def __init__(self, render_mode: str | None = None, **kwargs: Any) -> None:
-        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
-            raise ValueError(f"render_mode must be one of {self.metadata['render_modes']} or None, got {render_mode!r}")
+        if render_mode is not None and render_mode not in ("rgb_array", "human"):
+            raise ValueError(f"render_mode must be one of ['rgb_array', 'human'] or None, got {render_mode!r}")
         self.config = RobotChainConfig.from_kwargs(kwargs)
         self.render_mode = render_mode
         cfg = self.config
@@ -343,7 +344,6 @@ class RobotChainEnv(ParallelEnv):  # type: ignore[misc]
         self._bounds = np.array([xmin, ymin, xmax, ymax])
         self.diagonal = math.hypot(xmax - xmin, ymax - ymin)
         start_cell, goal_cell, path_cells = self._plan(cmap, rng)
-        res = cmap.grid.resolution
         path_xy = cmap.centres(np.array(path_cells))
         self.astar_cells = np.array(path_cells)
         self.astar_length = float(np.hypot(*np.diff(path_xy, axis=0).T).sum()) if len(path_xy) > 1 else 0.0
@@ -492,7 +492,8 @@ class RobotChainEnv(ParallelEnv):  # type: ignore[misc]
                 if placed == n:
                     return positions
         raise ValueError(
-            f"robot_chain_v0: {n} robots do not fit on the free floor around the start; use fewer robots or a larger map"
+            f"robot_chain_v0: {n} robots do not fit on the free floor around the start; "
+            "use fewer robots or a larger map"
         )
 
     # -- stepping --------------------------------------------------------------------------------------
