@@ -132,3 +132,37 @@ register_policy(
         description="Luo 2018: energy-optimal harvesting order (eq. 11) and APF sampling path points (Alg. 1)",
     )
 )
+
+
+def astar(occupancy: np.ndarray, start: tuple[int, int], goal: tuple[int, int]) -> list[tuple[int, int]] | None:
+    """8-connected grid A* (Apoorva 2018, Alg. 1); see :func:`agri_baselines.grid_astar.astar`.
+
+    Args:
+        occupancy: ``(H, W)`` boolean array, True = blocked.
+        start: ``(row, col)`` start cell.
+        goal: ``(row, col)`` goal cell.
+
+    Returns:
+        The cells from start to goal, or None when there is no path.
+    """
+    from agri_baselines.grid_astar import astar as _astar  # numba is compiled only when A* is used
+
+    return _astar(occupancy, start, goal)
+
+
+register_policy(
+    PolicySpec(
+        name="apoorva-chain",
+        env_id="robot_chain_v0",
+        entry_point="agri_baselines.apoorva_chain:make_apoorva_chain",
+        description="Apoorva 2018: A* + ghost robot, sonar potential field, leader/follower chain, elastic strip",
+    )
+)
+register_policy(
+    PolicySpec(
+        name="apoorva-chain-no-strip",
+        env_id="robot_chain_v0",
+        entry_point="agri_baselines.apoorva_chain:make_apoorva_chain_no_strip",
+        description="apoorva-chain without the elastic strip (Alg. 6 off)",
+    )
+)

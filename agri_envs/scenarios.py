@@ -187,3 +187,14 @@ register_scenario(
         default_episodes=100,
     )
 )
+
+_CHAIN = "robot_chain_v0"
+register_scenario(
+    Scenario(
+        _CHAIN,
+        "office-chain",
+        {"n_robots": 4, "scene": "office", "n_dynamic_obstacles": 1},
+        "Apoorva sec. 5.3-5.4, Fig. 8: four Amigobot-like robots in a chain cross an office floor along the "
+        "leader's A* path; an obstacle drops onto the path ahead of the leader (Fig. 8d).",
+    )
+)

@@ -23,6 +23,7 @@ import numpy as np
 import agri_envs
 from agri_baselines import list_policies, make_policy, policy_spec
 from agri_envs.scenarios import scenario as get_scenario
+from agri_training.multiagent import is_parallel_env, run_chain_episode
 from agri_training.parallel import EpisodeJob, run_episodes
 from agri_training.stats import format_interval, iqm, rate_interval, stratified_bootstrap_ci
 
@@ -123,6 +124,8 @@ def _jsonable(v: Any) -> Any:
 
 def run_episode(env: gym.Env[Any, Any], policy: Any, seed: int, trace_keys: tuple[str, ...] | None) -> dict[str, Any]:
     """One episode from ``reset(seed=seed)``: return, steps, final info and optionally the trace."""
+    if is_parallel_env(env):  # PettingZoo envs (the robot chain): per-agent dicts
+        return run_chain_episode(env, policy, seed, trace_keys)
     obs, info = env.reset(seed=seed)
     start = True
     state = None

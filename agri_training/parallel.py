@@ -114,8 +114,10 @@ def _env_for(job: EpisodeJob) -> tuple[gym.Env[Any, Any], tuple[str, ...]]:
         return _CACHE[key]
     while len(_CACHE) >= _CACHE_SIZE:
         _CACHE.popitem(last=False)[1][0].close()
-    env = gym.make(job.env_id, **job.env_kwargs)
-    _CACHE[key] = (env, tuple(env.unwrapped.metadata.get("trace_keys", ())))
+    from agri_training.multiagent import is_multiagent, make_env
+
+    env: Any = make_env(job.env_id, job.env_kwargs) if is_multiagent(job.env_id) else gym.make(job.env_id, **job.env_kwargs)
+    _CACHE[key] = (env, tuple(getattr(env, "unwrapped", env).metadata.get("trace_keys", ())))
     return _CACHE[key]
 
 

@@ -34,6 +34,7 @@ from agri_training.stats import newcombe_interval, paired_comparison, wilson_int
 SECTION_HOOKS: dict[str, str] = {
     "agri_envs/GreenhouseNav-v1": "agri_training.plots_rover:report_section",
     "agri_envs/GrapeHarvest-v1": "agri_training.plots_arm:report_section",
+    "robot_chain_v0": "agri_training.plots_chain:report_section",
 }
 
 #: Success rates the papers report, as (successes, trials, source), per suite name: our rate is compared

@@ -182,7 +182,7 @@ def cast_scan(
 
 
 @numba.njit(cache=True)
-def sonar_ranges(
+def _sonar_body(
     body_x: float,
     body_y: float,
     body_yaw: float,
@@ -191,25 +191,10 @@ def sonar_ranges(
     max_range: float,
     circles: np.ndarray,
     capsules: np.ndarray,
+    skip: int,
     out: np.ndarray,
 ) -> None:
-    """Nearest echo inside each sonar's cone (not a single ray), written into ``out``.
-
-    For a convex obstacle, the point nearest to the sonar inside the cone is either the obstacle's
-    nearest point overall (when that lies inside the cone) or lies on one of the cone's two edge rays;
-    both are computed exactly, so the result is the true nearest echo within the cone.
-
-    Args:
-        body_x: x of the body carrying the sonars (m).
-        body_y: y of the body (m).
-        body_yaw: Heading of the body (rad).
-        mounts: ``(k, 3)`` sonar ``x, y, yaw`` in the body frame.
-        half_aperture: Half the cone's opening angle (rad).
-        max_range: Returned when nothing lies in the cone within range (m).
-        circles: ``(n_c, 3)`` circles.
-        capsules: ``(n_s, 5)`` capsules.
-        out: ``(k,)`` output distances (m).
-    """
+    """:func:`sonar_ranges` for one body, ignoring circle ``skip`` (the body itself; -1: none)."""
     ex_x = math.cos(half_aperture)
     ex_y = math.sin(half_aperture)
     cb = math.cos(body_yaw)
@@ -221,6 +206,8 @@ def sonar_ranges(
         sh = math.sin(body_yaw + mounts[j, 2])
         best = max_range
         for i in range(circles.shape[0]):
+            if i == skip:
+                continue
             wx = circles[i, 0] - ox
             wy = circles[i, 1] - oy
             r = circles[i, 2]
@@ -251,6 +238,69 @@ def sonar_ranges(
             t2 = _ray_capsule(ax, ay, bx, by, r, ex_x, -ex_y)
             best = min(best, t1, t2)
         out[j] = best
+
+
+@numba.njit(cache=True)
+def sonar_ranges(
+    body_x: float,
+    body_y: float,
+    body_yaw: float,
+    mounts: np.ndarray,
+    half_aperture: float,
+    max_range: float,
+    circles: np.ndarray,
+    capsules: np.ndarray,
+    out: np.ndarray,
+) -> None:
+    """Nearest echo inside each sonar's cone (not a single ray), written into ``out``.
+
+    For a convex obstacle, the point nearest to the sonar inside the cone is either the obstacle's
+    nearest point overall (when that lies inside the cone) or lies on one of the cone's two edge rays;
+    both are computed exactly, so the result is the true nearest echo within the cone. A circle that
+    contains the sonar (the robot's own body in :class:`~agri_envs.sim2d.world.World2D`, whose sonars sit
+    just inside its outline) gives no echo.
+
+    Args:
+        body_x: x of the body carrying the sonars (m).
+        body_y: y of the body (m).
+        body_yaw: Heading of the body (rad).
+        mounts: ``(k, 3)`` sonar ``x, y, yaw`` in the body frame.
+        half_aperture: Half the cone's opening angle (rad).
+        max_range: Returned when nothing lies in the cone within range (m).
+        circles: ``(n_c, 3)`` circles.
+        capsules: ``(n_s, 5)`` capsules.
+        out: ``(k,)`` output distances (m).
+    """
+    _sonar_body(body_x, body_y, body_yaw, mounts, half_aperture, max_range, circles, capsules, -1, out)
+
+
+@numba.njit(cache=True)
+def sonar_ranges_many(
+    poses: np.ndarray,
+    mounts: np.ndarray,
+    half_aperture: float,
+    max_range: float,
+    circles: np.ndarray,
+    capsules: np.ndarray,
+    skip: np.ndarray,
+    out: np.ndarray,
+) -> None:
+    """:func:`sonar_ranges` for many identical bodies in one call (a robot team).
+
+    Args:
+        poses: ``(n, 3)`` body poses ``x, y, yaw``.
+        mounts: ``(k, 3)`` sonar mounts in the body frame (the same on every body).
+        half_aperture: Half the cone's opening angle (rad).
+        max_range: Returned when nothing lies in a cone within range (m).
+        circles: ``(n_c, 3)`` circles (the bodies themselves among them).
+        capsules: ``(n_s, 5)`` capsules.
+        skip: ``(n,)`` row of ``circles`` that is body ``b`` itself (never sensed by its own sonars), -1: none.
+        out: ``(n, k)`` output distances (m).
+    """
+    for b in range(poses.shape[0]):
+        _sonar_body(
+            poses[b, 0], poses[b, 1], poses[b, 2], mounts, half_aperture, max_range, circles, capsules, skip[b], out[b]
+        )
 
 
 @numba.njit(cache=True, inline="always")
@@ -296,6 +346,7 @@ def footprint_clearance(
     half_width: float,
     circles: np.ndarray,
     capsules: np.ndarray,
+    skip: int = -1,
 ) -> float:
     """Smallest distance (m) between a rectangular footprint and any obstacle; <= 0 means contact.
 
@@ -307,6 +358,7 @@ def footprint_clearance(
         half_width: Half the footprint's width (m).
         circles: ``(n_c, 3)`` circles.
         capsules: ``(n_s, 5)`` capsules.
+        skip: Row of ``circles`` to ignore (the footprint's own body in a multi-robot world); -1: none.
 
     Returns:
         The clearance, ``inf`` when there are no obstacles.
@@ -316,6 +368,8 @@ def footprint_clearance(
     circ = math.sqrt(half_length * half_length + half_width * half_width)
     best = math.inf
     for i in range(circles.shape[0]):
+        if i == skip:
+            continue
         wx = circles[i, 0] - px
         wy = circles[i, 1] - py
         r = circles[i, 2]
@@ -346,4 +400,44 @@ def footprint_clearance(
             qx, qy = _closest_on_segment(ax - cx, ay - cy, bx - cx, by - cy)
             d = min(d, math.sqrt(qx * qx + qy * qy))
         best = min(best, d - r)
+    return best
+
+
+@numba.njit(cache=True)
+def disc_clearance(
+    px: float, py: float, radius: float, circles: np.ndarray, capsules: np.ndarray, skip: int = -1
+) -> float:
+    """Smallest distance (m) between a disc (a round robot) and any obstacle; <= 0 means contact.
+
+    Args:
+        px: Disc centre x (m).
+        py: Disc centre y (m).
+        radius: Disc radius (m).
+        circles: ``(n_c, 3)`` circles.
+        capsules: ``(n_s, 5)`` capsules.
+        skip: Row of ``circles`` to ignore (the disc's own body); -1: none.
+
+    Returns:
+        The clearance, ``inf`` when there are no obstacles.
+    """
+    best = math.inf
+    for i in range(circles.shape[0]):
+        if i == skip:
+            continue
+        wx = circles[i, 0] - px
+        wy = circles[i, 1] - py
+        r = circles[i, 2] + radius
+        if abs(wx) - r >= best or abs(wy) - r >= best:
+            continue
+        best = min(best, math.sqrt(wx * wx + wy * wy) - r)
+    for i in range(capsules.shape[0]):
+        ax = capsules[i, 0] - px
+        ay = capsules[i, 1] - py
+        bx = capsules[i, 2] - px
+        by = capsules[i, 3] - py
+        r = capsules[i, 4] + radius
+        if min(ax, bx) - r >= best or -max(ax, bx) - r >= best or min(ay, by) - r >= best or -max(ay, by) - r >= best:
+            continue
+        qx, qy = _closest_on_segment(ax, ay, bx, by)
+        best = min(best, math.sqrt(qx * qx + qy * qy) - r)
     return best

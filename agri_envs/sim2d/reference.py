@@ -54,3 +54,11 @@ def reference_sonar(
     """Nearest echo in a cone, approximated by a dense fan of rays (converges to the exact value)."""
     angles = heading + np.linspace(-half_aperture, half_aperture, n_rays)
     return float(min(reference_ray(space, x, y, float(a), max_range) for a in angles))
+
+
+def reference_disc_clearance(space: pymunk.Space, x: float, y: float, radius: float) -> float:
+    """Distance (m) from a disc of ``radius`` at ``(x, y)`` to the nearest shape of ``space`` (pymunk's query)."""
+    hit = space.point_query_nearest((x, y), 1e9, pymunk.ShapeFilter())
+    if hit is None:
+        return math.inf
+    return float(hit.distance) - radius

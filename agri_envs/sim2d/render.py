@@ -168,6 +168,25 @@ class TopDownRenderer:
             label = self._font.render(str(i), True, COLOURS["text"])
             self.surface.blit(label, (p[0] + 8, p[1] - 18))
 
+    def polyline(self, points: np.ndarray, colour: tuple[int, int, int], width: int = 2) -> None:
+        """Draw an open polyline ``(k, 2)`` (m) in an RGB colour (planned paths, the elastic strip)."""
+        if len(points) >= 2:
+            self._pg.draw.lines(self.surface, colour, False, [self.to_px(*p[:2]) for p in points], width)
+
+    def ring(self, x: float, y: float, radius: float, colour: tuple[int, int, int], width: int = 2) -> None:
+        """Draw a circle outline of ``radius`` (m) at ``(x, y)`` (goals, ghost points)."""
+        self._pg.draw.circle(self.surface, colour, self.to_px(x, y), self._px_len(radius), width)
+
+    def round_robots(self, poses: np.ndarray, radius: float) -> None:
+        """Draw round robots ``(n, 3)`` with a heading mark; the first (a leader) in a darker shade."""
+        for k, (x, y, th) in enumerate(np.asarray(poses, dtype=np.float64).reshape(-1, 3)):
+            colour = (20, 50, 130) if k == 0 else COLOURS[Kind.ROBOT]
+            centre = self.to_px(x, y)
+            self._pg.draw.circle(self.surface, colour, centre, self._px_len(radius))
+            self._pg.draw.circle(self.surface, (0, 0, 0), centre, self._px_len(radius), 1)
+            nose = self.to_px(x + radius * math.cos(th), y + radius * math.sin(th))
+            self._pg.draw.line(self.surface, (255, 255, 255), centre, nose, 2)
+
     def text(self, lines: Sequence[str]) -> None:
         """Write status lines in the top-left corner."""
         for i, line in enumerate(lines):

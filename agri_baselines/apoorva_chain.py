@@ -1,0 +1,469 @@
+"""Apoorva, Gautam & Kala 2018: a robot chain driven by A*, a ghost robot, sonar potential fields, a strip.
+
+The pure parts (no Gymnasium, no PettingZoo):
+
+* :class:`Polyline` and :class:`GhostRobot`: the ghost that runs along the A* path ahead of the leader
+  (sec. 4.4: pseudo speed ``v_F``, back speed ``v_B``, leash ``eta``, patience ``T``);
+* :func:`attractive_force` (eq. 2) and :func:`sonar_repulsion` (eq. 4 with the sonar form of Alg. 3);
+* :func:`leader_force` (Alg. 4), :func:`follower_force` (Alg. 5), :func:`strip_forces` (Alg. 6);
+* :func:`force_to_command`: the proportional controller of Alg. 2, with the equipotential escape of
+  sec. 6.1 (a small tangential push when the forces cancel).
+
+:class:`ApoorvaChainPolicy` puts them together as one multi-agent policy whose ``predict`` takes and
+returns per-agent dicts (the central system of sec. 6.2 computes every robot's command).
+"""
+
+from __future__ import annotations
+
+import bisect
+import dataclasses
+import math
+from typing import Any
+
+import numba
+import numpy as np
+
+
+@numba.njit(cache=True)
+def _project(
+    points: np.ndarray, cumulative: np.ndarray, x: float, y: float, k0: int, k1: int, s_from: float, s_to: float
+) -> float:
+    """Arc length in ``[s_from, s_to]`` of the path point nearest to ``(x, y)`` (segments ``k0 .. k1 - 1``)."""
+    best = math.inf
+    s_best = max(s_from, cumulative[k0])
+    for k in range(k0, k1):
+        ax, ay = points[k, 0], points[k, 1]
+        ex, ey = points[k + 1, 0] - ax, points[k + 1, 1] - ay
+        l2 = ex * ex + ey * ey
+        length = math.sqrt(l2)
+        if length <= 1e-12:
+            continue
+        t_lo = max(0.0, (s_from - cumulative[k]) / length)
+        t_hi = min(1.0, (s_to - cumulative[k]) / length)
+        if t_lo > t_hi:
+            continue
+        t = min(t_hi, max(t_lo, ((x - ax) * ex + (y - ay) * ey) / l2))
+        qx, qy = ax + t * ex - x, ay + t * ey - y
+        d = qx * qx + qy * qy
+        if d < best:
+            best = d
+            s_best = cumulative[k] + t * length
+    return s_best
+
+
+class Polyline:
+    """A path parametrised by arc length.
+
+    Args:
+        points: ``(k, 2)`` vertices (m), ``k >= 1``.
+    """
+
+    def __init__(self, points: np.ndarray) -> None:
+        p = np.asarray(points, dtype=np.float64).reshape(-1, 2)
+        if len(p) == 0:
+            raise ValueError("Polyline: needs at least one point")
+        if len(p) == 1:
+            p = np.vstack([p, p])
+        self.points = p
+        seg = np.hypot(*np.diff(p, axis=0).T)
+        self.cumulative = np.concatenate([[0.0], np.cumsum(seg)])
+        self.length = float(self.cumulative[-1])
+        self._cum = self.cumulative.tolist()
+        self._pts = [(float(a), float(b)) for a, b in p]
+
+    def at(self, s: float) -> np.ndarray:
+        """Point at arc length ``s`` (clamped to the ends)."""
+        x, y = self.xy_at(s)
+        return np.array([x, y])
+
+    def xy_at(self, s: float) -> tuple[float, float]:
+        """:meth:`at` as two floats."""
+        c = self._cum
+        s = min(max(s, 0.0), self.length)
+        k = min(max(bisect.bisect_right(c, s) - 1, 0), len(c) - 2)
+        span = c[k + 1] - c[k]
+        t = 0.0 if span <= 0 else (s - c[k]) / span
+        (ax, ay), (bx, by) = self._pts[k], self._pts[k + 1]
+        return ax + t * (bx - ax), ay + t * (by - ay)
+
+    def project(self, xy: np.ndarray, s_from: float, s_to: float) -> float:
+        """Arc length of the point of the path nearest to ``xy``, searched between ``s_from`` and ``s_to``."""
+        c = self._cum
+        k0 = max(0, bisect.bisect_right(c, s_from) - 1)
+        k1 = min(len(c) - 1, bisect.bisect_left(c, s_to) + 1)
+        if k1 <= k0:
+            return min(max(s_from, 0.0), self.length)
+        s = _project(self.points, self.cumulative, float(xy[0]), float(xy[1]), k0, k1, s_from, s_to)
+        return min(max(s, s_from), s_to)
+
+
+@dataclasses.dataclass(frozen=True)
+class GhostParams:
+    """The ghost robot of sec. 4.4.
+
+    Attributes:
+        v_forward: ``v_F``, pseudo speed along the A* path (m/s).
+        v_back: ``v_B``, speed at which the ghost comes back when the leader is stuck (m/s).
+        eta: ``eta``, the ghost waits while the leader is farther than this (m).
+        patience: ``T``, time the leader may stay beyond ``eta`` before the ghost comes back (s).
+        window: How far ahead of its last projection the leader's nearest path point is searched (m).
+    """
+
+    v_forward: float = 0.4
+    v_back: float = 0.2
+    eta: float = 0.8
+    patience: float = 2.0
+    window: float = 1.5
+
+    def __post_init__(self) -> None:
+        for name in ("v_forward", "eta", "window"):
+            if not getattr(self, name) > 0:
+                raise ValueError(f"GhostParams: {name} must be > 0, got {getattr(self, name)}")
+        if self.v_back < 0 or self.patience < 0:
+            raise ValueError("GhostParams: v_back and patience must be >= 0")
+
+
+class GhostRobot:
+    """A point that runs along the A* path ahead of the leader (Alg. 4, part a).
+
+    Args:
+        path: The A* path.
+        params: Speeds and thresholds.
+        dt: Control period (s).
+    """
+
+    def __init__(self, path: Polyline, params: GhostParams, dt: float) -> None:
+        self.path = path
+        self.params = params
+        self.dt = dt
+        self.s = 0.0
+        self.s_leader = 0.0
+        self._waited = 0.0
+
+    def reset(self, leader_xy: np.ndarray) -> None:
+        """Put the ghost on the path point nearest to the leader (``s = argmin d(tau_A(s), q_1)``)."""
+        self.s_leader = self.path.project(np.asarray(leader_xy, dtype=np.float64), 0.0, self.params.window)
+        self.s = self.s_leader
+        self._waited = 0.0
+
+    @property
+    def point(self) -> np.ndarray:
+        """The ghost's position ``g = tau_A(s)``."""
+        return self.path.at(self.s)
+
+    @property
+    def xy(self) -> tuple[float, float]:
+        """:attr:`point` as two floats."""
+        return self.path.xy_at(self.s)
+
+    def update(self, leader_xy: np.ndarray) -> np.ndarray:
+        """Advance (``+v_F``), hold, or come back (``-v_B`` after ``T``), and return the new ``g``."""
+        p = self.params
+        xy = np.asarray(leader_xy, dtype=np.float64)
+        # The leader's own place on the path, searched forward from where it was (delta(s) > 0).
+        self.s_leader = self.path.project(xy, self.s_leader, self.s_leader + p.window)
+        gx, gy = self.path.xy_at(self.s)
+        if math.hypot(gx - xy[0], gy - xy[1]) > p.eta:
+            if self._waited > p.patience:
+                self.s -= p.v_back * self.dt
+            else:
+                self._waited += self.dt
+        else:
+            self.s += p.v_forward * self.dt
+            self._waited = 0.0
+        self.s = min(max(self.s, self.s_leader), self.path.length)
+        return self.path.at(self.s)
+
+
+# ----------------------------------------------------------------------------------------------------
+# Potential field (eqs. 1-4, Algs. 2-3)
+# ----------------------------------------------------------------------------------------------------
+
+
+def attractive_force(q: np.ndarray, goal: np.ndarray, epsilon: float, d_star: float) -> np.ndarray:
+    """``-grad U_att`` of eq. 2: quadratic (``epsilon (g - q)``) within ``d_star``, conic (constant size) beyond.
+
+    Args:
+        q: Robot position ``(2,)``.
+        goal: Goal position ``(2,)``.
+        epsilon: Attraction gain.
+        d_star: ``d*_goal``, where the potential switches from quadratic to conic (m).
+
+    Returns:
+        The force ``(2,)`` pointing at the goal.
+    """
+    diff = np.asarray(goal, dtype=np.float64) - np.asarray(q, dtype=np.float64)
+    d = math.hypot(diff[0], diff[1])
+    if d <= d_star:
+        return epsilon * diff
+    return d_star * epsilon * diff / d
+
+
+def repulsive_magnitude(d: np.ndarray, eta: float, q_star: float) -> np.ndarray:
+    """Size of eq. 4's repulsion for obstacle distances ``d``: ``eta (1/d - 1/Q*) / d^2`` within ``Q*``, else 0.
+
+    (Eq. 4 gives the gradient ``eta (1/Q* - 1/D) / D^2 grad D``; the force is its negative, pointing away
+    from the obstacle.)
+    """
+    d = np.maximum(np.asarray(d, dtype=np.float64), 1e-3)
+    return np.where(d <= q_star, eta * (1.0 / d - 1.0 / q_star) / (d * d), 0.0)
+
+
+def sonar_repulsion(
+    ranges: np.ndarray, sonar_angles: np.ndarray, heading: float, eta: float, q_star: float, offset: float = 0.0
+) -> np.ndarray:
+    """Sum of the repulsive forces of every sonar echo (Alg. 3), in the world frame.
+
+    Each sonar ``i`` with reading ``d_i`` at mount angle ``alpha_i`` pushes the robot along
+    ``-u(alpha_i)``, rotated into the world by the robot's heading ``R(q_theta)``.
+
+    Args:
+        ranges: Sonar readings (m).
+        sonar_angles: Mount angles in the robot frame (rad).
+        heading: Robot heading (rad).
+        eta: Repulsion gain.
+        q_star: ``Q*``, echoes farther than this are ignored (m).
+        offset: Distance from the robot centre to the sonar (added to each reading, m).
+
+    Returns:
+        The force ``(2,)``.
+    """
+    mag = repulsive_magnitude(np.asarray(ranges) + offset, eta, q_star + offset)
+    a = np.asarray(sonar_angles) + heading
+    return np.array([-(mag * np.cos(a)).sum(), -(mag * np.sin(a)).sum()])
+
+
+def spacing_force(
+    q: np.ndarray, other: np.ndarray, d_s: float, epsilon: float, eta: float, d_star: float = 0.6
+) -> np.ndarray:
+    """Force from a chain neighbour (Algs. 4b, 5a): attraction beyond ``d_s`` (eq. 2), repulsion within it.
+
+    The attraction is eq. 2's toward ``other`` scaled by ``(d - d_s) / d``, and the repulsion eq. 4's with
+    ``Q* = d_s``, so the force is continuous (zero) at ``d_s``.
+    """
+    diff = np.asarray(other, dtype=np.float64) - np.asarray(q, dtype=np.float64)
+    d = math.hypot(diff[0], diff[1])
+    if d < 1e-9:
+        return np.zeros(2)
+    if d > d_s:
+        return attractive_force(q, other, epsilon, d_star) * (d - d_s) / d
+    return -float(repulsive_magnitude(np.array([d]), eta, d_s)[0]) * diff / d
+
+
+def strip_forces(positions: np.ndarray, gain: float, max_force: float) -> np.ndarray:
+    """Elastic strip (Alg. 6): pull every robot toward the line from the first to the last robot.
+
+    ``Force = Distance * Fix_force``, directed from the robot to its foot point on the strip (capped at
+    ``max_force``: the strip must not overpower obstacle repulsion).
+
+    Args:
+        positions: ``(n, 2)`` robot positions, leader first.
+        gain: ``Fix_force`` (1/s^2-like gain, force per metre).
+        max_force: Cap on the size of each force.
+
+    Returns:
+        ``(n, 2)`` forces (zero for the first and the last robot, which define the strip).
+    """
+    p = np.asarray(positions, dtype=np.float64)
+    out = np.zeros_like(p)
+    if len(p) < 3:
+        return out
+    a, b = p[0], p[-1]
+    e = b - a
+    l2 = float(e @ e)
+    t = np.clip(((p - a) @ e) / l2, 0.0, 1.0) if l2 > 1e-12 else np.zeros(len(p))
+    foot = a + t[:, None] * e
+    pull = gain * (foot - p)
+    size = np.hypot(pull[:, 0], pull[:, 1])
+    scale = np.minimum(1.0, max_force / np.maximum(size, 1e-12))
+    out = pull * scale[:, None]
+    out[0] = 0.0
+    out[-1] = 0.0
+    return out
+
+
+def strip_distances(positions: np.ndarray) -> np.ndarray:
+    """Distance (m) of every robot to the strip segment between the first and the last robot."""
+    p = np.asarray(positions, dtype=np.float64)
+    if len(p) < 3:
+        return np.zeros(len(p))
+    a, b = p[0], p[-1]
+    e = b - a
+    l2 = float(e @ e)
+    t = np.clip(((p - a) @ e) / l2, 0.0, 1.0) if l2 > 1e-12 else np.zeros(len(p))
+    foot = a + t[:, None] * e
+    return np.hypot(*(p - foot).T)
+
+
+@dataclasses.dataclass(frozen=True)
+class ApoorvaParams:
+    """Gains and thresholds of the chain controller (symbols of the paper).
+
+    Attributes:
+        epsilon: Attraction gain of eq. 2.
+        d_star: ``d*_goal`` of eqs. 1-2 (m).
+        eta_rep: Repulsion gain ``eta`` of eqs. 3-4.
+        q_star: ``Q*``, sonar echoes beyond it are ignored (m).
+        d_apf: ``d_APF``: with every echo farther than this the leader only follows the ghost (m).
+        d_s: Desired spacing between neighbours (m).
+        delta: ``Delta``: a robot stops while its follower is farther than this (m).
+        spacing_gain: Attraction gain toward the predecessor (followers) / successor (leader).
+        strip_gain: ``Fix_force`` of Alg. 6 (0: no strip).
+        strip_max: Cap on the strip force.
+        kp_v: ``k_p^1`` of Alg. 2 (1/s): speed per metre of ``d(q, q')``.
+        kp_w: ``k_p^2`` of Alg. 2 (1/s): turn rate per radian of heading error.
+        escape: Size of the tangential push that leaves an equipotential point (sec. 6.1).
+        escape_below: Net force size under which the robot counts as stuck in an equipotential region.
+        lookahead: Followers aim this far ahead of themselves along their predecessor's trail (m).
+        leader_wait: Relative gain of the follower's pull on the leader (Alg. 4b).
+    """
+
+    epsilon: float = 1.0
+    d_star: float = 0.6
+    eta_rep: float = 0.02
+    q_star: float = 0.45
+    d_apf: float = 0.45
+    d_s: float = 0.55
+    delta: float = 1.2
+    spacing_gain: float = 1.0
+    strip_gain: float = 0.8
+    strip_max: float = 0.25
+    kp_v: float = 1.2
+    kp_w: float = 2.5
+    escape: float = 0.15
+    escape_below: float = 0.05
+    lookahead: float = 0.45
+    leader_wait: float = 0.5
+
+
+def force_to_command(
+    force: np.ndarray, heading: float, kp_v: float, kp_w: float, max_v: float, max_w: float
+) -> tuple[float, float]:
+    """Alg. 2's proportional controller: ``q' = q + F``, ``v = k_p^1 d(q, q')``, ``omega = k_p^2 theta_e``.
+
+    The speed is scaled by ``cos theta_e`` (and is zero when the target lies behind), so a robot turns
+    toward ``q'`` before it drives there instead of sweeping sideways into obstacles.
+    """
+    size = math.hypot(force[0], force[1])
+    if size < 1e-9:
+        return 0.0, 0.0
+    theta_e = math.atan2(force[1], force[0]) - heading
+    theta_e = math.atan2(math.sin(theta_e), math.cos(theta_e))
+    v = kp_v * size * max(0.0, math.cos(theta_e))
+    w = kp_w * theta_e
+    return min(v, max_v), max(-max_w, min(max_w, w))
+
+
+class ApoorvaChainPolicy:
+    """The whole chain controller as one multi-agent policy over ``robot_chain_v0`` observations.
+
+    ``predict`` takes ``{agent: observation}`` and returns ``({agent: action}, state)``. It reads from each
+    observation the robot's sonar, its pose, its neighbours' relative positions and (leader) the ghost;
+    the env's fixed description (sonar mounts, scales, limits) comes from the env at construction. The
+    followers aim at their predecessor's recent trail ("fetching its previous position", sec. 8), which
+    the central system records from the observed poses.
+
+    Args:
+        env: The (unwrapped-able) ``robot_chain_v0`` env.
+        params: Controller gains; default :class:`ApoorvaParams`.
+        use_strip: Apply the elastic strip (Alg. 6).
+    """
+
+    def __init__(self, env: Any, params: ApoorvaParams | None = None, use_strip: bool = True) -> None:
+        raw = env.unwrapped if hasattr(env, "unwrapped") else env
+        self.env = raw
+        self.spec = raw.observation_layout()
+        self.params = params or ApoorvaParams(d_s=raw.config.spacing, delta=raw.config.max_gap)
+        self.use_strip = use_strip
+        self.trails: dict[str, list[np.ndarray]] = {}
+
+    def reset(self) -> None:
+        """Forget the recorded trails (a new episode)."""
+        self.trails = {}
+
+    def predict(
+        self,
+        observation: dict[str, np.ndarray],
+        state: Any = None,
+        episode_start: np.ndarray | None = None,
+        deterministic: bool = True,
+    ) -> tuple[dict[str, np.ndarray], Any]:
+        """Commands for every agent in ``observation`` (actions in ``[-1, 1]^2``)."""
+        if episode_start is not None and bool(np.asarray(episode_start).any()):
+            self.reset()
+        spec = self.spec
+        p = self.params
+        agents = sorted(observation, key=lambda a: int(a.rsplit("_", 1)[1]))
+        n = len(agents)
+        obs = np.stack([np.asarray(observation[a], dtype=np.float64) for a in agents])
+        ranges = obs[:, spec["sonar"]] * spec["sonar_max_range"]
+        bounds = self.env.map_bounds  # the map is known (sec. 4.1); observations 8-9 are scaled by it
+        xy = obs[:, spec["xy"]] * (bounds[2:] - bounds[:2]) + bounds[:2]
+        heading = np.arctan2(obs[:, spec["sin_yaw"]], obs[:, spec["cos_yaw"]])
+        rel_pred = obs[:, spec["predecessor"]] * spec["rel_scale"]
+        for k, a in enumerate(agents):
+            trail = self.trails.setdefault(a, [])
+            if not trail or math.hypot(*(trail[-1] - xy[k])) > 0.02:
+                trail.append(xy[k].copy())
+                if len(trail) > 400:
+                    del trail[:200]
+        strip = strip_forces(xy, p.strip_gain, p.strip_max) if self.use_strip and n >= 3 else np.zeros((n, 2))
+        angles = spec["sonar_angles"]
+        offset = spec["sonar_offset"]
+        actions: dict[str, np.ndarray] = {}
+        for k, a in enumerate(agents):
+            c, s = math.cos(heading[k]), math.sin(heading[k])
+            near = bool(np.any(ranges[k] < p.d_apf))
+            rep = sonar_repulsion(ranges[k], angles, heading[k], p.eta_rep, p.q_star, offset) if near else np.zeros(2)
+            if k == 0:
+                # Alg. 4: the ghost (predecessor slot) attracts; the follower pulls or pushes.
+                rx, ry = rel_pred[k]
+                ghost = xy[k] + np.array([c * rx - s * ry, s * rx + c * ry])
+                force = attractive_force(xy[k], ghost, p.epsilon, p.d_star) + rep
+                if n > 1:
+                    force += spacing_force(xy[k], xy[k + 1], p.d_s, p.leader_wait * p.epsilon, p.eta_rep, p.d_star)
+            else:
+                # Alg. 5 (attraction to q_{i-1}, the printed q_2 is a slip), along q_{i-1}'s own trail.
+                target = self._trail_target(agents[k - 1], xy[k - 1], xy[k])
+                force = spacing_force(xy[k], xy[k - 1], p.d_s, 0.0, p.eta_rep) + rep
+                if target is not None:
+                    force += p.spacing_gain * attractive_force(xy[k], target, p.epsilon, p.d_star)
+            force = force + strip[k]
+            # Sec. 6.1: equipotential point (forces cancel, target not reached): a small tangential push.
+            if near and math.hypot(*force) < p.escape_below:
+                force = force + p.escape * np.array([-s, c])
+            v, w = force_to_command(force, float(heading[k]), p.kp_v, p.kp_w, spec["max_speed"], spec["max_turn_rate"])
+            # Stop while the follower is farther than Delta (Algs. 4-5).
+            if k + 1 < n and math.hypot(*(xy[k + 1] - xy[k])) > p.delta:
+                v, w = 0.0, 0.0
+            actions[a] = np.array([v / spec["max_speed"], w / spec["max_turn_rate"]], dtype=np.float32)
+        return actions, state
+
+    def _trail_target(self, agent: str, position: np.ndarray, me: np.ndarray) -> np.ndarray | None:
+        """Where a follower aims on its predecessor's recorded trail (sec. 8: "fetching its previous position").
+
+        The follower's nearest trail point, moved ``lookahead`` metres on along the trail but never closer
+        than ``d_s`` (along the trail) to the predecessor; None when the follower is already that close.
+        """
+        p = self.params
+        trail = self.trails.get(agent)
+        if not trail:
+            return None
+        pts = np.vstack([np.array(trail), position[None, :]])
+        seg = np.hypot(*np.diff(pts, axis=0).T)
+        cum = np.concatenate([[0.0], np.cumsum(seg)])
+        near = int(np.argmin(np.hypot(pts[:, 0] - me[0], pts[:, 1] - me[1])))
+        s_target = min(cum[near] + p.lookahead, cum[-1] - p.d_s)
+        if s_target <= cum[near]:
+            return None
+        return Polyline(pts).at(float(s_target)) if len(pts) > 1 else None
+
+
+def make_apoorva_chain(env: Any) -> ApoorvaChainPolicy:
+    """``apoorva-chain``: the full controller (A* + ghost, potential fields, elastic strip)."""
+    return ApoorvaChainPolicy(env, use_strip=True)
+
+
+def make_apoorva_chain_no_strip(env: Any) -> ApoorvaChainPolicy:
+    """``apoorva-chain-no-strip``: the same without the elastic strip."""
+    return ApoorvaChainPolicy(env, use_strip=False)

@@ -1,0 +1,114 @@
+"""Apoorva 2018 chain controller: potential-field equations, ghost robot, strip, and the policy on the env."""
+
+import math
+
+import numpy as np
+import pytest
+
+from agri_baselines import apoorva_chain as ac
+from agri_baselines import make_policy
+from agri_envs.chain import robot_chain_v0
+
+
+def test_attractive_force_eq2_quadratic_then_conic():
+    q = np.zeros(2)
+    np.testing.assert_allclose(ac.attractive_force(q, np.array([0.3, 0.4]), 2.0, 1.0), [0.6, 0.8])
+    far = ac.attractive_force(q, np.array([3.0, 4.0]), 2.0, 1.0)
+    np.testing.assert_allclose(far, [1.2, 1.6])  # d* eps (g - q) / d: constant size d* eps
+    # Continuous at d*: both branches give eps * d* there.
+    at = ac.attractive_force(q, np.array([1.0, 0.0]), 2.0, 1.0)
+    assert np.linalg.norm(at) == pytest.approx(2.0)
+
+
+def test_repulsion_eq4_and_sonar_direction():
+    assert ac.repulsive_magnitude(np.array([0.5]), 1.0, 0.5)[0] == pytest.approx(0.0)
+    assert ac.repulsive_magnitude(np.array([0.6]), 1.0, 0.5)[0] == 0.0
+    d = 0.2
+    assert ac.repulsive_magnitude(np.array([d]), 1.0, 0.5)[0] == pytest.approx((1 / d - 2) / d**2)
+    # An echo straight ahead of a robot facing +y pushes it toward -y (Alg. 3: -u(alpha) rotated by R(q_theta)).
+    f = ac.sonar_repulsion(np.array([0.2, 3.0]), np.array([0.0, math.pi]), math.pi / 2, 1.0, 0.5)
+    assert f[1] < 0 and abs(f[0]) < 1e-12
+    # Sonar offset: distances are measured from the robot centre.
+    g = ac.sonar_repulsion(np.array([0.1]), np.array([0.0]), 0.0, 1.0, 0.5, offset=0.1)
+    assert g[0] == pytest.approx(-ac.repulsive_magnitude(np.array([0.2]), 1.0, 0.6)[0])
+
+
+def test_spacing_force_switches_at_ds():
+    q = np.zeros(2)
+    assert ac.spacing_force(q, np.array([1.0, 0.0]), 0.5, 1.0, 1.0)[0] > 0  # too far: pulled
+    assert ac.spacing_force(q, np.array([0.3, 0.0]), 0.5, 1.0, 1.0)[0] < 0  # too close: pushed away
+    np.testing.assert_allclose(ac.spacing_force(q, np.array([0.5, 0.0]), 0.5, 1.0, 1.0), 0.0, atol=1e-12)
+
+
+def test_elastic_strip_pulls_middle_robots_onto_the_line():
+    p = np.array([[0.0, 0.0], [1.0, 0.5], [2.0, -0.2], [3.0, 0.0]])
+    f = ac.strip_forces(p, 1.0, 10.0)
+    np.testing.assert_allclose(f[[0, -1]], 0.0)
+    np.testing.assert_allclose(f[1:3], [[0.0, -0.5], [0.0, 0.2]], atol=1e-12)  # Distance * Fix_force, toward the strip
+    np.testing.assert_allclose(ac.strip_distances(p), [0, 0.5, 0.2, 0], atol=1e-12)
+    capped = ac.strip_forces(p, 1.0, 0.1)
+    assert np.linalg.norm(capped[1]) == pytest.approx(0.1)
+
+
+def test_ghost_runs_ahead_waits_and_comes_back():
+    path = ac.Polyline(np.array([[0.0, 0.0], [10.0, 0.0]]))
+    ghost = ac.GhostRobot(path, ac.GhostParams(v_forward=1.0, v_back=0.5, eta=0.8, patience=0.3), dt=0.1)
+    ghost.reset(np.array([0.0, 0.2]))
+    for _ in range(5):
+        ghost.update(np.array([0.0, 0.0]))
+    assert ghost.s == pytest.approx(0.5)
+    for _ in range(5):  # leader stays behind: the ghost advances until it is eta away, then waits
+        ghost.update(np.array([0.0, 0.0]))
+    assert ghost.s == pytest.approx(0.9)
+    ghost.update(np.array([0.0, 0.0]))
+    assert ghost.s == pytest.approx(0.9)  # waiting (t <= T)
+    for _ in range(5):
+        ghost.update(np.array([0.0, 0.0]))
+    assert ghost.s < 0.9  # came back with v_B after T
+    # Never behind the leader's own place on the path (searched within the window ahead of its last place).
+    ghost.update(np.array([1.2, 0.1]))
+    assert ghost.s_leader == pytest.approx(1.2) and ghost.s >= 1.2
+
+
+def test_polyline_at_and_project():
+    line = ac.Polyline(np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 2.0]]))
+    assert line.length == pytest.approx(3.0)
+    np.testing.assert_allclose(line.at(2.0), [1.0, 1.0])
+    assert line.project(np.array([1.5, 1.5]), 0.0, 3.0) == pytest.approx(2.5)
+    assert line.project(np.array([1.5, 1.5]), 0.0, 1.2) == pytest.approx(1.2)
+    assert line.project(np.array([1.5, 1.5]), 0.0, 0.5) == pytest.approx(0.5)
+    assert line.project(np.array([0.2, 0.3]), 0.0, 3.0) == pytest.approx(0.2)
+
+
+def _run(policy_name, seeds, **kwargs):
+    env = robot_chain_v0.parallel_env(**kwargs)
+    policy = make_policy(policy_name, env)
+    finals = []
+    for seed in seeds:
+        obs, _ = env.reset(seed=seed)
+        start = True
+        while env.agents:
+            actions, _ = policy.predict(obs, episode_start=np.array([start]))
+            start = False
+            for a in actions.values():
+                assert a.shape == (2,) and np.all(np.abs(a) <= 1.0)
+            obs, _, _, _, infos = env.step(actions)
+        finals.append(infos["robot_0"])
+    return finals
+
+
+def test_apoorva_chain_leads_the_chain_to_the_goal():
+    finals = _run("apoorva-chain", [0, 1], n_robots=4, n_dynamic_obstacles=1)
+    for info in finals:
+        assert info["is_success"] and info["collisions"] == 0 and info["chain_intact"]
+        assert 0.8 < info["path_ratio"] < 1.3
+
+
+@pytest.mark.slow
+def test_paper_preset_success_rate_and_strip_effect():
+    with_strip = _run("apoorva-chain", range(20), n_robots=4, n_dynamic_obstacles=1)
+    without = _run("apoorva-chain-no-strip", range(20), n_robots=4, n_dynamic_obstacles=1)
+    assert np.mean([i["is_success"] for i in with_strip]) >= 0.95
+    assert np.mean([i["mean_strip_distance"] for i in with_strip]) < np.mean(
+        [i["mean_strip_distance"] for i in without]
+    )
