@@ -1,0 +1,326 @@
+"""González et al. (2009) deliberative planner: a Voronoi diagram of the greenhouse and a search through every corridor.
+
+Sec. 3.1 of the paper: the generalized Voronoi diagram (GVD) of the free space is computed on the map,
+the edges that run inside the plants are eliminated, and a search builds the shortest path that leaves no
+corridor untracked (Figs. 4-5): start at the vertex nearest the start, run along a corridor (greater or
+lesser value along the rows) to its end, and when that is no longer possible move across to the next
+corridor (greater value across the rows), serpentine-wise.
+
+On the occupancy grid the GVD is the skeleton of the free space (scikit-image), and the clearance of each
+skeleton cell comes from the Euclidean distance transform (SciPy, which scikit-image builds on). Edges
+"inside the plants" are the skeleton cells whose clearance is below ``min_clearance``: the narrow gaps
+between plants of a row and the space inside a row bed, where the robot cannot pass. Eroding the free
+space by that clearance before skeletonising removes exactly those edges (the medial axis of the eroded
+set is the part of the medial axis with at least that clearance) and leaves a smaller image to thin.
+
+The corridors are the long skeleton branches that run along the dominant direction of the diagram (the
+rows); the search orders them across the rows, enters each at the end nearer to where the robot is, and
+joins them by shortest paths on the diagram (Dijkstra on the skeleton's 8-connected cell graph).
+
+Pure algorithms only: numpy, SciPy and scikit-image, no Gymnasium.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+from scipy import ndimage as ndi
+from scipy.sparse import csr_matrix
+from scipy.sparse.csgraph import dijkstra
+from skimage.morphology import skeletonize
+
+
+@dataclasses.dataclass(frozen=True)
+class CoveragePlannerParams:
+    """Parameters of :func:`coverage_path`.
+
+    Attributes:
+        min_clearance: Skeleton cells closer than this to an obstacle are removed as edges inside plants
+            (m); about half the robot's width plus a margin.
+        min_corridor_length: Skeleton branches shorter than this are not corridors (m).
+        direction_tolerance: A branch is a corridor when its direction is within this angle of the rows
+            (rad).
+        junction_radius: Cells within this distance of a skeleton junction are cut off when the skeleton
+            is split into branches (m).
+        sample_spacing: Spacing of the returned path points (m); the paper samples the path "depending on
+            the desired speed".
+        smoothing: Half-width of the moving average applied to the skeleton's staircase (m); 0 keeps it.
+    """
+
+    min_clearance: float = 0.3
+    min_corridor_length: float = 2.0
+    direction_tolerance: float = math.radians(30.0)
+    junction_radius: float = 0.15
+    sample_spacing: float = 0.1
+    smoothing: float = 0.15
+
+    def __post_init__(self) -> None:
+        for name in ("min_clearance", "min_corridor_length", "junction_radius", "sample_spacing"):
+            if not getattr(self, name) > 0:
+                raise ValueError(f"CoveragePlannerParams: {name} must be > 0, got {getattr(self, name)}")
+        if not 0 < self.direction_tolerance < math.pi / 2:
+            raise ValueError("CoveragePlannerParams: direction_tolerance must be in (0, pi/2) rad")
+        if self.smoothing < 0:
+            raise ValueError("CoveragePlannerParams: smoothing must be >= 0 m")
+
+
+@dataclasses.dataclass
+class CoveragePlan:
+    """Everything :func:`plan_coverage` found, for plots and tests.
+
+    Attributes:
+        path: ``(N, 2)`` path points (m), from the start through every corridor.
+        skeleton: Boolean grid of the pruned Voronoi diagram (the part the search uses).
+        corridors: Per corridor, its two end points ``(2, 2)`` (m) in the order the path drives it.
+        row_direction: Angle of the rows (rad) found from the diagram.
+    """
+
+    path: np.ndarray
+    skeleton: np.ndarray
+    corridors: list[np.ndarray]
+    row_direction: float
+
+
+_NEIGHBOURS = ((-1, -1), (-1, 0), (-1, 1), (0, -1), (0, 1), (1, -1), (1, 0), (1, 1))
+
+
+def _cell_graph(mask: np.ndarray) -> tuple[csr_matrix, np.ndarray]:
+    """8-connected graph of the True cells of ``mask`` (edge weights 1 and sqrt 2, in cells)."""
+    h, w = mask.shape
+    index = np.full(mask.shape, -1, dtype=np.int64)
+    ii, jj = np.nonzero(mask)
+    index[ii, jj] = np.arange(len(ii))
+    rows, cols, weights = [], [], []
+    for di, dj in _NEIGHBOURS[4:]:  # each undirected edge once
+        ni, nj = ii + di, jj + dj
+        ok = (ni >= 0) & (ni < h) & (nj >= 0) & (nj < w)
+        src = np.nonzero(ok)[0]
+        dst = index[ni[ok], nj[ok]]
+        keep = dst >= 0
+        rows.append(src[keep])
+        cols.append(dst[keep])
+        weights.append(np.full(int(keep.sum()), math.hypot(di, dj)))
+    r = np.concatenate(rows)
+    c = np.concatenate(cols)
+    wgt = np.concatenate(weights)
+    n = len(ii)
+    graph = csr_matrix((np.concatenate([wgt, wgt]), (np.concatenate([r, c]), np.concatenate([c, r]))), shape=(n, n))
+    return graph, np.column_stack([ii, jj])
+
+
+def _neighbour_count(mask: np.ndarray) -> np.ndarray:
+    kernel = np.ones((3, 3), dtype=np.int32)
+    kernel[1, 1] = 0
+    return ndi.convolve(mask.astype(np.int32), kernel, mode="constant") * mask
+
+
+def _visible(free: np.ndarray, a: np.ndarray, b: np.ndarray) -> bool:
+    """Whether the straight segment between cells ``a`` and ``b`` crosses free cells only."""
+    n = int(max(abs(b[0] - a[0]), abs(b[1] - a[1]))) * 2 + 2
+    t = np.linspace(0.0, 1.0, n)
+    ii = np.round(a[0] + t * (b[0] - a[0])).astype(np.int64)
+    jj = np.round(a[1] + t * (b[1] - a[1])).astype(np.int64)
+    return bool(np.all(free[ii, jj]))
+
+
+def _resample(points: np.ndarray, spacing: float) -> np.ndarray:
+    """Points every ``spacing`` metres along a polyline (keeps both ends)."""
+    seg = np.hypot(*np.diff(points, axis=0).T)
+    s = np.concatenate([[0.0], np.cumsum(seg)])
+    if s[-1] <= 0:
+        return points[:1].copy()
+    n = max(2, int(math.ceil(s[-1] / spacing)) + 1)
+    t = np.linspace(0.0, s[-1], n)
+    return np.column_stack([np.interp(t, s, points[:, 0]), np.interp(t, s, points[:, 1])])
+
+
+def _smooth(points: np.ndarray, half_width: int) -> np.ndarray:
+    """Moving average of a polyline with fixed end points (removes the skeleton's one-cell staircase)."""
+    if half_width <= 0 or len(points) < 3:
+        return points
+    k = 2 * half_width + 1
+    pad = np.vstack([np.repeat(points[:1], half_width, 0), points, np.repeat(points[-1:], half_width, 0)])
+    kernel = np.ones(k) / k
+    out = np.column_stack([np.convolve(pad[:, 0], kernel, "valid"), np.convolve(pad[:, 1], kernel, "valid")])
+    out[0], out[-1] = points[0], points[-1]
+    return out
+
+
+def plan_coverage(
+    occupancy: np.ndarray,
+    resolution: float,
+    start: tuple[float, float] | np.ndarray,
+    params: CoveragePlannerParams | None = None,
+) -> CoveragePlan:
+    """Plan the corridor-covering path and return it with the diagram it was built on.
+
+    Args:
+        occupancy: ``(H, W)`` boolean grid, True = blocked. Cell ``[i, j]`` covers x in
+            ``[j*res, (j+1)*res)`` and y in ``[i*res, (i+1)*res)``.
+        resolution: Cell size ``res`` (m).
+        start: Start ``(x, y)`` (m), on a free cell.
+        params: Planner parameters (defaults: :class:`CoveragePlannerParams`).
+
+    Returns:
+        The plan; its path starts at ``start`` and runs through free cells along every corridor.
+
+    Raises:
+        ValueError: For a malformed grid, a non-positive resolution, a start outside the grid or on a
+            blocked cell, or a map without corridors reachable from the start.
+    """
+    p = params or CoveragePlannerParams()
+    occ = np.asarray(occupancy)
+    if occ.ndim != 2 or occ.dtype != np.bool_ or min(occ.shape) < 3:
+        raise ValueError(f"occupancy must be a 2-D boolean array of at least 3 x 3 cells, got {occ.dtype} {occ.shape}")
+    res = float(resolution)
+    if not (math.isfinite(res) and res > 0):
+        raise ValueError(f"resolution must be a positive number of metres per cell, got {resolution}")
+    sx, sy = (float(v) for v in np.asarray(start, dtype=np.float64).reshape(2))
+    si, sj = int(math.floor(sy / res)), int(math.floor(sx / res))
+    h, w = occ.shape
+    if not (0 <= si < h and 0 <= sj < w):
+        raise ValueError(f"start ({sx}, {sy}) lies outside the {w * res:.2f} x {h * res:.2f} m grid")
+    if occ[si, sj]:
+        raise ValueError(f"start ({sx}, {sy}) lies on a blocked cell")
+    free = ~occ
+    # Cells outside the grid count as blocked (the map's border is the workspace boundary).
+    clearance = ndi.distance_transform_edt(np.pad(free, 1))[1:-1, 1:-1] * res
+    # GVD minus the edges inside the plants: the skeleton of the free space eroded by min_clearance.
+    skel = skeletonize(clearance >= p.min_clearance)
+    if not skel.any():
+        raise ValueError(f"no free corridor is wider than 2 * min_clearance = {2 * p.min_clearance:.2f} m")
+    graph, cells = _cell_graph(skel)
+    # The diagram's part reachable from the start: the skeleton cell nearest to the start that it can see.
+    d2 = (cells[:, 0] - si) ** 2 + (cells[:, 1] - sj) ** 2
+    entry = -1
+    for k in np.argsort(d2)[:400]:
+        if _visible(free, np.array([si, sj]), cells[k]):
+            entry = int(k)
+            break
+    if entry < 0:
+        raise ValueError(f"start ({sx}, {sy}) cannot see the Voronoi diagram of the free space")
+    dist0 = dijkstra(graph, indices=entry, min_only=True)
+    reach = np.isfinite(dist0)
+    main = np.zeros_like(skel)
+    main[cells[reach, 0], cells[reach, 1]] = True
+
+    # Branches: the diagram with its junctions cut out, one connected component per branch.
+    deg = _neighbour_count(main)
+    junction = main & (deg >= 3)
+    cut_r = max(1, int(round(p.junction_radius / res)))
+    near_junction = ndi.binary_dilation(junction, structure=np.ones((3, 3), bool), iterations=cut_r)
+    labels, n_branches = ndi.label(main & ~near_junction, structure=np.ones((3, 3), bool))
+    if n_branches == 0:
+        raise ValueError("the Voronoi diagram has no branches")
+    bi, bj = np.nonzero(labels)
+    lab = labels[bi, bj] - 1
+    count = np.bincount(lab, minlength=n_branches).astype(np.float64)
+    mx = np.bincount(lab, bj, n_branches) / count
+    my = np.bincount(lab, bi, n_branches) / count
+    dx = bj - mx[lab]
+    dy = bi - my[lab]
+    sxx = np.bincount(lab, dx * dx, n_branches)
+    syy = np.bincount(lab, dy * dy, n_branches)
+    sxy = np.bincount(lab, dx * dy, n_branches)
+    angle = 0.5 * np.arctan2(2 * sxy, sxx - syy)  # principal direction of each branch
+    spread = np.sqrt(np.maximum(0.0, 0.5 * (sxx + syy) + np.hypot(0.5 * (sxx - syy), sxy)) / count)
+    length = 2.0 * math.sqrt(3.0) * spread * res  # a straight branch of length L has std L / sqrt(12)
+    long = length >= p.min_corridor_length
+    if not long.any():
+        raise ValueError(f"no corridor of at least min_corridor_length = {p.min_corridor_length} m was found")
+    # Dominant direction of the rows: length-weighted mean of the long branches' doubled angles.
+    wts = length[long] ** 2
+    row_dir = 0.5 * math.atan2(float(np.sum(wts * np.sin(2 * angle[long]))), float(np.sum(wts * np.cos(2 * angle[long]))))
+    dev = np.abs(np.arctan2(np.sin(2 * (angle - row_dir)), np.cos(2 * (angle - row_dir)))) / 2
+    is_corr = long & (dev <= p.direction_tolerance)
+    ux, uy = math.cos(row_dir), math.sin(row_dir)
+    along = bj * ux + bi * uy  # in cells
+    across = -bj * uy + bi * ux
+
+    # Group corridor branches by their position across the rows (a corridor split by a junction is one).
+    corr_ids = np.nonzero(is_corr)[0]
+    across_mean = np.bincount(lab, across, n_branches) / count
+    order = corr_ids[np.argsort(across_mean[corr_ids])]
+    groups: list[list[int]] = []
+    tol = 0.35 * p.min_corridor_length / res
+    for b in order:
+        if groups and abs(across_mean[b] - across_mean[groups[-1][-1]]) < min(tol, 0.5 / res):
+            groups[-1].append(int(b))
+        else:
+            groups.append([int(b)])
+    # Index of each skeleton cell in the graph, for the two extreme cells of every corridor.
+    index = np.full(main.shape, -1, dtype=np.int64)
+    index[cells[:, 0], cells[:, 1]] = np.arange(len(cells))
+    ends = []
+    for g in groups:
+        sel = np.isin(lab, g)
+        a_vals, c_vals = along[sel], across[sel]
+        ci, cj = bi[sel], bj[sel]
+        # The corridor proper: drop the cells that bend away into the headlands (a corridor beside a wall
+        # runs into the headland without a junction), by a line fit with outlier rejection.
+        keep = np.ones(len(a_vals), dtype=bool)
+        for _ in range(3):
+            coef = np.polyfit(a_vals[keep], c_vals[keep], 1)
+            resid = np.abs(c_vals - np.polyval(coef, a_vals))
+            keep = resid <= max(0.3 / res, 3.0 * float(np.median(resid[keep])))
+        idx = np.nonzero(keep)[0]
+        k_lo, k_hi = idx[int(np.argmin(a_vals[idx]))], idx[int(np.argmax(a_vals[idx]))]
+        ends.append((int(index[ci[k_lo], cj[k_lo]]), int(index[ci[k_hi], cj[k_hi]])))
+    # Serpentine from the side of the greenhouse nearer to the start.
+    s_across = -sj * uy + si * ux
+    g_across = [float(np.mean([across_mean[b] for b in g])) for g in groups]
+    seq = list(np.argsort(g_across))
+    if abs(s_across - g_across[seq[-1]]) < abs(s_across - g_across[seq[0]]):
+        seq = seq[::-1]
+    sources = sorted({entry, *[e for pair in ends for e in pair]})
+    src_pos = {s: k for k, s in enumerate(sources)}
+    dist, pred = dijkstra(graph, indices=sources, return_predecessors=True)
+
+    def route(a: int, b: int) -> list[int]:
+        row = src_pos[a]
+        if not math.isfinite(dist[row, b]):
+            raise ValueError("a corridor is not connected to the start through the Voronoi diagram")
+        out = [b]
+        while out[-1] != a:
+            out.append(int(pred[row, out[-1]]))
+        return out[::-1]
+
+    nodes: list[int] = [entry]
+    driven: list[np.ndarray] = []
+    current = entry
+    for g in seq:
+        lo, hi = ends[g]
+        first, last = (lo, hi) if dist[src_pos[current], lo] <= dist[src_pos[current], hi] else (hi, lo)
+        there, along_corridor = route(current, first), route(first, last)
+        if current == entry and set(there) <= set(along_corridor):
+            # The start already lies on this corridor: drive it from there instead of going back to its
+            # end and retracing the same cells (the robot is placed at the corridor's beginning).
+            nodes += route(current, last)[1:]
+        else:
+            nodes += there[1:] + along_corridor[1:]
+        driven.append((cells[[first, last]][:, ::-1] + 0.5) * res)
+        current = last
+    xy = (cells[nodes][:, ::-1] + 0.5) * res
+    xy = _smooth(xy, int(round(p.smoothing / res)))
+    path = np.vstack([[sx, sy], _resample(xy, p.sample_spacing)])
+    return CoveragePlan(path=path, skeleton=main, corridors=driven, row_direction=row_dir)
+
+
+def coverage_path(occupancy: np.ndarray, resolution: float, start: tuple[float, float] | np.ndarray) -> np.ndarray:
+    """The shortest path through every corridor of a greenhouse map (González 2009, sec. 3.1).
+
+    Args:
+        occupancy: ``(H, W)`` boolean array, True = blocked. Cell ``[i, j]`` covers x in
+            ``[j*res, (j+1)*res)`` and y in ``[i*res, (i+1)*res)``.
+        resolution: Cell size ``res`` (m).
+        start: Start ``(x, y)`` in metres.
+
+    Returns:
+        ``(N, 2)`` path points in metres: from ``start``, through free space only, along every corridor.
+
+    Raises:
+        ValueError: See :func:`plan_coverage`.
+    """
+    return plan_coverage(occupancy, resolution, start).path
