@@ -97,7 +97,7 @@ class PurePursuit:
         return self.point_at(s + self.lookahead)
 
     def command(
-        self, pose: np.ndarray, max_speed: float, max_turn_rate: float, max_accel: float, turn_in_place: float = 1.2
+        self, pose: np.ndarray, max_speed: float, max_turn_rate: float, max_accel: float, turn_in_place: float = 0.3
     ) -> tuple[float, float]:
         """Velocities ``(v, w)`` (m/s, rad/s) that steer toward the look-ahead point.
 
@@ -285,13 +285,18 @@ class PseudoReactiveParams:
     Attributes:
         cruise_speed: Speed along corridors (m/s).
         turn_rate: Rotation speed of the turn behaviours (rad/s).
+        turn_speed: Forward speed during the first turn at a corridor end (m/s): an arc of radius
+            ``turn_speed / turn_rate`` that leaves a wall beside the robot; the second turn, in the open
+            headland, is on the spot.
         slow_distance: The front sonar starts slowing the robot below this distance (m).
         stop_distance: ... and stops it here (m).
-        side_valid: Lateral readings below this see a row or a wall (m).
-        side_open: Lateral readings above this see open space: a corridor's end or mouth (m).
-        exit_distance: Distance driven past the rows before the first 90 deg turn (m).
-        entry_offset: Distance driven after the turn-side sonar sees the next corridor's mouth, before the
-            second 90 deg turn (m).
+        side_valid: Lateral readings below this see a row or a wall beside the robot; above, the row ended (m).
+        side_open: Crossing the headland, a turn-side reading above this looks down a corridor's mouth (m).
+        row_end_range: Crossing the headland, the turn-side sonar sees a row end closer than this (m).
+        exit_distance: Distance driven after the turn-side middle sonar sees the rows end, before the first
+            90 deg turn (m).
+        entry_offset: Distance driven after the turn-side sonar looks down the next corridor, before the
+            second 90 deg turn (m). The sonar's cone sees far only near the corridor's centre line.
         min_corridor: Distance driven between rows before a corridor end may be detected (m).
         k_heading: Heading gain (1/s).
         k_center: Centering gain: heading offset per metre of lateral offset (rad/m), Fig. 7.
@@ -303,12 +308,14 @@ class PseudoReactiveParams:
 
     cruise_speed: float = 0.4
     turn_rate: float = 0.4
+    turn_speed: float = 0.2
     slow_distance: float = 1.2
     stop_distance: float = 0.35
     side_valid: float = 1.2
-    side_open: float = 2.0
+    side_open: float = 2.5
+    row_end_range: float = 2.0
     exit_distance: float = 0.55
-    entry_offset: float = 0.6
+    entry_offset: float = 0.15
     min_corridor: float = 2.0
     k_heading: float = 1.2
     k_center: float = 0.6
@@ -401,7 +408,7 @@ class PseudoReactiveController:
             side = filt[LM] if self.turn_side > 0 else filt[RM]
             if front < p.stop_distance + 0.1 and not self.seen_row:
                 self.phase = "stop"
-            elif side < p.side_valid:
+            elif side < p.row_end_range:
                 self.seen_row, self.mark = True, None
             elif self.seen_row and side > p.side_open:
                 if self.mark is None:
@@ -427,7 +434,7 @@ class PseudoReactiveController:
 
     def _turn(self, heading: float) -> tuple[float, float]:
         self.behaviour = "turn left" if self.turn_side > 0 else "turn right"
-        return 0.0, self.turn_side * self.p.turn_rate
+        return (self.p.turn_speed if self.phase == "turn1" else 0.0), self.turn_side * self.p.turn_rate
 
     def _straight(self, heading: float, target: float, v: float) -> tuple[float, float]:
         err = _wrap(target - heading)
@@ -460,9 +467,9 @@ class PseudoReactiveController:
         if between_rows:
             offset = 0.5 * (float(np.mean(left[lv])) - float(np.mean(right[rv])))
         target = self.reference + max(-p.max_center_angle, min(p.max_center_angle, p.k_center * offset))
-        # Corridor end: the sonars of the turn side (undecided: either side) all see open space.
+        # Corridor end: the front and middle sonars of the turn side (undecided: either side) no longer see a row.
         if self.in_rows >= p.min_corridor:
-            open_l, open_r = bool(np.all(left > p.side_open)), bool(np.all(right > p.side_open))
+            open_l, open_r = bool(np.all(left[:2] > p.side_valid)), bool(np.all(right[:2] > p.side_valid))
             side = self.turn_side_for(open_l, open_r)
             if side != 0:
                 self.turn_side = side
