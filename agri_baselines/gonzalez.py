@@ -370,6 +370,8 @@ class PseudoReactiveController:
         self.in_rows = 0.0
         self.mark: tuple[float, float] | None = None
         self.seen_row = False
+        self.row_count = 0
+        self.arc = False
         self.raw_log: list[np.ndarray] = []
         self.filtered_log: list[np.ndarray] = []
 
@@ -395,31 +397,34 @@ class PseudoReactiveController:
             return self._corridor(left, right, heading, x, y, slow, dt)
         if self.phase == "exit":
             if self._travelled(x, y) >= p.exit_distance or front < p.stop_distance + 0.3:
-                self.phase, self.turn_start = "turn1", heading
+                self.phase, self.turn_start, self.arc = "turn1", heading, True
                 return self._turn(heading)
             return self._straight(heading, self.reference, p.cruise_speed * slow)
         if self.phase == "turn1":
             if abs(_wrap(heading - self.turn_start)) >= math.pi / 2:
                 self.phase, self.mark, self.seen_row = "across", (x, y), False
+                self._fresh_filters()  # readings taken while rotating say nothing about the row ends
                 return self._straight(heading, self.turn_start + self.turn_side * math.pi / 2, 0.0)
             return self._turn(heading)
         if self.phase == "across":
             across = self.turn_start + self.turn_side * math.pi / 2
             side = filt[LM] if self.turn_side > 0 else filt[RM]
-            if front < p.stop_distance + 0.1 and not self.seen_row:
-                self.phase = "stop"
-            elif side < p.row_end_range:
-                self.seen_row, self.mark = True, None
+            if side < p.row_end_range:
+                self.row_count += 1
+                self.seen_row, self.mark = self.seen_row or self.row_count >= 2, None
             elif self.seen_row and side > p.side_open:
                 if self.mark is None:
                     self.mark = (x, y)
                 if self._travelled(x, y) >= p.entry_offset:
-                    self.phase, self.turn_start = "turn2", heading
+                    self.phase, self.turn_start, self.arc = "turn2", heading, False
                     return self._turn(heading)
-            elif front < p.stop_distance:
-                self.phase = "stop"
-            if self.phase == "stop":
-                self.behaviour = "stop"
+            if front < p.stop_distance + 0.15:
+                if self.seen_row and side > p.side_valid:
+                    # A wall ahead and a corridor beside: the last corridor, along the wall. The robot cannot
+                    # drive on to its centre line, so it turns in along an arc (as the first turn does).
+                    self.phase, self.turn_start, self.arc = "turn2", heading, True
+                    return self._turn(heading)
+                self.phase, self.behaviour = "stop", "stop"
                 return 0.0, 0.0
             return self._straight(heading, across, p.cruise_speed * slow)
         if self.phase == "turn2":
@@ -427,14 +432,20 @@ class PseudoReactiveController:
                 self.reference = _wrap(self.turn_start + self.turn_side * math.pi / 2)
                 self.turns += 2
                 self.phase, self.in_rows, self.mark = "corridor", 0.0, (x, y)
+                self._fresh_filters()
                 return self._straight(heading, self.reference, 0.0)
             return self._turn(heading)
         self.behaviour = "stop"
         return 0.0, 0.0
 
+    def _fresh_filters(self) -> None:
+        for f in self.filters:
+            f.reset()
+        self.row_count = 0
+
     def _turn(self, heading: float) -> tuple[float, float]:
         self.behaviour = "turn left" if self.turn_side > 0 else "turn right"
-        return (self.p.turn_speed if self.phase == "turn1" else 0.0), self.turn_side * self.p.turn_rate
+        return (self.p.turn_speed if self.arc else 0.0), self.turn_side * self.p.turn_rate
 
     def _straight(self, heading: float, target: float, v: float) -> tuple[float, float]:
         err = _wrap(target - heading)
