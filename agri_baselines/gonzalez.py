@@ -419,8 +419,8 @@ class PseudoReactiveController:
                     self.phase, self.turn_start, self.arc = "turn2", heading, False
                     return self._turn(heading)
             if front < p.stop_distance + 0.15:
-                if self.seen_row and side > p.side_valid:
-                    # A wall ahead and a corridor beside: the last corridor, along the wall. The robot cannot
+                if self.seen_row:
+                    # A wall ahead past a row end: the last corridor runs along the wall. The robot cannot
                     # drive on to its centre line, so it turns in along an arc (as the first turn does).
                     self.phase, self.turn_start, self.arc = "turn2", heading, True
                     return self._turn(heading)
