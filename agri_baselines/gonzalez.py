@@ -302,6 +302,7 @@ class PseudoReactiveParams:
         k_center: Centering gain: heading offset per metre of lateral offset (rad/m), Fig. 7.
         max_center_angle: Largest heading offset of the centering process (rad).
         k_incline: Per-step gain of the inclined-corridor correction of the reference heading, Fig. 8.
+        map_range: Echoes farther than this are not put in the sensory map (m).
         filter_n: Peak filter window n (eq. 1).
         filter_eps: Peak filter threshold eps (m, eq. 1).
     """
@@ -321,6 +322,7 @@ class PseudoReactiveParams:
     k_center: float = 0.6
     max_center_angle: float = 0.15
     k_incline: float = 0.05
+    map_range: float = 1.5
     filter_n: int = 5
     filter_eps: float = 0.3
 
@@ -384,7 +386,11 @@ class PseudoReactiveController:
         """One control step: ``(v, w)`` from the raw sonar ranges (m), the compass and the odometry position."""
         p = self.p
         filt = np.array([f(v) for f, v in zip(self.filters, sonar, strict=True)])
-        valid_echo = np.array([not f.last_was_peak for f in self.filters])
+        # Map only what the filter vouches for: a full window, no peak, and an echo near enough for its
+        # position to be known (a 20 deg cone at 4 m is 1.4 m wide).
+        valid_echo = np.array(
+            [len(f.window) == f.n and not f.last_was_peak and v < p.map_range for f, v in zip(self.filters, filt, strict=True)]
+        )
         self.raw_log.append(np.asarray(sonar, dtype=np.float64).copy())
         self.filtered_log.append(filt)
         self.map.add(x, y, heading, filt, valid_echo)
