@@ -12,7 +12,6 @@ from agri_baselines.gonzalez import PeakFilter, PurePursuit, SensoryMap, peak_fi
 from agri_baselines.gonzalez_planner import plan_coverage
 from agri_envs.rover.layout import LayoutParams, generate_layout
 from agri_envs.sim2d.gridmap import rasterize
-from agri_envs.sim2d.sensors import SonarArray, SonarSpec
 
 RES = 0.05
 
@@ -141,27 +140,6 @@ def test_vegetation_echoes_and_peak_filter_std_reduction():
     filtered = peak_filter(raw, n=5, eps=0.3)
     assert len(raw) > 100 and np.mean(raw > 1.0) > 0.03  # peaks happen
     assert np.std(raw) >= 3.0 * np.std(filtered)
-
-
-def test_sonar_slip_statistics_and_off_by_default():
-    from agri_envs.sim2d.geometry import GeometryBuilder, Kind
-
-    b = GeometryBuilder()
-    b.circle(1.0, 0.0, 0.2, Kind.PLANT)
-    b.capsule(3.0, -2.0, 3.0, 2.0, 0.05, Kind.WALL)
-    geo = b.build((-1, -3, 4, 3))
-    solid = (geo.circles[geo.circle_kinds != Kind.PLANT], geo.capsules)
-    mounts = np.array([[0.0, 0.0, 0.0], [0.0, 0.0, math.pi / 2]])
-    rng = np.random.default_rng(0)
-    pose = np.zeros(3)
-    sonar = SonarArray(SonarSpec(foliage_slip_prob=0.3, max_range=4.0), mounts)
-    r = np.array([sonar.ranges(pose, geo.circles, geo.capsules, rng, solid=solid) for _ in range(4000)])
-    slipped = r[:, 0] > 0.8 + 1e-6
-    assert abs(slipped.mean() - 0.3) < 0.03  # the per-reading probability
-    assert np.all(r[slipped, 0] <= 2.95 + 1e-9)  # never beyond the solid wall behind the plant
-    assert np.all(r[:, 1] == 4.0)  # no foliage in view: never a slip
-    plain = SonarArray(SonarSpec(max_range=4.0), mounts)
-    assert np.all(plain.ranges(pose, geo.circles, geo.capsules, rng, solid=solid)[0] == pytest.approx(0.8))
 
 
 def test_sensory_map_eq2_places_echoes():
