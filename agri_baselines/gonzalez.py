@@ -298,6 +298,7 @@ class PseudoReactiveParams:
         entry_offset: Distance driven after the turn-side sonar looks down the next corridor, before the
             second 90 deg turn (m). The sonar's cone sees far only near the corridor's centre line.
         min_corridor: Distance driven between rows before a corridor end may be detected (m).
+        end_confirm: The turn side must stay open over this distance before the corridor end counts (m).
         k_heading: Heading gain (1/s).
         k_center: Centering gain: heading offset per metre of lateral offset (rad/m), Fig. 7.
         max_center_angle: Largest heading offset of the centering process (rad).
@@ -318,6 +319,7 @@ class PseudoReactiveParams:
     exit_distance: float = 0.55
     entry_offset: float = 0.15
     min_corridor: float = 2.0
+    end_confirm: float = 0.2
     k_heading: float = 1.2
     k_center: float = 0.6
     max_center_angle: float = 0.15
@@ -374,6 +376,7 @@ class PseudoReactiveController:
         self.seen_row = False
         self.row_count = 0
         self.arc = False
+        self.end_mark: tuple[float, float] | None = None
         self.raw_log: list[np.ndarray] = []
         self.filtered_log: list[np.ndarray] = []
 
@@ -488,9 +491,14 @@ class PseudoReactiveController:
         if self.in_rows >= p.min_corridor:
             open_l, open_r = bool(np.all(left[:2] > p.side_valid)), bool(np.all(right[:2] > p.side_valid))
             side = self.turn_side_for(open_l, open_r)
-            if side != 0:
+            if side == 0:
+                self.end_mark = None
+            elif self.end_mark is None:
+                self.end_mark = (x, y)
+            elif math.hypot(x - self.end_mark[0], y - self.end_mark[1]) >= p.end_confirm:
+                # Open for end_confirm metres: not a gap between plants or a burst of vegetation echoes.
                 self.turn_side = side
-                self.phase, self.mark = "exit", (x, y)
+                self.phase, self.mark, self.end_mark = "exit", self.end_mark, None
         return self._straight(heading, target, p.cruise_speed * slow)
 
     def turn_side_for(self, open_left: bool, open_right: bool) -> int:

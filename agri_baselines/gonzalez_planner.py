@@ -116,6 +116,56 @@ def _neighbour_count(mask: np.ndarray) -> np.ndarray:
     return ndi.convolve(mask.astype(np.int32), kernel, mode="constant") * mask
 
 
+def _branches(pieces: np.ndarray, res: float) -> tuple[np.ndarray, int, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Connected pieces of a skeleton: labels of their cells, principal direction and length of each.
+
+    Returns:
+        ``(label per cell, count, cell rows, cell columns, angle per piece (rad), length per piece (m))``.
+    """
+    labels, n = ndi.label(pieces, structure=np.ones((3, 3), bool))
+    bi, bj = np.nonzero(labels)
+    lab = labels[bi, bj] - 1
+    if n == 0:
+        return lab, 0, bi, bj, np.zeros(0), np.zeros(0)
+    count = np.bincount(lab, minlength=n).astype(np.float64)
+    dx = bj - (np.bincount(lab, bj, n) / count)[lab]
+    dy = bi - (np.bincount(lab, bi, n) / count)[lab]
+    sxx = np.bincount(lab, dx * dx, n)
+    syy = np.bincount(lab, dy * dy, n)
+    sxy = np.bincount(lab, dx * dy, n)
+    angle = 0.5 * np.arctan2(2 * sxy, sxx - syy)  # principal direction of each piece
+    spread = np.sqrt(np.maximum(0.0, 0.5 * (sxx + syy) + np.hypot(0.5 * (sxx - syy), sxy)) / count)
+    length = 2.0 * math.sqrt(3.0) * spread * res  # a straight piece of length L has std L / sqrt(12)
+    return lab, n, bi, bj, angle, length
+
+
+def _aligned_cells(mask: np.ndarray, direction: float, tolerance: float, block: int) -> np.ndarray:
+    """Cells of ``mask`` whose surroundings (3 x 3 blocks of ``block`` cells) run within ``tolerance`` of ``direction``.
+
+    The second moments of the mask's cells are summed per block (on the few mask cells only) and over each
+    block's 3 x 3 neighbourhood, which gives every cell the principal direction of the skeleton around it.
+    """
+    ii, jj = np.nonzero(mask)
+    out = np.zeros_like(mask)
+    if len(ii) == 0:
+        return out
+    shape = (mask.shape[0] // block + 1, mask.shape[1] // block + 1)
+    flat = (ii // block) * shape[1] + (jj // block)
+    size = shape[0] * shape[1]
+    x, y = jj.astype(np.float64), ii.astype(np.float64)
+    moments = [np.bincount(flat, w, size).reshape(shape) for w in (np.ones_like(x), x, y, x * x, y * y, x * y)]
+    n, sx, sy, sxx, syy, sxy = (ndi.uniform_filter(m, size=3, mode="constant") for m in moments)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        cxx = sxx / n - (sx / n) ** 2
+        cyy = syy / n - (sy / n) ** 2
+        cxy = sxy / n - (sx / n) * (sy / n)
+        theta = 0.5 * np.arctan2(2 * cxy, cxx - cyy)
+    dev = np.abs(np.arctan2(np.sin(2 * (theta - direction)), np.cos(2 * (theta - direction)))) / 2
+    ok = np.nan_to_num(dev, nan=np.pi) <= tolerance
+    out[ii, jj] = ok[ii // block, jj // block]
+    return out
+
+
 def _visible(free: np.ndarray, a: np.ndarray, b: np.ndarray) -> bool:
     """Whether the straight segment between cells ``a`` and ``b`` crosses free cells only."""
     n = int(max(abs(b[0] - a[0]), abs(b[1] - a[1]))) * 2 + 2
@@ -211,30 +261,25 @@ def plan_coverage(
     junction = main & (deg >= 3)
     cut_r = max(1, int(round(p.junction_radius / res)))
     near_junction = ndi.binary_dilation(junction, structure=np.ones((3, 3), bool), iterations=cut_r)
-    labels, n_branches = ndi.label(main & ~near_junction, structure=np.ones((3, 3), bool))
-    if n_branches == 0:
-        raise ValueError("the Voronoi diagram has no branches")
-    bi, bj = np.nonzero(labels)
-    lab = labels[bi, bj] - 1
-    count = np.bincount(lab, minlength=n_branches).astype(np.float64)
-    mx = np.bincount(lab, bj, n_branches) / count
-    my = np.bincount(lab, bi, n_branches) / count
-    dx = bj - mx[lab]
-    dy = bi - my[lab]
-    sxx = np.bincount(lab, dx * dx, n_branches)
-    syy = np.bincount(lab, dy * dy, n_branches)
-    sxy = np.bincount(lab, dx * dy, n_branches)
-    angle = 0.5 * np.arctan2(2 * sxy, sxx - syy)  # principal direction of each branch
-    spread = np.sqrt(np.maximum(0.0, 0.5 * (sxx + syy) + np.hypot(0.5 * (sxx - syy), sxy)) / count)
-    length = 2.0 * math.sqrt(3.0) * spread * res  # a straight branch of length L has std L / sqrt(12)
+    pieces = main & ~near_junction
+    lab, n_branches, bi, bj, angle, length = _branches(pieces, res)
     long = length >= p.min_corridor_length
     if not long.any():
         raise ValueError(f"no corridor of at least min_corridor_length = {p.min_corridor_length} m was found")
     # Dominant direction of the rows: length-weighted mean of the long branches' doubled angles.
     wts = length[long] ** 2
     row_dir = 0.5 * math.atan2(float(np.sum(wts * np.sin(2 * angle[long]))), float(np.sum(wts * np.cos(2 * angle[long]))))
+    # A corridor beside a wall turns into the headland without a junction: keep only the cells whose
+    # neighbourhood runs along the rows, and split the branches again.
+    pieces &= _aligned_cells(pieces, row_dir, p.direction_tolerance, max(2, int(round(0.4 / res))))
+    lab, n_branches, bi, bj, angle, length = _branches(pieces, res)
+    if n_branches == 0:
+        raise ValueError("the Voronoi diagram has no branch along the rows")
     dev = np.abs(np.arctan2(np.sin(2 * (angle - row_dir)), np.cos(2 * (angle - row_dir)))) / 2
-    is_corr = long & (dev <= p.direction_tolerance)
+    is_corr = (length >= p.min_corridor_length) & (dev <= p.direction_tolerance)
+    if not is_corr.any():
+        raise ValueError(f"no corridor of at least min_corridor_length = {p.min_corridor_length} m was found")
+    count = np.bincount(lab, minlength=n_branches).astype(np.float64)
     ux, uy = math.cos(row_dir), math.sin(row_dir)
     along = bj * ux + bi * uy  # in cells
     across = -bj * uy + bi * ux
@@ -242,14 +287,27 @@ def plan_coverage(
     # Group corridor branches by their position across the rows (a corridor split by a junction is one).
     corr_ids = np.nonzero(is_corr)[0]
     across_mean = np.bincount(lab, across, n_branches) / count
+    along_mean = np.bincount(lab, along, n_branches) / count
     order = corr_ids[np.argsort(across_mean[corr_ids])]
     groups: list[list[int]] = []
-    tol = 0.35 * p.min_corridor_length / res
+    tol = min(0.35 * p.min_corridor_length, 0.5) / res
     for b in order:
-        if groups and abs(across_mean[b] - across_mean[groups[-1][-1]]) < min(tol, 0.5 / res):
+        if groups and abs(across_mean[b] - across_mean[groups[-1][-1]]) < tol:
             groups[-1].append(int(b))
         else:
             groups.append([int(b)])
+    # Shorter pieces along the rows (a corridor cut by a gap in a row near its end) join the corridor
+    # whose centre line they continue.
+    lines = []
+    for g in groups:
+        sel = np.isin(lab, g)
+        lines.append(np.polyfit(along[sel], across[sel], 1) if np.ptp(along[sel]) > 0 else (0.0, across[sel][0]))
+    short = np.nonzero(~is_corr & (dev <= p.direction_tolerance) & (length >= 2 * p.junction_radius))[0]
+    for b in short:
+        resid = [abs(across_mean[b] - np.polyval(line, along_mean[b])) for line in lines]
+        k = int(np.argmin(resid))
+        if resid[k] < tol:
+            groups[k].append(int(b))
     # Index of each skeleton cell in the graph, for the two extreme cells of every corridor.
     index = np.full(main.shape, -1, dtype=np.int64)
     index[cells[:, 0], cells[:, 1]] = np.arange(len(cells))

@@ -39,7 +39,7 @@ def _free_along(occ, path):
 @pytest.mark.parametrize(
     "seed, kw",
     [(0, {}), (3, {"row_incline": 0.03, "row_bend": 0.15}), (11, {"corridor_width_jitter": 0.3, "n_rows": 5}),
-     (5, {"row_bend": 0.25, "row_length": 15.0})],
+     (5, {"row_bend": 0.25, "row_length": 15.0}), (0, {"growth": 1.0, "corridor_width": 1.5, "row_length": 10.0, "n_rows": 4})],
 )
 def test_coverage_path_invariants(seed, kw):
     occ, layout, origin, start = _greenhouse(seed, **kw)
