@@ -47,6 +47,10 @@ class CoveragePlannerParams:
         sample_spacing: Spacing of the returned path points (m); the paper samples the path "depending on
             the desired speed".
         smoothing: Half-width of the moving average applied to the skeleton's staircase (m); 0 keeps it.
+        max_cells: Grids with more cells than this are max-pooled by the smallest integer factor that
+            brings them under it (a work cell is blocked when any of its cells is, so the path stays on free
+            cells of the given grid; the corridor runs are then re-centred on the given grid). This keeps a
+            50 x 30 m greenhouse at 5 cm under 100 ms; smaller maps are planned at their own resolution.
     """
 
     min_clearance: float = 0.3
@@ -54,7 +58,8 @@ class CoveragePlannerParams:
     direction_tolerance: float = math.radians(30.0)
     junction_radius: float = 0.15
     sample_spacing: float = 0.1
-    smoothing: float = 0.15
+    smoothing: float = 0.3
+    max_cells: int = 250_000
 
     def __post_init__(self) -> None:
         for name in ("min_clearance", "min_corridor_length", "junction_radius", "sample_spacing"):
@@ -64,6 +69,8 @@ class CoveragePlannerParams:
             raise ValueError("CoveragePlannerParams: direction_tolerance must be in (0, pi/2) rad")
         if self.smoothing < 0:
             raise ValueError("CoveragePlannerParams: smoothing must be >= 0 m")
+        if self.max_cells < 100:
+            raise ValueError(f"CoveragePlannerParams: max_cells must be >= 100, got {self.max_cells}")
 
 
 @dataclasses.dataclass
@@ -72,13 +79,15 @@ class CoveragePlan:
 
     Attributes:
         path: ``(N, 2)`` path points (m), from the start through every corridor.
-        skeleton: Boolean grid of the pruned Voronoi diagram (the part the search uses).
+        skeleton: Boolean grid of the pruned Voronoi diagram (the part the search uses), on the work grid.
+        resolution: Cell size of the work grid (m).
         corridors: Per corridor, its two end points ``(2, 2)`` (m) in the order the path drives it.
         row_direction: Angle of the rows (rad) found from the diagram.
     """
 
     path: np.ndarray
     skeleton: np.ndarray
+    resolution: float
     corridors: list[np.ndarray]
     row_direction: float
 
@@ -111,9 +120,12 @@ def _cell_graph(mask: np.ndarray) -> tuple[csr_matrix, np.ndarray]:
 
 
 def _neighbour_count(mask: np.ndarray) -> np.ndarray:
-    kernel = np.ones((3, 3), dtype=np.int32)
-    kernel[1, 1] = 0
-    return ndi.convolve(mask.astype(np.int32), kernel, mode="constant") * mask
+    """Number of 8-neighbours of every True cell of ``mask`` (0 elsewhere), counted at the True cells only."""
+    ii, jj = np.nonzero(mask)
+    padded = np.pad(mask, 1)
+    deg = np.zeros(mask.shape, dtype=np.int8)
+    deg[ii, jj] = sum(padded[ii + 1 + di, jj + 1 + dj].astype(np.int8) for di, dj in _NEIGHBOURS)
+    return deg
 
 
 def _branches(pieces: np.ndarray, res: float) -> tuple[np.ndarray, int, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -164,6 +176,40 @@ def _aligned_cells(mask: np.ndarray, direction: float, tolerance: float, block: 
     ok = np.nan_to_num(dev, nan=np.pi) <= tolerance
     out[ii, jj] = ok[ii // block, jj // block]
     return out
+
+
+def _centre_across(
+    points: np.ndarray, normal: tuple[float, float], occ: np.ndarray, res: float, reach: float, max_shift: float
+) -> np.ndarray:
+    """Move each point across the rows to midway between the nearest blocked cells on either side.
+
+    Along a corridor the Voronoi diagram is the mid-line between its two rows; this finds it on the given
+    (fine) grid, ``reach`` metres to each side at most, moving no point by more than ``max_shift`` metres.
+    """
+    if len(points) == 0:
+        return points
+    t = np.arange(1, int(reach / res) + 1) * res
+    h, w = occ.shape
+    gaps = []
+    for sign in (1.0, -1.0):
+        px = points[:, 0:1] + sign * t[None, :] * normal[0]
+        py = points[:, 1:2] + sign * t[None, :] * normal[1]
+        jj = np.floor(px / res).astype(np.int64)
+        ii = np.floor(py / res).astype(np.int64)
+        outside = (ii < 0) | (ii >= h) | (jj < 0) | (jj >= w)
+        blocked = outside | occ[np.clip(ii, 0, h - 1), np.clip(jj, 0, w - 1)]
+        first = np.where(blocked.any(axis=1), np.argmax(blocked, axis=1), len(t) - 1)
+        gaps.append(t[first])
+    shift = np.clip(0.5 * (gaps[0] - gaps[1]), -max_shift, max_shift)
+    return points + shift[:, None] * np.asarray(normal)[None, :]
+
+
+def _line_fit(a: np.ndarray, c: np.ndarray) -> tuple[float, float]:
+    """Least-squares line ``c = slope * a + intercept`` (a flat line through the mean for a single point)."""
+    ma, mc = float(a.mean()), float(c.mean())
+    va = float(np.dot(a - ma, a - ma))
+    slope = float(np.dot(a - ma, c - mc)) / va if va > 0 else 0.0
+    return slope, mc - slope * ma
 
 
 def _visible(free: np.ndarray, a: np.ndarray, b: np.ndarray) -> bool:
@@ -234,11 +280,32 @@ def plan_coverage(
         raise ValueError(f"start ({sx}, {sy}) lies outside the {w * res:.2f} x {h * res:.2f} m grid")
     if occ[si, sj]:
         raise ValueError(f"start ({sx}, {sy}) lies on a blocked cell")
+    fine_occ, fine_res = occ, res
+    f = max(1, int(math.ceil(math.sqrt(h * w / p.max_cells))))
+    if f > 1:  # max-pool to the work resolution; cells past the grid's edge count as blocked
+        hh, ww = -(-h // f), -(-w // f)
+        padded = np.ones((hh * f, ww * f), dtype=bool)
+        padded[:h, :w] = occ
+        occ = padded[0::f, 0::f].copy()
+        for di in range(f):
+            for dj in range(f):
+                if di or dj:
+                    occ |= padded[di::f, dj::f]
+        res, si, sj, h, w = res * f, si // f, sj // f, hh, ww
+        if occ[si, sj]:
+            raise ValueError(
+                f"start ({sx}, {sy}) lies within {res:.2f} m of an obstacle; move it or raise max_cells"
+            )
     free = ~occ
     # Cells outside the grid count as blocked (the map's border is the workspace boundary).
-    clearance = ndi.distance_transform_edt(np.pad(free, 1))[1:-1, 1:-1] * res
-    # GVD minus the edges inside the plants: the skeleton of the free space eroded by min_clearance.
-    skel = skeletonize(clearance >= p.min_clearance)
+    # GVD minus the edges inside the plants: the skeleton of the free space eroded by min_clearance, i.e. of
+    # the cells whose Euclidean distance transform is at least min_clearance (an erosion by the digital disk
+    # of that radius is the same set, computed without the full transform).
+    r = p.min_clearance / res
+    k = int(math.ceil(r))
+    oy, ox = np.mgrid[-k : k + 1, -k : k + 1]
+    disk = ox * ox + oy * oy < r * r
+    skel = skeletonize(ndi.binary_erosion(free, structure=disk, border_value=0))
     if not skel.any():
         raise ValueError(f"no free corridor is wider than 2 * min_clearance = {2 * p.min_clearance:.2f} m")
     graph, cells = _cell_graph(skel)
@@ -298,32 +365,38 @@ def plan_coverage(
             groups.append([int(b)])
     # Shorter pieces along the rows (a corridor cut by a gap in a row near its end) join the corridor
     # whose centre line they continue.
-    lines = []
-    for g in groups:
-        sel = np.isin(lab, g)
-        lines.append(np.polyfit(along[sel], across[sel], 1) if np.ptp(along[sel]) > 0 else (0.0, across[sel][0]))
+    group_of = np.full(n_branches, -1, dtype=np.int64)
+    for k, g in enumerate(groups):
+        group_of[g] = k
+    lines = [_line_fit(along[group_of[lab] == k], across[group_of[lab] == k]) for k in range(len(groups))]
     short = np.nonzero(~is_corr & (dev <= p.direction_tolerance) & (length >= 2 * p.junction_radius))[0]
     for b in short:
-        resid = [abs(across_mean[b] - np.polyval(line, along_mean[b])) for line in lines]
+        resid = [abs(across_mean[b] - (line[0] * along_mean[b] + line[1])) for line in lines]
         k = int(np.argmin(resid))
         if resid[k] < tol:
             groups[k].append(int(b))
+            group_of[b] = k
     # Index of each skeleton cell in the graph, for the two extreme cells of every corridor.
     index = np.full(main.shape, -1, dtype=np.int64)
     index[cells[:, 0], cells[:, 1]] = np.arange(len(cells))
     ends = []
-    for g in groups:
-        sel = np.isin(lab, g)
+    chains: list[list[int]] = []
+    lines = []
+    for k in range(len(groups)):
+        sel = group_of[lab] == k
         a_vals, c_vals = along[sel], across[sel]
         ci, cj = bi[sel], bj[sel]
         # The corridor proper: drop the cells that bend away into the headlands (a corridor beside a wall
         # runs into the headland without a junction), by a line fit with outlier rejection.
         keep = np.ones(len(a_vals), dtype=bool)
         for _ in range(3):
-            coef = np.polyfit(a_vals[keep], c_vals[keep], 1)
-            resid = np.abs(c_vals - np.polyval(coef, a_vals))
+            slope, icpt = _line_fit(a_vals[keep], c_vals[keep])
+            resid = np.abs(c_vals - (slope * a_vals + icpt))
             keep = resid <= max(0.3 / res, 3.0 * float(np.median(resid[keep])))
         idx = np.nonzero(keep)[0]
+        idx = idx[np.argsort(a_vals[idx], kind="stable")]
+        chains.append([int(v) for v in index[ci[idx], cj[idx]]])  # the corridor's cells, along the rows
+        lines.append((slope, icpt, float(a_vals[idx[0]]), float(a_vals[idx[-1]])))
         k_lo, k_hi = idx[int(np.argmin(a_vals[idx]))], idx[int(np.argmax(a_vals[idx]))]
         ends.append((int(index[ci[k_lo], cj[k_lo]]), int(index[ci[k_hi], cj[k_hi]])))
     # Serpentine from the side of the greenhouse nearer to the start.
@@ -332,38 +405,53 @@ def plan_coverage(
     seq = list(np.argsort(g_across))
     if abs(s_across - g_across[seq[-1]]) < abs(s_across - g_across[seq[0]]):
         seq = seq[::-1]
-    sources = sorted({entry, *[e for pair in ends for e in pair]})
-    src_pos = {s: k for k, s in enumerate(sources)}
-    dist, pred = dijkstra(graph, indices=sources, return_predecessors=True)
 
     def route(a: int, b: int) -> list[int]:
-        row = src_pos[a]
-        if not math.isfinite(dist[row, b]):
+        """Shortest path on the diagram from node a to node b (a search bounded near the straight line first)."""
+        straight = math.hypot(*(cells[a] - cells[b]).tolist())
+        for limit in (1.5 * straight + 2.0 / res, np.inf):
+            dist, pred = dijkstra(graph, indices=a, return_predecessors=True, limit=limit)
+            if math.isfinite(dist[b]):
+                break
+        else:
             raise ValueError("a corridor is not connected to the start through the Voronoi diagram")
         out = [b]
         while out[-1] != a:
-            out.append(int(pred[row, out[-1]]))
+            out.append(int(pred[out[-1]]))
         return out[::-1]
 
     nodes: list[int] = [entry]
+    in_corridor: list[bool] = [False]
     driven: list[np.ndarray] = []
     current = entry
     for g in seq:
         lo, hi = ends[g]
-        first, last = (lo, hi) if dist[src_pos[current], lo] <= dist[src_pos[current], hi] else (hi, lo)
-        there, along_corridor = route(current, first), route(first, last)
-        if current == entry and set(there) <= set(along_corridor):
-            # The start already lies on this corridor: drive it from there instead of going back to its
-            # end and retracing the same cells (the robot is placed at the corridor's beginning).
-            nodes += route(current, last)[1:]
+        # Enter at the end nearer to the robot (in a greenhouse the nearer end is also nearer on the diagram).
+        d_lo, d_hi = (float(np.hypot(*(cells[e] - cells[current]).tolist())) for e in (lo, hi))
+        first, last = (lo, hi) if d_lo <= d_hi else (hi, lo)
+        chain = chains[g] if first == chains[g][0] else chains[g][::-1]
+        slope, icpt, a_lo, a_hi = lines[g]
+        ei, ej = cells[entry]
+        a_e, c_e = ej * ux + ei * uy, -ej * uy + ei * ux
+        if current == entry and a_lo < a_e < a_hi and abs(c_e - (slope * a_e + icpt)) < tol:
+            # The start already lies on this corridor: drive it from there on instead of going back to its
+            # end (the robot is placed at the corridor's beginning).
+            chain_a = (cells[chain][:, 1] * ux + cells[chain][:, 0] * uy).tolist()
+            k = int(np.argmin(np.abs(np.asarray(chain_a) - a_e)))
+            link, run = route(current, chain[k])[1:], chain[k + 1 :]
         else:
-            nodes += there[1:] + along_corridor[1:]
+            link, run = route(current, first)[1:], chain[1:]
+        nodes += link + run
+        in_corridor += [False] * len(link) + [True] * len(run)
         driven.append((cells[[first, last]][:, ::-1] + 0.5) * res)
         current = last
     xy = (cells[nodes][:, ::-1] + 0.5) * res
+    if f > 1:  # back to the given grid's precision along the corridors
+        sel = np.asarray(in_corridor)
+        xy[sel] = _centre_across(xy[sel], (-uy, ux), fine_occ, fine_res, reach=1.5, max_shift=res)
     xy = _smooth(xy, int(round(p.smoothing / res)))
     path = np.vstack([[sx, sy], _resample(xy, p.sample_spacing)])
-    return CoveragePlan(path=path, skeleton=main, corridors=driven, row_direction=row_dir)
+    return CoveragePlan(path=path, skeleton=main, resolution=res, corridors=driven, row_direction=row_dir)
 
 
 def coverage_path(occupancy: np.ndarray, resolution: float, start: tuple[float, float] | np.ndarray) -> np.ndarray:
