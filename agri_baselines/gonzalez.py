@@ -377,8 +377,6 @@ class PseudoReactiveController:
         self.row_count = 0
         self.arc = False
         self.end_mark: tuple[float, float] | None = None
-        self.raw_log: list[np.ndarray] = []
-        self.filtered_log: list[np.ndarray] = []
 
     def _travelled(self, x: float, y: float) -> float:
         if self.mark is None:
@@ -394,8 +392,6 @@ class PseudoReactiveController:
         valid_echo = np.array(
             [len(f.window) == f.n and not f.last_was_peak and v < p.map_range for f, v in zip(self.filters, filt, strict=True)]
         )
-        self.raw_log.append(np.asarray(sonar, dtype=np.float64).copy())
-        self.filtered_log.append(filt)
         self.map.add(x, y, heading, filt, valid_echo)
         if self.reference is None:
             self.reference = heading

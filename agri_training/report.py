@@ -21,6 +21,7 @@ from agri_training.evaluate import EvalRequest, evaluate
 SECTION_HOOKS = {
     "agri_envs/GreenhouseNav-v1": "agri_training.plots_rover:report_section",
     "agri_envs/GrapeHarvest-v1": "agri_training.plots_arm:report_section",
+    "agri_envs/GreenhouseCoverage-v0": "agri_training.plots_coverage:report_section",
 }
 
 

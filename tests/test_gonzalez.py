@@ -170,3 +170,48 @@ def test_deliberative_solves_default_preset():
 
     out = run_episode(env, make_policy("gonzalez-deliberative", env), 0, None)["record"]
     assert out["is_success"] and out["crop_contacts"] == 0 and out["max_cross_track"] < 0.1
+
+
+def test_pseudo_reactive_solves_preset_and_returns_its_sensory_map():
+    from agri_training.evaluate import run_episode
+
+    env = gym.make("agri_envs/GreenhouseCoverage-v0", localization="odometry", n_rows=2, row_length=6.0)
+    out = run_episode(env, make_policy("gonzalez-pseudo-reactive", env), 1, None)["record"]
+    assert out["is_success"] and out["crop_contacts"] == 0 and out["turns"] == 4
+    echoes = np.array(out["sensory_map"])
+    assert len(echoes) > 100
+    # The echoes lie on the crop and the walls: most of them within 0.3 m of an obstacle of the true scene
+    # (in the odometry frame, which the compass bias rotates about the start).
+    occ, res, origin = env.unwrapped.true_map()
+    from scipy import ndimage as ndi
+
+    dist = ndi.distance_transform_edt(~occ) * res
+    ij = np.clip(np.floor((echoes - origin) / res).astype(int)[:, ::-1], 0, np.array(occ.shape) - 1)
+    assert np.mean(dist[ij[:, 0], ij[:, 1]] < 0.3) > 0.8
+
+
+def test_hybrid_plans_its_second_run_on_the_first_runs_map():
+    from agri_training.evaluate import run_episode
+
+    env = gym.make("agri_envs/GreenhouseCoverage-v0", localization="odometry", n_rows=2, row_length=6.0, layout_seed=1)
+    policy = make_policy("gonzalez-hybrid", env)
+    first = run_episode(env, policy, 0, None)["record"]
+    second = run_episode(env, policy, 1, None)["record"]
+    assert first["hybrid_deliberative"] == 0 and second["hybrid_deliberative"] == 1
+    assert first["is_success"] and second["is_success"] and second["crop_contacts"] == 0
+    assert second["episode_time"] < first["episode_time"]
+
+
+def test_report_section_writes_the_figures(tmp_path):
+    from agri_training.evaluate import EvalRequest, evaluate
+    from agri_training.plots_coverage import report_section
+
+    kw = {"n_rows": 1, "row_length": 5.0}
+    results = [
+        evaluate(EvalRequest("agri_envs/GreenhouseCoverage-v0", name, 1, 0, env_kwargs=kw), progress=False)
+        for name in ("gonzalez-deliberative", "gonzalez-pseudo-reactive")
+    ]
+    md = report_section(results, tmp_path)
+    pngs = sorted(p.name for p in tmp_path.glob("*.png"))
+    assert len(pngs) == 5 and all(name in md for name in pngs)
+    assert "| gonzalez-deliberative |" in md and "Peak filter (eq. 1)" in md
