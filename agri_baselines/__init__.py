@@ -134,7 +134,6 @@ register_policy(
 )
 
 
-
 def __getattr__(name: str) -> Any:
     """``agri_baselines.coverage_path`` (González's planner), imported on first use (it loads scikit-image)."""
     if name == "coverage_path":

@@ -18,11 +18,8 @@ from __future__ import annotations
 import dataclasses
 import math
 from collections import deque
-from typing import Any
 
 import numpy as np
-
-from agri_baselines.gonzalez_planner import CoveragePlannerParams, plan_coverage
 
 # --------------------------------------------------------------------------------------------------
 # Pure Pursuit
@@ -390,7 +387,10 @@ class PseudoReactiveController:
         # Map only what the filter vouches for: a full window, no peak, and an echo near enough for its
         # position to be known (a 20 deg cone at 4 m is 1.4 m wide).
         valid_echo = np.array(
-            [len(f.window) == f.n and not f.last_was_peak and v < p.map_range for f, v in zip(self.filters, filt, strict=True)]
+            [
+                len(f.window) == f.n and not f.last_was_peak and v < p.map_range
+                for f, v in zip(self.filters, filt, strict=True)
+            ]
         )
         self.map.add(x, y, heading, filt, valid_echo)
         if self.reference is None:

@@ -293,9 +293,7 @@ def plan_coverage(
                     occ |= padded[di::f, dj::f]
         res, si, sj, h, w = res * f, si // f, sj // f, hh, ww
         if occ[si, sj]:
-            raise ValueError(
-                f"start ({sx}, {sy}) lies within {res:.2f} m of an obstacle; move it or raise max_cells"
-            )
+            raise ValueError(f"start ({sx}, {sy}) lies within {res:.2f} m of an obstacle; move it or raise max_cells")
     free = ~occ
     # Cells outside the grid count as blocked (the map's border is the workspace boundary).
     # GVD minus the edges inside the plants: the skeleton of the free space eroded by min_clearance, i.e. of
@@ -335,7 +333,9 @@ def plan_coverage(
         raise ValueError(f"no corridor of at least min_corridor_length = {p.min_corridor_length} m was found")
     # Dominant direction of the rows: length-weighted mean of the long branches' doubled angles.
     wts = length[long] ** 2
-    row_dir = 0.5 * math.atan2(float(np.sum(wts * np.sin(2 * angle[long]))), float(np.sum(wts * np.cos(2 * angle[long]))))
+    row_dir = 0.5 * math.atan2(
+        float(np.sum(wts * np.sin(2 * angle[long]))), float(np.sum(wts * np.cos(2 * angle[long])))
+    )
     # A corridor beside a wall turns into the headland without a junction: keep only the cells whose
     # neighbourhood runs along the rows, and split the branches again.
     pieces &= _aligned_cells(pieces, row_dir, p.direction_tolerance, max(2, int(round(0.4 / res))))
@@ -381,7 +381,7 @@ def plan_coverage(
     index[cells[:, 0], cells[:, 1]] = np.arange(len(cells))
     ends = []
     chains: list[list[int]] = []
-    lines = []
+    spans: list[tuple[float, float, float, float]] = []
     for k in range(len(groups)):
         sel = group_of[lab] == k
         a_vals, c_vals = along[sel], across[sel]
@@ -396,7 +396,7 @@ def plan_coverage(
         idx = np.nonzero(keep)[0]
         idx = idx[np.argsort(a_vals[idx], kind="stable")]
         chains.append([int(v) for v in index[ci[idx], cj[idx]]])  # the corridor's cells, along the rows
-        lines.append((slope, icpt, float(a_vals[idx[0]]), float(a_vals[idx[-1]])))
+        spans.append((slope, icpt, float(a_vals[idx[0]]), float(a_vals[idx[-1]])))
         k_lo, k_hi = idx[int(np.argmin(a_vals[idx]))], idx[int(np.argmax(a_vals[idx]))]
         ends.append((int(index[ci[k_lo], cj[k_lo]]), int(index[ci[k_hi], cj[k_hi]])))
     # Serpentine from the side of the greenhouse nearer to the start.
@@ -430,7 +430,7 @@ def plan_coverage(
         d_lo, d_hi = (float(np.hypot(*(cells[e] - cells[current]).tolist())) for e in (lo, hi))
         first, last = (lo, hi) if d_lo <= d_hi else (hi, lo)
         chain = chains[g] if first == chains[g][0] else chains[g][::-1]
-        slope, icpt, a_lo, a_hi = lines[g]
+        slope, icpt, a_lo, a_hi = spans[g]
         ei, ej = cells[entry]
         a_e, c_e = ej * ux + ei * uy, -ej * uy + ei * ux
         if current == entry and a_lo < a_e < a_hi and abs(c_e - (slope * a_e + icpt)) < tol:

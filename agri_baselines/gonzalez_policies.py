@@ -165,8 +165,10 @@ class GonzalezPseudoReactivePolicy(_CoveragePolicyBase):
         return self.controller.map.as_array()
 
     def episode_metrics(self, index: int = 0) -> dict[str, Any]:
-        """The final phase, the number of turns, and the sensory map (eq. 2, one echo per 10 cm square) with the
-        driven odometry (every fifth step)."""
+        """The final phase, the number of turns, the sensory map (eq. 2) and the driven odometry.
+
+        The map keeps one echo per 10 cm square and the odometry every fifth step (small result files).
+        """
         c = self.controller
         return {
             "final_phase": c.phase,

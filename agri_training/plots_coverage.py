@@ -130,10 +130,19 @@ def plot_sonar(trace: dict[str, Any], path: Path, n: int = 5, eps: float = 0.3) 
     filt = peak_filter(series, n=n, eps=eps)
     fig, ax = plt.subplots(figsize=(9, 3.5))
     ax.plot(x[sl], series, "-", color="tab:red", lw=1.0, label=f"raw (std {np.std(series):.2f} m)")
-    ax.plot(x[sl], filt, ":", color="tab:blue", lw=1.8, label=f"filtered, eq. 1, n={n}, eps={eps} m (std {np.std(filt):.2f} m)")
+    ax.plot(
+        x[sl],
+        filt,
+        ":",
+        color="tab:blue",
+        lw=1.8,
+        label=f"filtered, eq. 1, n={n}, eps={eps} m (std {np.std(filt):.2f} m)",
+    )
     ax.set_xlabel("x along the corridor [m]")
     ax.set_ylabel("left middle sonar [m]")
-    ax.set_title(f"Sonar peaks from vegetation echoes (Fig. 9), corridor {int(corridor[best[0]])}, seed {trace['seed']}")
+    ax.set_title(
+        f"Sonar peaks from vegetation echoes (Fig. 9), corridor {int(corridor[best[0]])}, seed {trace['seed']}"
+    )
     ax.legend(fontsize=8)
     fig.tight_layout()
     fig.savefig(path, dpi=110)

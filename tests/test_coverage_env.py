@@ -103,10 +103,12 @@ def test_driving_into_the_crop_ends_the_episode_with_a_crop_contact():
 def test_time_limit_truncates():
     env = gym.make(ENV_ID, **SMALL, time_limit=2.0)
     env.reset(seed=0)
-    for k in range(20):
+    truncations = []
+    for _ in range(20):
         _, _, term, trunc, _ = env.step(np.zeros(2))
         assert not term
-    assert trunc and k == 19
+        truncations.append(trunc)
+    assert truncations == [False] * 19 + [True]
 
 
 def test_coverage_task_bins_cross_track_and_success():

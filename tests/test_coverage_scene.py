@@ -65,8 +65,9 @@ def test_corridor_width_variation_and_centre_lines():
 
 
 def test_max_narrowing_bounds_the_generated_corridors():
-    p = LayoutParams(n_rows=5, row_length=12.0, corridor_width=1.6, row_incline=0.02, row_bend=0.15,
-                     corridor_width_jitter=0.2)
+    p = LayoutParams(
+        n_rows=5, row_length=12.0, corridor_width=1.6, row_incline=0.02, row_bend=0.15, corridor_width_jitter=0.2
+    )
     for seed in range(10):
         shapes = row_shapes(p, np.random.default_rng(seed))
         xs = np.linspace(shapes.x0, shapes.x1, 50)
@@ -94,5 +95,3 @@ def test_sonar_slip_statistics_and_off_by_default():
     assert np.all(r[:, 1] == 4.0)  # no foliage in view: never a slip
     plain = SonarArray(SonarSpec(max_range=4.0), mounts)
     assert np.all(plain.ranges(pose, geo.circles, geo.capsules, rng, solid=solid)[0] == pytest.approx(0.8))
-
-

@@ -17,8 +17,18 @@ RES = 0.05
 
 
 def _greenhouse(seed, **kw):
-    p = LayoutParams(**{"n_rows": 3, "row_length": 8.0, "corridor_width": 1.4, "row_width": 0.6, "headland": 2.6,
-                        "growth": 0.6, "post_spacing": 4.0, **kw})
+    p = LayoutParams(
+        **{
+            "n_rows": 3,
+            "row_length": 8.0,
+            "corridor_width": 1.4,
+            "row_width": 0.6,
+            "headland": 2.6,
+            "growth": 0.6,
+            "post_spacing": 4.0,
+            **kw,
+        }
+    )
     layout = generate_layout(p, np.random.default_rng(seed))
     grid = rasterize(layout.geometry, RES)
     origin = np.array(grid.origin[:2])
@@ -38,8 +48,13 @@ def _free_along(occ, path):
 
 @pytest.mark.parametrize(
     "seed, kw",
-    [(0, {}), (3, {"row_incline": 0.03, "row_bend": 0.15}), (11, {"corridor_width_jitter": 0.3, "n_rows": 5}),
-     (5, {"row_bend": 0.25, "row_length": 15.0}), (0, {"growth": 1.0, "corridor_width": 1.5, "row_length": 10.0, "n_rows": 4})],
+    [
+        (0, {}),
+        (3, {"row_incline": 0.03, "row_bend": 0.15}),
+        (11, {"corridor_width_jitter": 0.3, "n_rows": 5}),
+        (5, {"row_bend": 0.25, "row_length": 15.0}),
+        (0, {"growth": 1.0, "corridor_width": 1.5, "row_length": 10.0, "n_rows": 4}),
+    ],
 )
 def test_coverage_path_invariants(seed, kw):
     occ, layout, origin, start = _greenhouse(seed, **kw)

@@ -42,7 +42,9 @@ class GreenhouseCoverageConfig(StrictConfig):
     plant_spacing: float = param(0.4, "distance between plants along a row", unit="m", low=0.15, high=2.0)
     plant_jitter: float = param(0.03, "uniform jitter of plant positions", unit="m", low=0.0, high=0.1)
     growth: float = param(0.6, "season: plant size and leaves reaching into corridors", low=0.0, high=1.0)
-    post_spacing: float = param(4.0, "distance between structural posts along rows and walls", unit="m", low=1.0, high=20.0)
+    post_spacing: float = param(
+        4.0, "distance between structural posts along rows and walls", unit="m", low=1.0, high=20.0
+    )
     layout_seed: int = param(
         -1, "seed of the scene layout; -1 draws a new greenhouse every episode", low=-1, high=2**31 - 1
     )
@@ -82,7 +84,8 @@ class GreenhouseCoverageConfig(StrictConfig):
         if free < fito.WIDTH + 0.2:
             raise ValueError(
                 f"GreenhouseCoverageConfig: the narrowest corridor keeps only {free:.2f} m free (corridor_width "
-                f"minus corridor_width_jitter, row_incline and row_bend narrowing, and leaves at growth={self.growth}); "
+                f"minus corridor_width_jitter, row_incline and row_bend narrowing, and leaves at "
+                f"growth={self.growth}); "
                 f"the {fito.WIDTH} m wide Fitorobot needs {fito.WIDTH + 0.2:.2f} m: increase corridor_width or "
                 f"lower the variation."
             )
@@ -139,7 +142,7 @@ class GreenhouseCoverageEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
 
     | key | shape | meaning |
     |---|---|---|
-    | ``sonar`` | (7,) | ranges / 4 m: front, left front, left middle, left rear, right front, right middle, right rear |
+    | ``sonar`` | (7,) | ranges / 4 m: front; left front, middle, rear; right front, middle, rear |
     | ``compass`` | (2,) | ``(1 + sin h) / 2, (1 + cos h) / 2`` of the compass heading h (noise and bias) |
     | ``velocity`` | (2,) | ``(1 + v / max_speed) / 2, (1 + w / max_turn_rate) / 2`` measured by the track encoders |
     | ``pose`` | (4,) | ``x / pose_scale[0], y / pose_scale[1], (1 + sin), (1 + cos) / 2`` of the pose estimate (1) |
@@ -334,7 +337,9 @@ class GreenhouseCoverageEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
                 time=cfg.reward_time,
             ),
         )
-        self._encoder_scale = 1.0 + cfg.encoder_scale_std * rng.standard_normal(2) if cfg.encoder_scale_std else np.ones(2)
+        self._encoder_scale = (
+            1.0 + cfg.encoder_scale_std * rng.standard_normal(2) if cfg.encoder_scale_std else np.ones(2)
+        )
         self._estimate = start[:2].copy()
         self._steps = 0
         self._path_length = 0.0

@@ -127,7 +127,7 @@ def serpentine_waypoints(p: LayoutParams, corridors: tuple[np.ndarray, ...] | No
     x_left = p.headland - p.waypoint_offset
     x_right = p.headland + p.row_length + p.waypoint_offset
     y_left, y_right = _corridor_end_ys(p, corridors)
-    pts = []
+    pts: list[tuple[float, float]] = []
     for k in range(len(y_left)):
         ends = ((x_left, y_left[k]), (x_right, y_right[k]))
         pts.extend(ends if k % 2 == 0 else ends[::-1])
