@@ -186,11 +186,17 @@ class GonzalezHybridPolicy(GonzalezPseudoReactivePolicy):
             every episode after the first a later run in the same greenhouse.
         params: Pseudo-reactive gains.
         lookahead: Pure Pursuit look-ahead (m).
+        end_overshoot: The planned path is extended this far straight on past its end, where the map is free
+            (m): the first run's map ends where that run's coverage did, and this run's odometry differs
+            from the first run's by the encoders' scale errors.
     """
 
-    def __init__(self, env: Any, params: PseudoReactiveParams | None = None, lookahead: float = 1.0) -> None:
+    def __init__(
+        self, env: Any, params: PseudoReactiveParams | None = None, lookahead: float = 1.0, end_overshoot: float = 0.6
+    ) -> None:
         super().__init__(env, params)
         self.lookahead = lookahead
+        self.end_overshoot = end_overshoot
         self.known_map: tuple[np.ndarray, tuple[float, float]] | None = None
         self.follower: _Follower | None = None
         self.mode = "pseudo-reactive"
@@ -212,7 +218,8 @@ class GonzalezHybridPolicy(GonzalezPseudoReactivePolicy):
                 occ, origin = self.known_map
                 try:
                     plan = plan_coverage(occ, 0.05, pose[:2] - np.asarray(origin))
-                    self.follower = _Follower(plan.path + np.asarray(origin), self.lookahead)
+                    path = _extend_end(plan.path, occ, 0.05, self.end_overshoot)
+                    self.follower = _Follower(path + np.asarray(origin), self.lookahead)
                     self.mode = "deliberative"
                 except ValueError:  # the map does not allow a plan: drive this run pseudo-reactively
                     self.known_map = None
@@ -231,6 +238,23 @@ class GonzalezHybridPolicy(GonzalezPseudoReactivePolicy):
             "planned_length": self.follower.tracker.length,
             "planned_path": self.follower.path[::2].round(3).tolist(),
         }
+
+
+def _extend_end(path: np.ndarray, occ: np.ndarray, res: float, length: float) -> np.ndarray:
+    """``path`` continued straight on past its last point, up to ``length`` metres over free cells."""
+    seg = path[-1] - path[max(0, len(path) - 10)]
+    norm = float(np.hypot(*seg))
+    if length <= 0 or norm < 1e-9:
+        return path
+    u = seg / norm
+    extra = []
+    for t in np.arange(res, length + 1e-9, res):
+        q = path[-1] + t * u
+        i, j = int(q[1] // res), int(q[0] // res)
+        if not (0 <= i < occ.shape[0] and 0 <= j < occ.shape[1]) or occ[i, j]:
+            break
+        extra.append(q)
+    return np.vstack([path, *extra]) if extra else path
 
 
 def _thin(points: np.ndarray, cell: float) -> np.ndarray:
