@@ -45,9 +45,7 @@ class GreenhouseCoverageConfig(StrictConfig):
     post_spacing: float = param(
         4.0, "distance between structural posts along rows and walls", unit="m", low=1.0, high=20.0
     )
-    layout_seed: int = param(
-        -1, "seed of the scene layout; -1 draws a new greenhouse every episode", low=-1, high=2**31 - 1
-    )
+    layout_seed: int = param(-1, "layout seed; -1: a new greenhouse every episode", low=-1, high=2**31 - 1)
     # Robot (756 kg: low accelerations)
     max_speed: float = param(0.5, "forward speed limit (reverse: half of it)", unit="m/s", low=0.1, high=1.5)
     max_turn_rate: float = param(0.6, "angular speed limit", unit="rad/s", low=0.1, high=2.0)
@@ -57,18 +55,18 @@ class GreenhouseCoverageConfig(StrictConfig):
     # Sensors
     sonar_noise_std: float = param(0.01, "sonar Gaussian range noise", unit="m", low=0.0, high=0.5)
     vegetation_echo_prob: float = param(
-        0.15, "probability that a sonar echo off foliage slips between the leaves and reads long", low=0.0, high=1.0
+        0.15, "chance that an echo off foliage slips through (reads long)", low=0.0, high=1.0
     )
     compass_noise_std: float = param(0.01, "compass Gaussian heading noise", unit="rad", low=0.0, high=0.5)
     compass_bias: float = param(0.03, "constant compass heading bias", unit="rad", low=-0.5, high=0.5)
     encoder_noise: float = param(0.02, "relative std of each track-speed measurement", low=0.0, high=0.5)
     encoder_scale_std: float = param(
-        0.01, "std of the per-episode scale error of each track encoder (odometry drift)", low=0.0, high=0.1
+        0.01, "per-episode scale error std of each track encoder (drift)", low=0.0, high=0.1
     )
     localization: str = param("odometry", "source of the 'pose' observation", choices=LOCALIZATION_MODES)
     # Task and reward
     bin_length: float = param(0.25, "length of a coverage bin along a corridor", unit="m", low=0.05, high=2.0)
-    terminate_on_contact: bool = param(True, "end the episode when the robot touches the crop or anything else")
+    terminate_on_contact: bool = param(True, "end the episode on touching the crop or anything else")
     time_limit: float = param(0.0, "episode time limit; 0 sizes it to the mission", unit="s", low=0.0, high=36000.0)
     reward_coverage: float = param(1.0, "reward per corridor covered (paid per bin)", low=0.0, high=100.0)
     reward_success: float = param(10.0, "bonus when every corridor is covered", low=0.0, high=1000.0)
@@ -204,14 +202,44 @@ class GreenhouseCoverageEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
     ## Arguments
 
     Every argument is a field of :class:`GreenhouseCoverageConfig`; unknown names and values out of range
-    raise ``ValueError`` naming the argument and its valid range (``GreenhouseCoverageConfig().describe()``
-    lists them with units and defaults): scene ``n_rows``, ``row_length``, ``corridor_width``,
-    ``corridor_width_jitter``, ``row_incline``, ``row_bend``, ``row_width``, ``headland``, ``plant_spacing``,
-    ``plant_jitter``, ``growth``, ``post_spacing``, ``layout_seed``; robot ``max_speed``, ``max_turn_rate``,
-    ``max_accel``, ``max_angular_accel``, ``control_period``; sensors ``sonar_noise_std``,
-    ``vegetation_echo_prob``, ``compass_noise_std``, ``compass_bias``, ``encoder_noise``,
-    ``encoder_scale_std``, ``localization``; task ``bin_length``, ``terminate_on_contact``, ``time_limit``,
-    the reward weights ``reward_*`` and ``render_width``.
+    raise ``ValueError`` naming the argument and its valid range.
+
+    | argument | default | unit | valid | meaning |
+    |---|---|---|---|---|
+    | ``n_rows`` | 4 |  | in [1, 12] | rows of plants (the corridors are the n_rows + 1 spaces beside them) |
+    | ``row_length`` | 10 | m | in [3.0, 50.0] | length of each row |
+    | ``corridor_width`` | 1.4 | m | in [1.0, 3.0] | mean free width of a corridor |
+    | ``corridor_width_jitter`` | 0.1 | m | in [0.0, 0.4] | each corridor is corridor_width + U(-jitter, jitter) wide |
+    | ``row_incline`` | 0.01 | rad | in [0.0, 0.05] | each row is tilted by U(-incline, incline) |
+    | ``row_bend`` | 0.05 | m | in [0.0, 0.3] | each row bows sideways by U(-bend, bend) at mid-length |
+    | ``row_width`` | 0.6 | m | in [0.2, 1.5] | width of a row bed |
+    | ``headland`` | 2.6 | m | in [2.2, 6.0] | free space between row ends and the end walls |
+    | ``plant_spacing`` | 0.4 | m | in [0.15, 2.0] | distance between plants along a row |
+    | ``plant_jitter`` | 0.03 | m | in [0.0, 0.1] | uniform jitter of plant positions |
+    | ``growth`` | 0.6 |  | in [0.0, 1.0] | season: plant size and leaves reaching into corridors |
+    | ``post_spacing`` | 4 | m | in [1.0, 20.0] | distance between structural posts along rows and walls |
+    | ``layout_seed`` | -1 |  | in [-1, 2147483647] | layout seed; -1: a new greenhouse every episode |
+    | ``max_speed`` | 0.5 | m/s | in [0.1, 1.5] | forward speed limit (reverse: half of it) |
+    | ``max_turn_rate`` | 0.6 | rad/s | in [0.1, 2.0] | angular speed limit |
+    | ``max_accel`` | 0.3 | m/s^2 | in [0.05, 2.0] | linear acceleration limit |
+    | ``max_angular_accel`` | 0.8 | rad/s^2 | in [0.05, 5.0] | angular acceleration limit |
+    | ``control_period`` | 0.1 | s | in [0.02, 0.5] | time between actions (the paper's 100 ms) |
+    | ``sonar_noise_std`` | 0.01 | m | in [0.0, 0.5] | sonar Gaussian range noise |
+    | ``vegetation_echo_prob`` | 0.15 |  | in [0.0, 1.0] | chance that an echo off foliage slips through (reads long) |
+    | ``compass_noise_std`` | 0.01 | rad | in [0.0, 0.5] | compass Gaussian heading noise |
+    | ``compass_bias`` | 0.03 | rad | in [-0.5, 0.5] | constant compass heading bias |
+    | ``encoder_noise`` | 0.02 |  | in [0.0, 0.5] | relative std of each track-speed measurement |
+    | ``encoder_scale_std`` | 0.01 |  | in [0.0, 0.1] | per-episode scale error std of each track encoder (drift) |
+    | ``localization`` | 'odometry' |  | one of 'odometry', 'ground_truth' | source of the 'pose' observation |
+    | ``bin_length`` | 0.25 | m | in [0.05, 2.0] | length of a coverage bin along a corridor |
+    | ``terminate_on_contact`` | True |  | True or False | end the episode on touching the crop or anything else |
+    | ``time_limit`` | 0 | s | in [0.0, 36000.0] | episode time limit; 0 sizes it to the mission |
+    | ``reward_coverage`` | 1 |  | in [0.0, 100.0] | reward per corridor covered (paid per bin) |
+    | ``reward_success`` | 10 |  | in [0.0, 1000.0] | bonus when every corridor is covered |
+    | ``reward_contact`` | 10 |  | in [0.0, 1000.0] | penalty on contact |
+    | ``reward_cross_track`` | 0 |  | in [0.0, 100.0] | penalty per step per metre of cross-track error |
+    | ``reward_time`` | 0.001 |  | in [0.0, 10.0] | penalty per step |
+    | ``render_width`` | 800 | px | in [100, 4000] | width of rendered frames |
 
     Example::
 
