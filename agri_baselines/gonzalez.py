@@ -316,7 +316,7 @@ class PseudoReactiveParams:
     exit_distance: float = 0.55
     entry_offset: float = 0.15
     min_corridor: float = 2.0
-    end_confirm: float = 0.2
+    end_confirm: float = 0.45
     k_heading: float = 1.2
     k_center: float = 0.6
     max_center_angle: float = 0.15
