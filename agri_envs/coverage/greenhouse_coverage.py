@@ -195,7 +195,8 @@ class GreenhouseCoverageEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
     ``cross_track`` (m, distance from the robot's centre to that corridor's centre line, 0 in the
     headlands), ``max_cross_track`` (m, over the episode), ``mean_cross_track`` (m, over the steps inside
     corridors), ``crop_contacts`` (steps that touched plants, leaves or trees), ``other_contacts``
-    (walls, posts), ``collision`` (any contact so far), true pose ``x``, ``y``, ``yaw``, odometry
+    (walls, posts), ``collision`` (any contact so far), ``clearance`` and ``min_clearance`` (m, footprint to
+    the nearest obstacle, now and over the episode), true pose ``x``, ``y``, ``yaw``, odometry
     ``est_x``, ``est_y``, compass ``compass`` (rad), ``v``, ``w``, ``path_length`` (m), ``episode_time``
     (s), the seven ``sonar_<name>`` readings (m) and the reward terms.
 
@@ -273,6 +274,7 @@ class GreenhouseCoverageEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
             "mean_cross_track",
             "crop_contacts",
             "other_contacts",
+            "min_clearance",
             "path_length",
             "episode_time",
         ),
@@ -285,6 +287,7 @@ class GreenhouseCoverageEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
             "compass",
             "corridor",
             "cross_track",
+            "clearance",
             "coverage",
             *(f"sonar_{n}" for n in fito.SONAR_NAMES),
         ),
@@ -379,6 +382,7 @@ class GreenhouseCoverageEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
         self._w_meas = 0.0
         self._trail = [(float(start[0]), float(start[1]))]
         self._compass = self._read_compass()
+        self._min_clearance = math.inf
         outcome = self.task.evaluate(self.robot.pose, False, False)
         self._track(outcome)
         obs = self._observe()
@@ -427,6 +431,9 @@ class GreenhouseCoverageEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
         return float(footprint_clearance(p[0], p[1], p[2], 0.5 * s.length, 0.5 * s.width, arrays[0], arrays[1]))
 
     def _track(self, outcome: dict[str, Any]) -> None:
+        assert self.world is not None
+        self._clearance_now = self.world.clearance(self.robot)
+        self._min_clearance = min(self._min_clearance, self._clearance_now)
         if outcome["corridor"] >= 0:
             self._cross_sum += float(outcome["cross_track"])
             self._cross_n += 1
@@ -499,6 +506,8 @@ class GreenhouseCoverageEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
             crop_contacts=self._crop_contacts,
             other_contacts=self._other_contacts,
             collision=bool(self._crop_contacts or self._other_contacts),
+            clearance=float(self._clearance_now),
+            min_clearance=float(self._min_clearance),
             x=float(pose[0]),
             y=float(pose[1]),
             yaw=float(pose[2]),
