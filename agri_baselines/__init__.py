@@ -150,6 +150,15 @@ def astar(occupancy: np.ndarray, start: tuple[int, int], goal: tuple[int, int]) 
     return _astar(occupancy, start, goal)
 
 
+def __getattr__(name: str) -> Any:
+    """``agri_baselines.coverage_path`` (González's planner), imported on first use (it loads scikit-image)."""
+    if name == "coverage_path":
+        from agri_baselines.gonzalez_planner import coverage_path
+
+        return coverage_path
+    raise AttributeError(f"module 'agri_baselines' has no attribute {name!r}")
+
+
 register_policy(
     PolicySpec(
         name="apoorva-chain",
@@ -164,5 +173,33 @@ register_policy(
         env_id="robot_chain_v0",
         entry_point="agri_baselines.apoorva_chain:make_apoorva_chain_no_strip",
         description="apoorva-chain without the elastic strip (Alg. 6 off)",
+    )
+)
+register_policy(
+    PolicySpec(
+        name="gonzalez-deliberative",
+        env_id="agri_envs/GreenhouseCoverage-v0",
+        entry_point="agri_baselines.gonzalez_policies:make_gonzalez_deliberative",
+        env_kwargs={"localization": "ground_truth"},
+        privileged=True,
+        description="González 2009: Voronoi diagram of the true map, corridor-covering search, Pure Pursuit (1 m)",
+    )
+)
+register_policy(
+    PolicySpec(
+        name="gonzalez-pseudo-reactive",
+        env_id="agri_envs/GreenhouseCoverage-v0",
+        entry_point="agri_baselines.gonzalez_policies:make_gonzalez_pseudo_reactive",
+        env_kwargs={"localization": "odometry"},
+        description="González 2009: behaviours, 2+2 turn rule, centering, peak filter (eq. 1), sensory map (eq. 2)",
+    )
+)
+register_policy(
+    PolicySpec(
+        name="gonzalez-hybrid",
+        env_id="agri_envs/GreenhouseCoverage-v0",
+        entry_point="agri_baselines.gonzalez_policies:make_gonzalez_hybrid",
+        env_kwargs={"localization": "odometry"},
+        description="González 2009, Fig. 2: first run pseudo-reactive, later runs deliberative on its sensory map",
     )
 )

@@ -32,6 +32,11 @@ def register_envs() -> None:
             entry_point="agri_envs.arm.grape_harvest:GrapeHarvestEnv",
             max_episode_steps=1000,
         )
+    if "agri_envs/GreenhouseCoverage-v0" not in registry:  # the env truncates itself at its mission-sized limit
+        register(
+            id="agri_envs/GreenhouseCoverage-v0",
+            entry_point="agri_envs.coverage.greenhouse_coverage:GreenhouseCoverageEnv",
+        )
 
 
 register_envs()

@@ -198,3 +198,31 @@ register_scenario(
         "leader's A* path; an obstacle drops onto the path ahead of the leader (Fig. 8d).",
     )
 )
+_COVER = "agri_envs/GreenhouseCoverage-v0"
+register_scenario(
+    Scenario(
+        _COVER,
+        "almeria",
+        {},
+        "González sec. 3-4: five corridors of an Almería greenhouse, neither straight nor equally wide, sonar "
+        "echoes slipping into the foliage; a new greenhouse every seed (the env's defaults).",
+    )
+)
+register_scenario(
+    Scenario(
+        _COVER,
+        "same-greenhouse",
+        {"layout_seed": 1},
+        "González Fig. 2: the same greenhouse every run, so the hybrid architecture's first (pseudo-reactive) "
+        "run builds the sensory map that its later (deliberative) runs plan on.",
+        default_episodes=10,
+    )
+)
+register_scenario(
+    Scenario(
+        _COVER,
+        "dense-foliage",
+        {"growth": 1.0, "vegetation_echo_prob": 0.3, "corridor_width": 1.5},
+        "Fig. 9's situation pushed further: fully grown plants, twice the vegetation echoes.",
+    )
+)

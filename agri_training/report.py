@@ -35,6 +35,7 @@ SECTION_HOOKS: dict[str, str] = {
     "agri_envs/GreenhouseNav-v1": "agri_training.plots_rover:report_section",
     "agri_envs/GrapeHarvest-v1": "agri_training.plots_arm:report_section",
     "robot_chain_v0": "agri_training.plots_chain:report_section",
+    "agri_envs/GreenhouseCoverage-v0": "agri_training.plots_coverage:report_section",
 }
 
 #: Success rates the papers report, as (successes, trials, source), per suite name: our rate is compared

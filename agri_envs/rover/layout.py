@@ -48,6 +48,11 @@ class LayoutParams:
     post_radius: float = 0.05
     n_trees: int = 0
     waypoint_offset: float = 0.8
+    # Mediterranean greenhouses (González 2009, sec. 3.2): rows that are neither straight nor parallel,
+    # corridors that are not equally wide. All zero by default (straight rows, one corridor width).
+    row_incline: float = 0.0  # rad: each row is tilted by a uniform angle in [-row_incline, row_incline]
+    row_bend: float = 0.0  # m: each row bows sideways by a uniform offset in [-row_bend, row_bend] at mid-length
+    corridor_width_jitter: float = 0.0  # m: each corridor's width is corridor_width + U(-jitter, jitter)
 
     def max_intrusion(self) -> float:
         """How far plants or leaves can reach past the edge of a row bed at this growth (m)."""
@@ -65,6 +70,11 @@ class LayoutParams:
     def height(self) -> float:
         """Inner width of the greenhouse across the rows (m)."""
         return (self.n_rows + 1) * self.corridor_width + self.n_rows * self.row_width
+
+    def max_narrowing(self) -> float:
+        """Worst-case loss of corridor width (m) from width jitter, inclined and bent rows (two rows per corridor)."""
+        incline = 0.5 * self.row_length * math.tan(self.row_incline)
+        return self.corridor_width_jitter + 2.0 * (incline + self.row_bend)
 
     def corridor_centres(self) -> np.ndarray:
         """Y of each corridor's centre line (m)."""
@@ -87,6 +97,8 @@ class Layout:
         mission: Indices of the waypoints to visit, in order (by default 1, 2, ..., k-1, 0: the loop).
         start_pose: Robot start ``(x, y, yaw)``.
         routes: Where people walk.
+        corridors: Centre line of every corridor as a ``(k, 2)`` polyline from its low-x to its high-x end
+            (generated greenhouses only; empty otherwise).
     """
 
     geometry: Geometry
@@ -94,6 +106,7 @@ class Layout:
     mission: np.ndarray
     start_pose: np.ndarray
     routes: RouteGraph
+    corridors: tuple[np.ndarray, ...] = ()
 
     @property
     def targets(self) -> np.ndarray:
@@ -101,43 +114,137 @@ class Layout:
         return self.waypoints[self.mission]
 
 
-def serpentine_waypoints(p: LayoutParams) -> np.ndarray:
+def _corridor_end_ys(p: LayoutParams, corridors: tuple[np.ndarray, ...] | None) -> tuple[np.ndarray, np.ndarray]:
+    """Y of each corridor's centre at its low-x and its high-x end (nominal straight rows without ``corridors``)."""
+    if not corridors:
+        ys = p.corridor_centres()
+        return ys, ys
+    return np.array([c[0, 1] for c in corridors]), np.array([c[-1, 1] for c in corridors])
+
+
+def serpentine_waypoints(p: LayoutParams, corridors: tuple[np.ndarray, ...] | None = None) -> np.ndarray:
     """Waypoints 0, 1, ...: up and down every corridor in turn, ending where the loop can close."""
     x_left = p.headland - p.waypoint_offset
     x_right = p.headland + p.row_length + p.waypoint_offset
-    pts = []
-    for k, y in enumerate(p.corridor_centres()):
-        ends = (x_left, x_right) if k % 2 == 0 else (x_right, x_left)
-        pts.extend([(ends[0], y), (ends[1], y)])
+    y_left, y_right = _corridor_end_ys(p, corridors)
+    pts: list[tuple[float, float]] = []
+    for k in range(len(y_left)):
+        ends = ((x_left, y_left[k]), (x_right, y_right[k]))
+        pts.extend(ends if k % 2 == 0 else ends[::-1])
     if pts[-1][0] == x_right:  # odd number of corridors: come back along the first corridor
-        pts.append((x_right, float(p.corridor_centres()[0])))
+        pts.append((x_right, float(y_right[0])))
     return np.array(pts, dtype=np.float64)
 
 
-def route_graph(p: LayoutParams) -> RouteGraph:
+def route_graph(p: LayoutParams, corridors: tuple[np.ndarray, ...] | None = None) -> RouteGraph:
     """People walk every corridor and the two headlands between corridor ends."""
-    ys = p.corridor_centres()
+    y_left, y_right = _corridor_end_ys(p, corridors)
     x_left = p.headland - p.waypoint_offset
     x_right = p.headland + p.row_length + p.waypoint_offset
-    nodes = [(x_left, y) for y in ys] + [(x_right, y) for y in ys]
+    ys = y_left
+    nodes = [(x_left, y) for y in y_left] + [(x_right, y) for y in y_right]
     k = len(ys)
     edges = [(i, i + k) for i in range(k)]
     edges += [(i, i + 1) for i in range(k - 1)] + [(k + i, k + i + 1) for i in range(k - 1)]
     return RouteGraph(nodes=np.array(nodes, dtype=np.float64), edges=np.array(edges, dtype=np.int64))
 
 
-def generate_layout(p: LayoutParams, rng: np.random.Generator) -> Layout:
-    """Build the greenhouse: walls, posts, plants (jittered, grown), leaves and trees.
+@dataclasses.dataclass(frozen=True)
+class RowShapes:
+    """Where the rows of one generated greenhouse run (straight, inclined or bent).
+
+    Row ``r`` follows ``y = centre[r] + slope[r] * (x - x_mid) + bend[r] * (1 - |2 (x - x_mid) / row_length|)``
+    between its ends ``x0 .. x1``: a straight line tilted by ``atan(slope)`` with a kink of ``bend`` metres
+    at mid-length.
+
+    Attributes:
+        centre: ``(n_rows,)`` y of each row's centre at mid-length (m).
+        slope: ``(n_rows,)`` tangent of each row's incline.
+        bend: ``(n_rows,)`` sideways offset of each row's mid-point (m).
+        x0: Low-x end of the rows (m).
+        x1: High-x end of the rows (m).
+        half_extent: Half-width of the crop across a row (m): the plants' radius, where the free space of
+            a corridor ends (a row bed is wider than its plants).
+        height: Inner width of the greenhouse across the rows (m).
+    """
+
+    centre: np.ndarray
+    slope: np.ndarray
+    bend: np.ndarray
+    x0: float
+    x1: float
+    half_extent: float
+    height: float
+
+    def row_y(self, r: int, x: np.ndarray | float) -> np.ndarray:
+        """Y of row ``r``'s centre line at ``x`` (m)."""
+        xm = 0.5 * (self.x0 + self.x1)
+        half = 0.5 * (self.x1 - self.x0)
+        xa = np.asarray(x, dtype=np.float64)
+        return self.centre[r] + self.slope[r] * (xa - xm) + self.bend[r] * (1.0 - np.abs(xa - xm) / half)
+
+    def corridor_lines(self) -> tuple[np.ndarray, ...]:
+        """Centre line of every corridor: midway between the plants of its two rows (or a row and a wall)."""
+        xs = np.array([self.x0, 0.5 * (self.x0 + self.x1), self.x1])
+        n = len(self.centre)
+        lines = []
+        for k in range(n + 1):
+            lo = self.row_y(k - 1, xs) + self.half_extent if k > 0 else np.zeros(3)
+            hi = self.row_y(k, xs) - self.half_extent if k < n else np.full(3, self.height)
+            lines.append(np.column_stack([xs, 0.5 * (lo + hi)]))
+        return tuple(lines)
+
+
+def row_shapes(p: LayoutParams, rng: np.random.Generator) -> RowShapes:
+    """Draw the corridor widths, row inclines and bends (nothing is drawn for features that are off).
 
     Args:
         p: Scene parameters.
-        rng: Source of the jitter, leaves and tree positions.
+        rng: Source of the variation.
 
     Returns:
-        The layout with its default serpentine mission.
+        The rows of one greenhouse; with the default parameters they are the straight rows at
+        :meth:`LayoutParams.row_centres` and the greenhouse is :attr:`LayoutParams.height` wide.
     """
+    n = p.n_rows
+    widths = np.full(n + 1, p.corridor_width)
+    if p.corridor_width_jitter > 0:
+        widths += rng.uniform(-p.corridor_width_jitter, p.corridor_width_jitter, n + 1)
+    slope = np.tan(rng.uniform(-p.row_incline, p.row_incline, n)) if p.row_incline > 0 else np.zeros(n)
+    bend = rng.uniform(-p.row_bend, p.row_bend, n) if p.row_bend > 0 else np.zeros(n)
+    if p.corridor_width_jitter > 0:
+        centre = np.cumsum(widths[:-1]) + p.row_width * (0.5 + np.arange(n))
+        height = float(widths.sum() + n * p.row_width)
+    else:  # the rover's straight rows, exactly as before
+        centre = p.row_centres()
+        height = p.height
+    return RowShapes(
+        centre=centre,
+        slope=slope,
+        bend=bend,
+        x0=p.headland,
+        x1=p.headland + p.row_length,
+        half_extent=PLANT_RADIUS[0] + p.growth * (PLANT_RADIUS[1] - PLANT_RADIUS[0]),
+        height=height,
+    )
+
+
+def generate_layout(p: LayoutParams, rng: np.random.Generator) -> Layout:
+    """Build the greenhouse: walls, posts, plants (jittered, grown), leaves and trees.
+
+    Rows are straight and corridors equally wide unless ``row_incline``, ``row_bend`` or
+    ``corridor_width_jitter`` say otherwise (see :func:`row_shapes`).
+
+    Args:
+        p: Scene parameters.
+        rng: Source of the jitter, leaves, tree positions and row shapes.
+
+    Returns:
+        The layout with its default serpentine mission and the corridors' centre lines.
+    """
+    shapes = row_shapes(p, rng)
     b = GeometryBuilder()
-    w, h = p.width, p.height
+    w, h = p.width, shapes.height
     t = 0.5 * WALL_THICKNESS
     for x0, y0, x1, y1 in (
         (-t, -t, w + t, -t),
@@ -165,13 +272,14 @@ def generate_layout(p: LayoutParams, rng: np.random.Generator) -> Layout:
     if p.n_trees > 0:
         picks = rng.choice(len(slots), size=min(p.n_trees, len(slots)), replace=False)
         tree_slots = {slots[int(i)] for i in picks}
-    for row, y in enumerate(p.row_centres()):
+    for row in range(p.n_rows):
         for x in post_xs:
-            b.circle(x, y, p.post_radius, Kind.POST)
+            b.circle(x, float(shapes.row_y(row, x)), p.post_radius, Kind.POST)
         for j in range(n_plants):
             x = x0 + (j + 0.5) * (p.row_length / n_plants)
             if np.min(np.abs(post_xs - x)) < plant_r + p.post_radius + 0.02:
                 continue  # the post stands here
+            y = float(shapes.row_y(row, x))
             px = x + rng.uniform(-p.plant_jitter, p.plant_jitter)
             py = y + rng.uniform(-p.plant_jitter, p.plant_jitter)
             if (row, j) in tree_slots:
@@ -187,14 +295,18 @@ def generate_layout(p: LayoutParams, rng: np.random.Generator) -> Layout:
                         px, py, px + reach * math.cos(angle), py + reach * math.sin(angle), LEAF_RADIUS, Kind.LEAF
                     )
     geometry = b.build((-WALL_THICKNESS, -WALL_THICKNESS, w + WALL_THICKNESS, h + WALL_THICKNESS))
-    waypoints = serpentine_waypoints(p)
+    corridors = shapes.corridor_lines()
+    shaped = p.row_incline > 0 or p.row_bend > 0 or p.corridor_width_jitter > 0
+    ends = corridors if shaped else None  # straight rows: the rover's waypoints exactly as before
+    waypoints = serpentine_waypoints(p, ends)
     mission = np.array([*range(1, len(waypoints)), 0])
     return Layout(
         geometry=geometry,
         waypoints=waypoints,
         mission=mission,
         start_pose=_start_facing(waypoints, 1),
-        routes=route_graph(p),
+        routes=route_graph(p, ends),
+        corridors=corridors,
     )
 
 

@@ -142,18 +142,25 @@ class SonarSpec:
         min_range: Closest measurable distance (m).
         max_range: Reported when no echo returns (m).
         noise_std: Standard deviation of Gaussian range noise (m).
+        foliage_slip_prob: Vegetation echoes (González 2009, Fig. 9): probability that a reading whose
+            nearest echo comes off foliage slips between the leaves and reads long, uniformly between the
+            foliage and the nearest solid echo behind it (or ``max_range``). 0 (off) by default; it needs
+            the solid obstacles passed to :meth:`SonarArray.ranges`.
     """
 
     aperture: float = math.radians(15.0)
     min_range: float = 0.02
     max_range: float = 4.0
     noise_std: float = 0.0
+    foliage_slip_prob: float = 0.0
 
     def __post_init__(self) -> None:
         if not 0 < self.aperture < math.pi:
             raise ValueError(f"SonarSpec: aperture must be in (0, pi), got {self.aperture}")
         if not 0 <= self.min_range < self.max_range:
             raise ValueError("SonarSpec: need 0 <= min_range < max_range")
+        if not 0 <= self.foliage_slip_prob <= 1:
+            raise ValueError(f"SonarSpec: foliage_slip_prob must be in [0, 1], got {self.foliage_slip_prob}")
 
 
 def hc_sr04(**overrides: float) -> SonarSpec:
@@ -204,10 +211,30 @@ class SonarArray:
         return self._out
 
     def ranges(
-        self, body_pose: np.ndarray, circles: np.ndarray, capsules: np.ndarray, rng: np.random.Generator
+        self,
+        body_pose: np.ndarray,
+        circles: np.ndarray,
+        capsules: np.ndarray,
+        rng: np.random.Generator,
+        solid: tuple[np.ndarray, np.ndarray] | None = None,
     ) -> np.ndarray:
-        """Distances (m) with Gaussian noise from ``rng`` (a fresh array)."""
+        """Distances (m) with Gaussian noise from ``rng`` (a fresh array).
+
+        Args:
+            body_pose: ``(x, y, yaw)`` of the body.
+            circles: Every circle the sonars see.
+            capsules: Every capsule the sonars see.
+            rng: Source of the noise and the vegetation echoes.
+            solid: ``(circles, capsules)`` of the obstacles that are not foliage. With
+                ``spec.foliage_slip_prob > 0`` a reading is a foliage echo when the solid obstacles alone
+                read farther; such readings slip long with that probability (see :class:`SonarSpec`).
+        """
         out = self.exact_ranges(body_pose, circles, capsules).copy()
+        if self.spec.foliage_slip_prob > 0 and solid is not None:
+            hard = self.exact_ranges(body_pose, solid[0], solid[1])
+            slip = (out < hard - 1e-9) & (rng.random(len(out)) < self.spec.foliage_slip_prob)
+            if np.any(slip):
+                out[slip] = rng.uniform(out[slip], hard[slip])
         if self.spec.noise_std > 0:
             out += self.spec.noise_std * rng.standard_normal(len(out))
             np.clip(out, self.spec.min_range, self.spec.max_range, out=out)

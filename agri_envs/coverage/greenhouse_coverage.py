@@ -1,0 +1,588 @@
+"""GreenhouseCoverage-v0: the tracked Fitorobot drives every corridor of a Mediterranean greenhouse (González 2009)."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+from gymnasium import spaces
+
+from agri_envs._actions import checked_action
+from agri_envs._config import StrictConfig, param
+from agri_envs.coverage import robot as fito
+from agri_envs.coverage.task import CoverageTask, CoverageWeights
+from agri_envs.rover.layout import Layout, LayoutParams, generate_layout
+from agri_envs.sim2d.geometry import Kind
+from agri_envs.sim2d.raycast import footprint_clearance
+from agri_envs.sim2d.sensors import SonarArray, SonarSpec
+from agri_envs.sim2d.world import World2D
+
+LOCALIZATION_MODES = ("odometry", "ground_truth")
+_CROP = (int(Kind.PLANT), int(Kind.LEAF), int(Kind.TREE))
+
+
+@dataclasses.dataclass(frozen=True)
+class GreenhouseCoverageConfig(StrictConfig):
+    """Arguments of ``agri_envs/GreenhouseCoverage-v0`` (each one a ``gym.make`` keyword)."""
+
+    # Scene
+    n_rows: int = param(4, "rows of plants (the corridors are the n_rows + 1 spaces beside them)", low=1, high=12)
+    row_length: float = param(10.0, "length of each row", unit="m", low=3.0, high=50.0)
+    corridor_width: float = param(1.4, "mean free width of a corridor", unit="m", low=1.0, high=3.0)
+    corridor_width_jitter: float = param(
+        0.1, "each corridor is corridor_width + U(-jitter, jitter) wide", unit="m", low=0.0, high=0.4
+    )
+    row_incline: float = param(0.01, "each row is tilted by U(-incline, incline)", unit="rad", low=0.0, high=0.05)
+    row_bend: float = param(0.05, "each row bows sideways by U(-bend, bend) at mid-length", unit="m", low=0.0, high=0.3)
+    row_width: float = param(0.6, "width of a row bed", unit="m", low=0.2, high=1.5)
+    headland: float = param(2.6, "free space between row ends and the end walls", unit="m", low=2.2, high=6.0)
+    plant_spacing: float = param(0.4, "distance between plants along a row", unit="m", low=0.15, high=2.0)
+    plant_jitter: float = param(0.03, "uniform jitter of plant positions", unit="m", low=0.0, high=0.1)
+    growth: float = param(0.6, "season: plant size and leaves reaching into corridors", low=0.0, high=1.0)
+    post_spacing: float = param(
+        4.0, "distance between structural posts along rows and walls", unit="m", low=1.0, high=20.0
+    )
+    layout_seed: int = param(-1, "layout seed; -1: a new greenhouse every episode", low=-1, high=2**31 - 1)
+    # Robot (756 kg: low accelerations)
+    max_speed: float = param(0.5, "forward speed limit (reverse: half of it)", unit="m/s", low=0.1, high=1.5)
+    max_turn_rate: float = param(0.6, "angular speed limit", unit="rad/s", low=0.1, high=2.0)
+    max_accel: float = param(0.3, "linear acceleration limit", unit="m/s^2", low=0.05, high=2.0)
+    max_angular_accel: float = param(0.8, "angular acceleration limit", unit="rad/s^2", low=0.05, high=5.0)
+    control_period: float = param(0.1, "time between actions (the paper's 100 ms)", unit="s", low=0.02, high=0.5)
+    # Sensors
+    sonar_noise_std: float = param(0.01, "sonar Gaussian range noise", unit="m", low=0.0, high=0.5)
+    vegetation_echo_prob: float = param(
+        0.15, "chance that an echo off foliage slips through (reads long)", low=0.0, high=1.0
+    )
+    compass_noise_std: float = param(0.01, "compass Gaussian heading noise", unit="rad", low=0.0, high=0.5)
+    compass_bias: float = param(0.03, "constant compass heading bias", unit="rad", low=-0.5, high=0.5)
+    encoder_noise: float = param(0.02, "relative std of each track-speed measurement", low=0.0, high=0.5)
+    encoder_scale_std: float = param(
+        0.01, "per-episode scale error std of each track encoder (drift)", low=0.0, high=0.1
+    )
+    localization: str = param("odometry", "source of the 'pose' observation", choices=LOCALIZATION_MODES)
+    # Task and reward
+    bin_length: float = param(0.25, "length of a coverage bin along a corridor", unit="m", low=0.05, high=2.0)
+    terminate_on_contact: bool = param(True, "end the episode on touching the crop or anything else")
+    time_limit: float = param(0.0, "episode time limit; 0 sizes it to the mission", unit="s", low=0.0, high=36000.0)
+    reward_coverage: float = param(1.0, "reward per corridor covered (paid per bin)", low=0.0, high=100.0)
+    reward_success: float = param(10.0, "bonus when every corridor is covered", low=0.0, high=1000.0)
+    reward_contact: float = param(10.0, "penalty on contact", low=0.0, high=1000.0)
+    reward_cross_track: float = param(0.0, "penalty per step per metre of cross-track error", low=0.0, high=100.0)
+    reward_time: float = param(0.001, "penalty per step", low=0.0, high=10.0)
+    render_width: int = param(800, "width of rendered frames", unit="px", low=100, high=4000)
+
+    def validate(self) -> None:
+        """Check that the narrowest corridor still lets the 0.7 m wide robot pass with 0.2 m to spare."""
+        lp = self.layout_params()
+        free = self.corridor_width - lp.max_narrowing() - 2 * lp.max_intrusion()
+        if free < fito.WIDTH + 0.2:
+            raise ValueError(
+                f"GreenhouseCoverageConfig: the narrowest corridor keeps only {free:.2f} m free (corridor_width "
+                f"minus corridor_width_jitter, row_incline and row_bend narrowing, and leaves at "
+                f"growth={self.growth}); "
+                f"the {fito.WIDTH} m wide Fitorobot needs {fito.WIDTH + 0.2:.2f} m: increase corridor_width or "
+                f"lower the variation."
+            )
+
+    def layout_params(self) -> LayoutParams:
+        """The scene part of the config."""
+        return LayoutParams(
+            n_rows=self.n_rows,
+            row_length=self.row_length,
+            corridor_width=self.corridor_width,
+            row_width=self.row_width,
+            headland=self.headland,
+            plant_spacing=self.plant_spacing,
+            plant_jitter=self.plant_jitter,
+            growth=self.growth,
+            post_spacing=self.post_spacing,
+            row_incline=self.row_incline,
+            row_bend=self.row_bend,
+            corridor_width_jitter=self.corridor_width_jitter,
+        )
+
+    def mission_time(self) -> float:
+        """The episode time limit (s): ``time_limit``, or three times the serpentine at full speed plus turns."""
+        if self.time_limit > 0:
+            return self.time_limit
+        n = self.n_rows + 1
+        length = n * (self.row_length + self.headland) + self.n_rows * (self.corridor_width + self.row_width)
+        turns = 2 * self.n_rows * (math.pi / 2) / self.max_turn_rate
+        return 3.0 * (length / self.max_speed + turns) + 30.0
+
+
+class GreenhouseCoverageEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
+    """Drive the tracked Fitorobot through every corridor of a Mediterranean greenhouse without touching the crop.
+
+    ## Description
+
+    The robot of González et al. (2009), the Fitorobot (a 0.7 x 1.5 m, 756 kg rubber-tracked vehicle with
+    differential steering), must traverse every corridor of a greenhouse end to end, as a spraying robot
+    does. The greenhouse has ``n_rows`` rows of plants; the corridors are the ``n_rows + 1`` spaces between
+    them and between the outer rows and the walls. As in Almería's greenhouses the corridors are neither
+    straight nor equally wide (``row_incline``, ``row_bend``, ``corridor_width_jitter``), and sonar echoes
+    off the foliage sometimes slip between the leaves and read long (``vegetation_echo_prob``: the peaks of
+    the paper's Fig. 9). The world is a top-view pymunk space shared with GreenhouseNav.
+
+    ## Action Space
+
+    ``Box(-1, 1, (2,), float32)``: ``[u, r]``, the commanded linear and angular velocity, scaled by
+    ``max_speed`` (forward; half of it backward) and ``max_turn_rate``. The achieved velocities follow
+    within the (low) acceleration limits. Actions outside the box are clipped; NaN or inf raises ``ValueError``.
+
+    ## Observation Space
+
+    A ``Dict`` of float32 boxes, every value normalised to [0, 1]:
+
+    | key | shape | meaning |
+    |---|---|---|
+    | ``sonar`` | (7,) | ranges / 4 m: front; left front, middle, rear; right front, middle, rear |
+    | ``compass`` | (2,) | ``(1 + sin h) / 2, (1 + cos h) / 2`` of the compass heading h (noise and bias) |
+    | ``velocity`` | (2,) | ``(1 + v / max_speed) / 2, (1 + w / max_turn_rate) / 2`` measured by the track encoders |
+    | ``pose`` | (4,) | ``x / pose_scale[0], y / pose_scale[1], (1 + sin), (1 + cos) / 2`` of the pose estimate (1) |
+    | ``coverage`` | (n_rows + 1,) | covered fraction of each corridor, in order across the rows |
+
+    (1) ``localization="odometry"``: the encoders' distance integrated along the compass heading (it
+    drifts, and it is rotated by the compass bias); ``"ground_truth"``: the true pose (privileged).
+    ``pose_scale`` is an attribute of the env (m), the largest greenhouse size the arguments allow.
+
+    ## Sensors
+
+    Seven ultrasonic range finders (three per side at 0.6 m ahead of, at, and 0.6 m behind the centre, one
+    at the front; 0.1-4 m, 20 deg cone; nearest echo in the cone, Gaussian noise ``sonar_noise_std``; an
+    echo off plants or leaves slips long with probability ``vegetation_echo_prob``, uniformly up to the
+    nearest solid echo behind or 4 m). A magnetic compass (Gaussian noise ``compass_noise_std``, constant
+    ``compass_bias``). One incremental encoder per track (per-episode scale error ``encoder_scale_std`` and
+    relative noise ``encoder_noise``). Control period 100 ms, as the paper's programs.
+
+    ## Rewards
+
+    ``reward = coverage + success + contact + cross_track + time`` with
+
+    | term | formula |
+    |---|---|
+    | ``reward_coverage`` | ``reward_coverage * (n_rows + 1) * (coverage gained this step)``: 1 per corridor |
+    | ``reward_success`` | ``+reward_success`` when every corridor is covered |
+    | ``reward_contact`` | ``-reward_contact`` on contact with the crop or anything else |
+    | ``reward_cross_track`` | ``-reward_cross_track * cross_track`` (0 by default) |
+    | ``reward_time`` | ``-reward_time`` every step |
+
+    Each term is reported in ``info`` under its name.
+
+    ## Starting State
+
+    The robot stands in the headland before the first corridor (the one at the lowest y, between the wall
+    and the first row), 1 m before the row ends, facing along it, with a uniform jitter of +-3 cm and
+    +-0.02 rad. The odometry starts at the true pose. With ``layout_seed=-1`` the greenhouse (corridor
+    widths, row inclines and bends, plants and leaves) is drawn anew from the episode seed; otherwise it
+    comes from ``layout_seed``. ``reset(options={"layout_seed": s, "growth": g})`` overrides these for one
+    episode.
+
+    ## Episode End
+
+    Terminated when every corridor is covered end to end (success) or, with ``terminate_on_contact``, when
+    the robot touches the crop, a post or a wall. Truncated at ``time_limit`` seconds (0: three times the
+    serpentine's length at full speed plus the turns, plus 30 s).
+
+    ## Info
+
+    ``is_success``, ``coverage`` (covered fraction of all corridor bins), ``corridors_covered``,
+    ``n_corridors``, ``corridor`` (index of the corridor the robot is in, -1 in the headlands),
+    ``cross_track`` (m, distance from the robot's centre to that corridor's centre line, 0 in the
+    headlands), ``max_cross_track`` (m, over the episode), ``mean_cross_track`` (m, over the steps inside
+    corridors), ``crop_contacts`` (steps that touched plants, leaves or trees), ``other_contacts``
+    (walls, posts), ``collision`` (any contact so far), ``clearance`` and ``min_clearance`` (m, footprint to
+    the nearest obstacle, now and over the episode), true pose ``x``, ``y``, ``yaw``, odometry
+    ``est_x``, ``est_y``, compass ``compass`` (rad), ``v``, ``w``, ``path_length`` (m), ``episode_time``
+    (s), the seven ``sonar_<name>`` readings (m) and the reward terms.
+
+    ## Arguments
+
+    Every argument is a field of :class:`GreenhouseCoverageConfig`; unknown names and values out of range
+    raise ``ValueError`` naming the argument and its valid range.
+
+    | argument | default | unit | valid | meaning |
+    |---|---|---|---|---|
+    | ``n_rows`` | 4 |  | in [1, 12] | rows of plants (the corridors are the n_rows + 1 spaces beside them) |
+    | ``row_length`` | 10 | m | in [3.0, 50.0] | length of each row |
+    | ``corridor_width`` | 1.4 | m | in [1.0, 3.0] | mean free width of a corridor |
+    | ``corridor_width_jitter`` | 0.1 | m | in [0.0, 0.4] | each corridor is corridor_width + U(-jitter, jitter) wide |
+    | ``row_incline`` | 0.01 | rad | in [0.0, 0.05] | each row is tilted by U(-incline, incline) |
+    | ``row_bend`` | 0.05 | m | in [0.0, 0.3] | each row bows sideways by U(-bend, bend) at mid-length |
+    | ``row_width`` | 0.6 | m | in [0.2, 1.5] | width of a row bed |
+    | ``headland`` | 2.6 | m | in [2.2, 6.0] | free space between row ends and the end walls |
+    | ``plant_spacing`` | 0.4 | m | in [0.15, 2.0] | distance between plants along a row |
+    | ``plant_jitter`` | 0.03 | m | in [0.0, 0.1] | uniform jitter of plant positions |
+    | ``growth`` | 0.6 |  | in [0.0, 1.0] | season: plant size and leaves reaching into corridors |
+    | ``post_spacing`` | 4 | m | in [1.0, 20.0] | distance between structural posts along rows and walls |
+    | ``layout_seed`` | -1 |  | in [-1, 2147483647] | layout seed; -1: a new greenhouse every episode |
+    | ``max_speed`` | 0.5 | m/s | in [0.1, 1.5] | forward speed limit (reverse: half of it) |
+    | ``max_turn_rate`` | 0.6 | rad/s | in [0.1, 2.0] | angular speed limit |
+    | ``max_accel`` | 0.3 | m/s^2 | in [0.05, 2.0] | linear acceleration limit |
+    | ``max_angular_accel`` | 0.8 | rad/s^2 | in [0.05, 5.0] | angular acceleration limit |
+    | ``control_period`` | 0.1 | s | in [0.02, 0.5] | time between actions (the paper's 100 ms) |
+    | ``sonar_noise_std`` | 0.01 | m | in [0.0, 0.5] | sonar Gaussian range noise |
+    | ``vegetation_echo_prob`` | 0.15 |  | in [0.0, 1.0] | chance that an echo off foliage slips through (reads long) |
+    | ``compass_noise_std`` | 0.01 | rad | in [0.0, 0.5] | compass Gaussian heading noise |
+    | ``compass_bias`` | 0.03 | rad | in [-0.5, 0.5] | constant compass heading bias |
+    | ``encoder_noise`` | 0.02 |  | in [0.0, 0.5] | relative std of each track-speed measurement |
+    | ``encoder_scale_std`` | 0.01 |  | in [0.0, 0.1] | per-episode scale error std of each track encoder (drift) |
+    | ``localization`` | 'odometry' |  | one of 'odometry', 'ground_truth' | source of the 'pose' observation |
+    | ``bin_length`` | 0.25 | m | in [0.05, 2.0] | length of a coverage bin along a corridor |
+    | ``terminate_on_contact`` | True |  | True or False | end the episode on touching the crop or anything else |
+    | ``time_limit`` | 0 | s | in [0.0, 36000.0] | episode time limit; 0 sizes it to the mission |
+    | ``reward_coverage`` | 1 |  | in [0.0, 100.0] | reward per corridor covered (paid per bin) |
+    | ``reward_success`` | 10 |  | in [0.0, 1000.0] | bonus when every corridor is covered |
+    | ``reward_contact`` | 10 |  | in [0.0, 1000.0] | penalty on contact |
+    | ``reward_cross_track`` | 0 |  | in [0.0, 100.0] | penalty per step per metre of cross-track error |
+    | ``reward_time`` | 0.001 |  | in [0.0, 10.0] | penalty per step |
+    | ``render_width`` | 800 | px | in [100, 4000] | width of rendered frames |
+
+    Example::
+
+        env = gym.make("agri_envs/GreenhouseCoverage-v0", n_rows=6, row_bend=0.1, vegetation_echo_prob=0.3)
+
+    ## Baselines
+
+    ``gonzalez-deliberative`` (Voronoi diagram, corridor-covering search, Pure Pursuit; privileged: the true
+    map and pose), ``gonzalez-pseudo-reactive`` (behaviours, turn rule, centering, peak filter, sensory map;
+    no map) and ``gonzalez-hybrid`` (first run pseudo-reactive, later runs deliberative on its sensory map).
+
+    ## Version History
+
+    * v0: initial release.
+
+    ## References
+
+    R. González Sánchez, F. Rodríguez Díaz, J. Sánchez-Hermosilla López, J. García Donaire, "Navigation
+    techniques for mobile robots in greenhouses", Applied Engineering in Agriculture 25(2), 2009.
+    """
+
+    metadata = {
+        "render_modes": ["rgb_array", "human"],
+        "render_fps": 10,
+        "episode_metric_keys": (
+            "collision",
+            "coverage",
+            "corridors_covered",
+            "n_corridors",
+            "max_cross_track",
+            "mean_cross_track",
+            "crop_contacts",
+            "other_contacts",
+            "min_clearance",
+            "path_length",
+            "episode_time",
+        ),
+        "trace_keys": (
+            "x",
+            "y",
+            "yaw",
+            "est_x",
+            "est_y",
+            "compass",
+            "corridor",
+            "cross_track",
+            "clearance",
+            "coverage",
+            *(f"sonar_{n}" for n in fito.SONAR_NAMES),
+        ),
+    }
+
+    def __init__(self, render_mode: str | None = None, **kwargs: Any) -> None:
+        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
+            raise ValueError(f"render_mode must be one of {self.metadata['render_modes']} or None, got {render_mode!r}")
+        self.config = GreenhouseCoverageConfig.from_kwargs(kwargs)
+        self.render_mode = render_mode
+        cfg = self.config
+        self.robot_spec = fito.fitorobot_spec(cfg.max_speed, cfg.max_turn_rate, cfg.max_accel, cfg.max_angular_accel)
+        self.sonars = SonarArray(
+            SonarSpec(
+                aperture=fito.SONAR_APERTURE,
+                min_range=fito.SONAR_MIN_RANGE,
+                max_range=fito.SONAR_MAX_RANGE,
+                noise_std=cfg.sonar_noise_std,
+                foliage_slip_prob=cfg.vegetation_echo_prob,
+            ),
+            fito.SONAR_MOUNTS,
+        )
+        lp = cfg.layout_params()
+        #: Normalisation of the ``pose`` observation (m): the largest greenhouse the arguments allow.
+        self.pose_scale = (lp.width, lp.height + (cfg.n_rows + 1) * cfg.corridor_width_jitter)
+        self.n_corridors = cfg.n_rows + 1
+        self.max_steps = int(math.ceil(cfg.mission_time() / cfg.control_period))
+        box = spaces.Box
+        self.observation_space = spaces.Dict(  # type: ignore[assignment]
+            {
+                "sonar": box(0.0, 1.0, (len(self.sonars),), np.float32),
+                "compass": box(0.0, 1.0, (2,), np.float32),
+                "velocity": box(0.0, 1.0, (2,), np.float32),
+                "pose": box(0.0, 1.0, (4,), np.float32),
+                "coverage": box(0.0, 1.0, (self.n_corridors,), np.float32),
+            }
+        )
+        self.action_space = spaces.Box(-1.0, 1.0, (2,), np.float32)
+        self.layout: Layout | None = None
+        self.world: World2D | None = None
+        self._renderer: Any = None
+        self._renderer_layout: Layout | None = None
+        self._trail: list[tuple[float, float]] = []
+
+    # -- episode set-up --------------------------------------------------------------------------------
+    def reset(
+        self, *, seed: int | None = None, options: dict[str, Any] | None = None
+    ) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
+        """Build a new greenhouse and place the robot before the first corridor (see Starting State)."""
+        super().reset(seed=seed)
+        cfg = self.config
+        overrides = dict(options or {})
+        allowed = {"growth", "layout_seed"}
+        if set(overrides) - allowed:
+            raise ValueError(f"reset options {sorted(set(overrides) - allowed)} unknown; allowed: {sorted(allowed)}")
+        if overrides:
+            cfg = cfg.replace(**overrides)
+        rng = self.np_random
+        layout_rng = rng if cfg.layout_seed < 0 else np.random.default_rng(cfg.layout_seed)
+        self.layout = generate_layout(cfg.layout_params(), layout_rng)
+        geo = self.layout.geometry
+        self.world = World2D(geo, n_movers=0)
+        crop_c = np.isin(geo.circle_kinds, _CROP)
+        crop_s = np.isin(geo.capsule_kinds, _CROP)
+        self._solid = (np.ascontiguousarray(geo.circles[~crop_c]), np.ascontiguousarray(geo.capsules[~crop_s]))
+        self._crop = (np.ascontiguousarray(geo.circles[crop_c]), np.ascontiguousarray(geo.capsules[crop_s]))
+        first = self.layout.corridors[0]
+        start = np.array([first[0, 0] - 1.0, first[0, 1], 0.0]) + rng.uniform([-0.03, -0.03, -0.02], [0.03, 0.03, 0.02])
+        self.robot = self.world.add_robot(self.robot_spec, start)
+        self.task = CoverageTask(
+            self.layout.corridors,
+            cfg.bin_length,
+            CoverageWeights(
+                coverage=cfg.reward_coverage,
+                success=cfg.reward_success,
+                contact=cfg.reward_contact,
+                cross_track=cfg.reward_cross_track,
+                time=cfg.reward_time,
+            ),
+        )
+        self._encoder_scale = (
+            1.0 + cfg.encoder_scale_std * rng.standard_normal(2) if cfg.encoder_scale_std else np.ones(2)
+        )
+        self._estimate = start[:2].copy()
+        self._steps = 0
+        self._path_length = 0.0
+        self._crop_contacts = 0
+        self._other_contacts = 0
+        self._cross_sum = 0.0
+        self._cross_n = 0
+        self._v_meas = 0.0
+        self._w_meas = 0.0
+        self._trail = [(float(start[0]), float(start[1]))]
+        self._compass = self._read_compass()
+        self._min_clearance = math.inf
+        outcome = self.task.evaluate(self.robot.pose, False, False)
+        self._track(outcome)
+        obs = self._observe()
+        info = self._info(outcome)
+        if self.render_mode == "human":
+            self.render()
+        return obs, info
+
+    # -- stepping --------------------------------------------------------------------------------------
+    def step(self, action: np.ndarray) -> tuple[dict[str, np.ndarray], float, bool, bool, dict[str, Any]]:
+        """Apply ``[u, r]`` for one control period and return the Gymnasium 5-tuple."""
+        if self.world is None:
+            raise RuntimeError("call reset() before step()")
+        u, r = checked_action(action, 2).tolist()
+        spec = self.robot_spec
+        v_cmd = u * (spec.max_speed if u >= 0 else spec.max_reverse_speed)
+        w_cmd = r * spec.max_turn_rate
+        dt = self.config.control_period
+        robot = self.robot
+        before = robot.pose
+        contact = self.world.drive(robot, v_cmd, w_cmd, dt)
+        self._path_length += math.hypot(robot.pose[0] - before[0], robot.pose[1] - before[1])
+        crop_contact = other_contact = False
+        if contact:  # which obstacle stopped the robot: the nearer of the crop and the rest
+            crop_contact = self._clearance(self._crop) <= self._clearance(self._solid)
+            other_contact = not crop_contact
+        self._crop_contacts += int(crop_contact)
+        self._other_contacts += int(other_contact)
+        self._steps += 1
+        self._compass = self._read_compass()
+        self._update_odometry(dt)
+        self._trail.append((float(robot.pose[0]), float(robot.pose[1])))
+        outcome = self.task.evaluate(robot.pose, crop_contact, other_contact)
+        self._track(outcome)
+        terminated = bool(outcome["is_success"]) or (contact and self.config.terminate_on_contact)
+        truncated = not terminated and self._steps >= self.max_steps
+        obs = self._observe()
+        info = self._info(outcome)
+        if self.render_mode == "human":
+            self.render()
+        return obs, float(outcome["reward"]), terminated, truncated, info
+
+    def _clearance(self, arrays: tuple[np.ndarray, np.ndarray]) -> float:
+        p = self.robot.pose
+        s = self.robot_spec
+        return float(footprint_clearance(p[0], p[1], p[2], 0.5 * s.length, 0.5 * s.width, arrays[0], arrays[1]))
+
+    def _track(self, outcome: dict[str, Any]) -> None:
+        assert self.world is not None
+        self._clearance_now = self.world.clearance(self.robot)
+        self._min_clearance = min(self._min_clearance, self._clearance_now)
+        if outcome["corridor"] >= 0:
+            self._cross_sum += float(outcome["cross_track"])
+            self._cross_n += 1
+
+    def _read_compass(self) -> float:
+        cfg = self.config
+        h = float(self.robot.pose[2]) + cfg.compass_bias
+        if cfg.compass_noise_std > 0:
+            h += cfg.compass_noise_std * float(self.np_random.standard_normal())
+        return math.atan2(math.sin(h), math.cos(h))
+
+    def _update_odometry(self, dt: float) -> None:
+        """Track encoders -> travelled distance, integrated along the compass heading (the paper's sec. 3.3)."""
+        cfg = self.config
+        v, w = self.robot.v, self.robot.w
+        half = 0.5 * fito.TRACK_GAUGE
+        tracks = np.array([v - w * half, v + w * half]) * self._encoder_scale
+        if cfg.encoder_noise > 0:
+            tracks = tracks * (1.0 + cfg.encoder_noise * self.np_random.standard_normal(2))
+        self._v_meas = float(0.5 * (tracks[0] + tracks[1]))
+        self._w_meas = float((tracks[1] - tracks[0]) / fito.TRACK_GAUGE)
+        h = self._compass
+        self._estimate = self._estimate + self._v_meas * dt * np.array([math.cos(h), math.sin(h)])
+
+    # -- observation and info ---------------------------------------------------------------------------
+    def _observe(self) -> dict[str, np.ndarray]:
+        assert self.world is not None
+        self._last_sonar = self.sonars.ranges(
+            self.robot.pose, self.world.circles, self.world.capsules, self.np_random, solid=self._solid
+        )
+        spec = self.robot_spec
+        h = self._compass
+        if self.config.localization == "ground_truth":
+            px, py, ph = (float(v) for v in self.robot.pose)
+        else:
+            px, py, ph = float(self._estimate[0]), float(self._estimate[1]), h
+        half = np.float32(0.5)
+        return {
+            "sonar": (self._last_sonar / self.sonars.spec.max_range).astype(np.float32),
+            "compass": np.array([0.5 + 0.5 * math.sin(h), 0.5 + 0.5 * math.cos(h)], np.float32),
+            "velocity": np.clip(
+                half + half * np.array([self._v_meas / spec.max_speed, self._w_meas / spec.max_turn_rate], np.float32),
+                0.0,
+                1.0,
+            ),
+            "pose": np.clip(
+                np.array(
+                    [
+                        px / self.pose_scale[0],
+                        py / self.pose_scale[1],
+                        0.5 + 0.5 * math.sin(ph),
+                        0.5 + 0.5 * math.cos(ph),
+                    ],
+                    np.float32,
+                ),
+                0.0,
+                1.0,
+            ),
+            "coverage": self.task.corridor_fractions().astype(np.float32),
+        }
+
+    def _info(self, outcome: dict[str, Any]) -> dict[str, Any]:
+        pose = self.robot.pose
+        info = dict(outcome)
+        info.pop("reward")
+        info.update(
+            is_success=bool(outcome["is_success"]),
+            n_corridors=self.n_corridors,
+            mean_cross_track=self._cross_sum / self._cross_n if self._cross_n else 0.0,
+            crop_contacts=self._crop_contacts,
+            other_contacts=self._other_contacts,
+            collision=bool(self._crop_contacts or self._other_contacts),
+            clearance=float(self._clearance_now),
+            min_clearance=float(self._min_clearance),
+            x=float(pose[0]),
+            y=float(pose[1]),
+            yaw=float(pose[2]),
+            est_x=float(self._estimate[0]),
+            est_y=float(self._estimate[1]),
+            compass=self._compass,
+            v=float(self.robot.v),
+            w=float(self.robot.w),
+            path_length=float(self._path_length),
+            episode_time=self._steps * self.config.control_period,
+        )
+        for name, value in zip(fito.SONAR_NAMES, self._last_sonar, strict=True):
+            info[f"sonar_{name}"] = float(value)
+        return info
+
+    # -- privileged accessors (labelled so: a real robot has neither) ----------------------------------
+    def true_map(self, resolution: float = 0.05) -> tuple[np.ndarray, float, tuple[float, float]]:
+        """PRIVILEGED: the current greenhouse as an occupancy grid, for the deliberative baseline.
+
+        González's deliberative technique is given the greenhouse's digital map (sec. 3.1); this accessor
+        plays that map. Results that use it are labelled privileged.
+
+        Args:
+            resolution: Cell size (m).
+
+        Returns:
+            ``(occupancy, resolution, origin)``: a boolean grid (True = blocked) whose cell ``[i, j]``
+            covers x in ``origin[0] + [j*res, (j+1)*res)`` and y in ``origin[1] + [i*res, (i+1)*res)``.
+        """
+        from agri_envs.sim2d.gridmap import rasterize
+
+        if self.layout is None:
+            raise RuntimeError("call reset() before true_map()")
+        grid = rasterize(self.layout.geometry, resolution)
+        return grid.data > 0, grid.resolution, (float(grid.origin[0]), float(grid.origin[1]))
+
+    def corridor_lines(self) -> tuple[np.ndarray, ...]:
+        """PRIVILEGED: the centre line of every corridor (m), as the task measures cross-track error."""
+        if self.layout is None:
+            raise RuntimeError("call reset() before corridor_lines()")
+        return self.layout.corridors
+
+    # -- rendering ---------------------------------------------------------------------------------------
+    def render(self) -> np.ndarray | None:
+        """Top-down frame with sonar cones, corridor centre lines and the driven path."""
+        if self.render_mode is None:
+            gym.logger.warn("render() called with render_mode=None; pass render_mode='rgb_array' to gym.make")
+            return None
+        if self.world is None or self.layout is None:
+            raise RuntimeError("call reset() before render()")
+        from agri_envs.sim2d.render import TopDownRenderer
+
+        if self._renderer is None or self._renderer_layout is not self.layout:
+            self._renderer = TopDownRenderer(self.layout.geometry.bounds, self.config.render_width)
+            self._renderer.draw_geometry(self.layout.geometry)
+            self._renderer_layout = self.layout
+        rd = self._renderer
+        rd.begin()
+        rd.path(np.array(self._trail))
+        rd.cones(self.sonars.poses_in_world(self.robot.pose), self._last_sonar, self.sonars.spec.aperture)
+        rd.robot(self.robot.pose, self.robot_spec.length, self.robot_spec.width)
+        rd.text(
+            [
+                f"t = {self._steps * self.config.control_period:5.1f} s   coverage {self.task.coverage:4.0%}   "
+                f"corridors {sum(bool(c.all()) for c in self.task.covered)}/{self.n_corridors}"
+            ]
+        )
+        frame = rd.finish()
+        if self.render_mode == "human":
+            rd.show(self.metadata["render_fps"])
+            return None
+        return frame
+
+    def close(self) -> None:
+        """Release the renderer (idempotent)."""
+        if self._renderer is not None:
+            self._renderer.close()
+            self._renderer = None

@@ -1,0 +1,232 @@
+"""González 2009 baselines: coverage planner invariants, Pure Pursuit, peak filter (eq. 1), sensory map (eq. 2)."""
+
+import math
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+import agri_envs  # noqa: F401
+from agri_baselines import coverage_path, make_policy
+from agri_baselines.gonzalez import PeakFilter, PurePursuit, SensoryMap, peak_filter
+from agri_baselines.gonzalez_planner import CoveragePlannerParams, plan_coverage
+from agri_envs.rover.layout import LayoutParams, generate_layout
+from agri_envs.sim2d.gridmap import rasterize
+
+RES = 0.05
+
+
+def _greenhouse(seed, **kw):
+    p = LayoutParams(
+        **{
+            "n_rows": 3,
+            "row_length": 8.0,
+            "corridor_width": 1.4,
+            "row_width": 0.6,
+            "headland": 2.6,
+            "growth": 0.6,
+            "post_spacing": 4.0,
+            **kw,
+        }
+    )
+    layout = generate_layout(p, np.random.default_rng(seed))
+    grid = rasterize(layout.geometry, RES)
+    origin = np.array(grid.origin[:2])
+    start = layout.corridors[0][0] - np.array([1.0, 0.0]) - origin
+    return grid.data > 0, layout, origin, start
+
+
+def _free_along(occ, path):
+    """Every point of the densely resampled path lies on a free cell."""
+    seg = np.hypot(*np.diff(path, axis=0).T)
+    s = np.concatenate([[0], np.cumsum(seg)])
+    t = np.arange(0, s[-1], RES / 4)
+    pts = np.column_stack([np.interp(t, s, path[:, 0]), np.interp(t, s, path[:, 1])])
+    ij = np.floor(pts[:, ::-1] / RES).astype(int)
+    return not occ[ij[:, 0], ij[:, 1]].any()
+
+
+@pytest.mark.parametrize(
+    "seed, kw",
+    [
+        (0, {}),
+        (3, {"row_incline": 0.03, "row_bend": 0.15}),
+        (11, {"corridor_width_jitter": 0.3, "n_rows": 5}),
+        (5, {"row_bend": 0.25, "row_length": 15.0}),
+        (0, {"growth": 1.0, "corridor_width": 1.5, "row_length": 10.0, "n_rows": 4}),
+    ],
+)
+def test_coverage_path_invariants(seed, kw):
+    occ, layout, origin, start = _greenhouse(seed, **kw)
+    _check_covering_path(coverage_path(occ, RES, start), occ, layout, origin, start)
+
+
+def test_large_maps_are_pooled_and_still_cover_every_corridor():
+    occ, layout, origin, start = _greenhouse(2, row_bend=0.1, row_incline=0.01)
+    plan = plan_coverage(occ, RES, start, CoveragePlannerParams(max_cells=occ.size // 3))
+    assert plan.resolution == pytest.approx(2 * RES)
+    _check_covering_path(plan.path, occ, layout, origin, start)
+
+
+def _check_covering_path(path, occ, layout, origin, start):
+    assert path.shape[1] == 2 and np.allclose(path[0], start)
+    assert _free_along(occ, path)
+    # Every corridor is traversed end to end: at every x along it the path passes within 0.3 m of its centre
+    # line, i.e. inside that corridor (the Voronoi diagram bends toward the wall where leaves reach out).
+    for line in layout.corridors:
+        c = line - origin
+        xs = np.linspace(c[0, 0], c[-1, 0], 30)
+        yc = np.interp(xs, c[:, 0], c[:, 1])
+        for x, y in zip(xs, yc, strict=True):
+            d = np.hypot(path[:, 0] - x, path[:, 1] - y).min()
+            assert d < 0.3, (x, y, d)
+
+
+def test_coverage_path_bad_input():
+    occ, _, _, start = _greenhouse(0)
+    with pytest.raises(ValueError, match="boolean"):
+        coverage_path(occ.astype(int), RES, start)
+    with pytest.raises(ValueError, match="resolution"):
+        coverage_path(occ, 0.0, start)
+    with pytest.raises(ValueError, match="outside"):
+        coverage_path(occ, RES, (-1.0, 1.0))
+    with pytest.raises(ValueError, match="blocked"):
+        coverage_path(occ, RES, (0.02, 0.02))
+
+
+def test_plan_removes_edges_inside_plants():
+    occ, _, _, start = _greenhouse(0)
+    plan = plan_coverage(occ, RES, start)
+    from scipy import ndimage as ndi
+
+    clearance = ndi.distance_transform_edt(~occ) * RES
+    ii, jj = np.nonzero(plan.skeleton)  # cells of the work grid -> cells of the map
+    fine = np.floor((np.column_stack([ii, jj]) + 0.5) * plan.resolution / RES).astype(int)
+    # No Voronoi edge through the gaps between plants: clearance >= min_clearance up to half a work cell.
+    assert clearance[fine[:, 0], fine[:, 1]].min() >= 0.3 - 0.5 * plan.resolution
+    assert abs(plan.row_direction) < 0.05
+
+
+def test_pure_pursuit_lookahead_interpolated_forward_only_and_goal():
+    path = np.array([[0.0, 0.0], [2.0, 0.0], [2.0, 2.0], [0.0, 2.0]])
+    pp = PurePursuit(path, lookahead=1.0)
+    assert np.allclose(pp.lookahead_point(0.5, 0.1), [1.5, 0.0])
+    assert np.allclose(pp.lookahead_point(1.5, -0.2), [2.0, 0.5])  # interpolated round the corner
+    # Forward only: from near the start of the last leg it never jumps back to the first leg.
+    pp.lookahead_point(1.0, 2.0)
+    assert pp.progress > 4.0
+    assert np.allclose(pp.lookahead_point(0.1, 0.0), pp.point_at(pp.progress + 1.0))
+    # Straight ahead: no turn; a point to the left: positive curvature 2 y / L^2.
+    pp2 = PurePursuit(np.array([[0.0, 0.0], [10.0, 0.0]]))
+    v, w = pp2.command(np.array([0.0, 0.0, 0.0]), 0.5, 0.6, 0.3)
+    assert v == pytest.approx(0.5) and w == pytest.approx(0.0)
+    v, w = pp2.command(np.array([1.0, -0.2, 0.0]), 0.5, 0.6, 0.3)
+    assert w / v == pytest.approx(2 * 0.2 / (1.0 + 0.04), rel=0.05)
+    # Near the goal: it brakes, then stops within the tolerance.
+    v_near, _ = pp2.command(np.array([9.8, 0.0, 0.0]), 0.5, 0.6, 0.3)
+    assert 0 < v_near < 0.5
+    assert pp2.command(np.array([9.9, 0.0, 0.0]), 0.5, 0.6, 0.3) == (0.0, 0.0) and pp2.done
+
+
+def test_pure_pursuit_drives_a_unicycle_onto_the_path():
+    pp = PurePursuit(np.array([[0.0, 0.0], [6.0, 0.0], [6.0, 4.0]]), lookahead=1.0)
+    pose = np.array([0.0, 0.4, 0.3])
+    for _ in range(400):
+        v, w = pp.command(pose, 0.5, 0.6, 0.3)
+        pose = pose + 0.1 * np.array([v * math.cos(pose[2]), v * math.sin(pose[2]), w])
+        if pp.done:
+            break
+    assert pp.done and np.hypot(pose[0] - 6.0, pose[1] - 4.0) < 0.2
+
+
+def test_peak_filter_on_known_series():
+    s = np.array([1.0] * 6 + [3.0, 1.0, 1.0, 1.0, 3.0, 3.1] + [1.0] * 5)
+    f = peak_filter(s, n=5, eps=0.3)
+    assert np.all(f == 1.0)  # single and double peaks replaced by the last good value
+    step = np.r_[np.ones(8), 2.0 * np.ones(8)]
+    g = peak_filter(step, n=4, eps=0.3)
+    assert g[8] == 1.0 and g[-1] == 2.0 and np.argmax(g == 2.0) <= 8 + 3  # a real change is accepted
+    with pytest.raises(ValueError):
+        PeakFilter(0, 0.3)
+
+
+def test_vegetation_echoes_and_peak_filter_std_reduction():
+    """A lateral sonar along a corridor: slips are long and foliage-only; eq. 1 cuts the std by >= 3x."""
+    env = gym.make("agri_envs/GreenhouseCoverage-v0", localization="ground_truth", vegetation_echo_prob=0.15)
+    policy = make_policy("gonzalez-deliberative", env)
+    obs, info = env.reset(seed=4)
+    raw = []
+    start = True
+    while True:
+        a, _ = policy.predict(obs, episode_start=np.array([start]))
+        start = False
+        obs, _, term, trunc, info = env.step(a)
+        if info["corridor"] == 1 and 3.5 < info["x"] < 11.5:
+            raw.append(info["sonar_left_middle"])
+        if term or trunc or info["corridor"] == 2:
+            break
+    raw = np.array(raw)
+    filtered = peak_filter(raw, n=5, eps=0.3)
+    assert len(raw) > 100 and np.mean(raw > 1.0) > 0.03  # peaks happen
+    assert np.std(raw) >= 3.0 * np.std(filtered)
+
+
+def test_sensory_map_eq2_places_echoes():
+    m = SensoryMap(np.array([[0.5, 0.2, math.pi / 2]]), max_range=4.0)
+    m.add(1.0, 2.0, math.pi / 2, np.array([0.3]))  # facing +y, the sonar points to -x
+    assert np.allclose(m.as_array(), [[1.0 - 0.2 - 0.3, 2.5]])
+    m.add(1.0, 2.0, 0.0, np.array([4.0]))  # no echo
+    assert len(m.as_array()) == 1
+
+
+def test_deliberative_solves_default_preset():
+    env = gym.make("agri_envs/GreenhouseCoverage-v0", localization="ground_truth", n_rows=2, row_length=6.0)
+    from agri_training.evaluate import run_episode
+
+    out = run_episode(env, make_policy("gonzalez-deliberative", env), 0, None)["record"]
+    assert out["is_success"] and out["crop_contacts"] == 0 and out["max_cross_track"] < 0.1
+
+
+def test_pseudo_reactive_solves_preset_and_returns_its_sensory_map():
+    from agri_training.evaluate import run_episode
+
+    env = gym.make("agri_envs/GreenhouseCoverage-v0", localization="odometry", n_rows=2, row_length=6.0)
+    out = run_episode(env, make_policy("gonzalez-pseudo-reactive", env), 1, None)["record"]
+    assert out["is_success"] and out["crop_contacts"] == 0 and out["turns"] == 4
+    echoes = np.array(out["sensory_map"])
+    assert len(echoes) > 100
+    # The echoes lie on the crop and the walls: most of them within 0.3 m of an obstacle of the true scene
+    # (in the odometry frame, which the compass bias rotates about the start).
+    occ, res, origin = env.unwrapped.true_map()
+    from scipy import ndimage as ndi
+
+    dist = ndi.distance_transform_edt(~occ) * res
+    ij = np.clip(np.floor((echoes - origin) / res).astype(int)[:, ::-1], 0, np.array(occ.shape) - 1)
+    assert np.mean(dist[ij[:, 0], ij[:, 1]] < 0.3) > 0.8
+
+
+def test_hybrid_plans_its_second_run_on_the_first_runs_map():
+    from agri_training.evaluate import run_episode
+
+    env = gym.make("agri_envs/GreenhouseCoverage-v0", localization="odometry", n_rows=2, row_length=6.0, layout_seed=1)
+    policy = make_policy("gonzalez-hybrid", env)
+    first = run_episode(env, policy, 0, None)["record"]
+    second = run_episode(env, policy, 1, None)["record"]
+    assert first["hybrid_deliberative"] == 0 and second["hybrid_deliberative"] == 1
+    assert first["is_success"] and second["is_success"] and second["crop_contacts"] == 0
+    assert second["episode_time"] < first["episode_time"]
+
+
+def test_report_section_writes_the_figures(tmp_path):
+    from agri_training.evaluate import EvalRequest, evaluate
+    from agri_training.plots_coverage import report_section
+
+    kw = {"n_rows": 1, "row_length": 5.0}
+    results = [
+        evaluate(EvalRequest("agri_envs/GreenhouseCoverage-v0", name, 1, 0, env_kwargs=kw), progress=False)
+        for name in ("gonzalez-deliberative", "gonzalez-pseudo-reactive")
+    ]
+    md = report_section(results, tmp_path)
+    pngs = sorted(p.name for p in tmp_path.glob("*.png"))
+    assert len(pngs) == 5 and all(name in md for name in pngs)
+    assert "| gonzalez-deliberative |" in md and "Peak filter (eq. 1)" in md
