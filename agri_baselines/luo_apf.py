@@ -362,20 +362,34 @@ def plan_harvest(
 # ---------------------------------------------------------------------------------------- policy adapter
 
 
-def targets_from_observation(obs: np.ndarray) -> tuple[list[ClusterTarget], list[int], np.ndarray, np.ndarray]:
-    """Clusters (unharvested, with their slot indices) and other boxes from a GrapeHarvest-v1 observation."""
-    from agri_envs.arm.grape_harvest import _ARM_FEATURES, _CLUSTER_FEATURES, _OBSTACLE_FEATURES, MAX_CLUSTERS
+def targets_from_observation(
+    observation: dict[str, np.ndarray], layout: dict[str, slice]
+) -> tuple[list[ClusterTarget], np.ndarray, np.ndarray]:
+    """Unharvested clusters and the other boxes from a GrapeHarvest-v1 observation.
 
-    o = np.asarray(obs, dtype=np.float64)
-    targets, slots = [], []
-    for i in range(MAX_CLUSTERS):
-        c = o[_ARM_FEATURES + i * _CLUSTER_FEATURES :][:_CLUSTER_FEATURES]
-        if c[0] > 0.5 and c[1] < 0.5:
-            targets.append(ClusterTarget(c[2:5], c[5:8], c[8:11], c[11:14], c[14:17]))
-            slots.append(i)
-    rest = o[_ARM_FEATURES + MAX_CLUSTERS * _CLUSTER_FEATURES :].reshape(-1, _OBSTACLE_FEATURES)
+    The designated cluster's cut is ``desired_goal`` and its box the ``target_box`` slot; the other
+    clusters carry box and cut in their slots (see the env's Observation Space).
+
+    Args:
+        observation: The env's dict observation (one env, not batched).
+        layout: ``env.unwrapped.layout``: where each part of ``observation["observation"]`` sits.
+
+    Returns:
+        ``(targets, lo, hi)``: the clusters (designated first) and the minima and maxima of the stems' and
+        leaves' boxes.
+    """
+    o = np.asarray(observation["observation"], dtype=np.float64)
+    goal = np.asarray(observation["desired_goal"], dtype=np.float64)
+    targets = []
+    box = o[layout["target_box"]]
+    if box[0] > 0.5:
+        targets.append(ClusterTarget(goal[:3], goal[3:6], goal[6:9], box[1:4], box[4:7]))
+    for c in o[layout["others"]].reshape(-1, 16):
+        if c[0] > 0.5:
+            targets.append(ClusterTarget(c[7:10], c[10:13], c[13:16], c[1:4], c[4:7]))
+    rest = o[layout["obstacles"]].reshape(-1, 7)
     rest = rest[rest[:, 0] > 0.5]
-    return targets, slots, rest[:, 1:4], rest[:, 4:7]
+    return targets, rest[:, 1:4], rest[:, 4:7]
 
 
 def joints_from_observation(obs: np.ndarray) -> np.ndarray:
@@ -393,22 +407,28 @@ class LuoApfPolicy:
         params: Planner parameters.
     """
 
-    def __init__(self, max_joint_step: float, seed: int = 0, params: LuoApfParams | None = None) -> None:
+    def __init__(
+        self,
+        max_joint_step: float,
+        layout: dict[str, slice],
+        seed: int = 0,
+        params: LuoApfParams | None = None,
+    ) -> None:
         self.max_joint_step = max_joint_step
+        self.layout = layout
         self.params = params or LuoApfParams()
         self.rng = np.random.default_rng(seed)
         self.plans: list[Plan | None] = []
-        self.slots: list[list[int]] = []
         self.cursor: list[int] = []
 
-    def _start(self, env_index: int, obs: np.ndarray) -> None:
-        targets, slots, lo, hi = targets_from_observation(obs)
-        plan = plan_harvest(joints_from_observation(obs), targets, lo, hi, self.rng, self.params)
+    def _start(self, env_index: int, obs: dict[str, np.ndarray]) -> None:
+        targets, lo, hi = targets_from_observation(obs, self.layout)
+        q0 = joints_from_observation(obs["observation"])
+        plan = plan_harvest(q0, targets, lo, hi, self.rng, self.params)
         while len(self.plans) <= env_index:
             self.plans.append(None)
-            self.slots.append([])
             self.cursor.append(0)
-        self.plans[env_index], self.slots[env_index], self.cursor[env_index] = plan, slots, 1
+        self.plans[env_index], self.cursor[env_index] = plan, 1
 
     def predict(
         self,
@@ -421,11 +441,12 @@ class LuoApfPolicy:
         obs = np.asarray(observation["observation"])
         single = obs.ndim == 1
         batch = obs[None] if single else obs
+        goals = np.asarray(observation["desired_goal"]).reshape(len(batch), -1)
         starts = np.ones(len(batch), bool) if episode_start is None else np.asarray(episode_start, bool).reshape(-1)
         actions = np.zeros((len(batch), 6), dtype=np.float32)
         for k, o in enumerate(batch):
             if starts[k] or k >= len(self.plans) or self.plans[k] is None:
-                self._start(k, o)
+                self._start(k, {"observation": o, "desired_goal": goals[k]})
             plan = self.plans[k]
             assert plan is not None
             q = joints_from_observation(o)
@@ -441,9 +462,9 @@ class LuoApfPolicy:
         plan = self.plans[index] if index < len(self.plans) else None
         if plan is None:
             return {}
-        slots = self.slots[index]
+        # Clusters are numbered as the observation lists them: 1 is the env's designated one.
         return {
-            "order": "->".join(str(slots[i] + 1) for i in plan.order),
+            "order": "->".join(str(i + 1) for i in plan.order),
             "path_length_mm": plan.path_length * 1000.0,
             "path_points": len(plan.points),
             "planning_time_ms": plan.planning_time * 1000.0,
@@ -457,4 +478,4 @@ def make_luo_apf(env: Any) -> LuoApfPolicy:
     cfg = env.unwrapped.config
     if cfg.control != "joint":
         raise ValueError(f"luo-apf drives joint-delta actions: make the env with control='joint' (got {cfg.control!r})")
-    return LuoApfPolicy(cfg.max_joint_step)
+    return LuoApfPolicy(cfg.max_joint_step, env.unwrapped.layout)

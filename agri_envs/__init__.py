@@ -26,11 +26,16 @@ def register_envs() -> None:
             entry_point="agri_envs.rover.greenhouse_nav:GreenhouseNavEnv",
             max_episode_steps=2250,
         )
+    # GrapeHarvest truncates itself at a time limit that follows the scene (its info["time_limit"]).
     if "agri_envs/GrapeHarvest-v1" not in registry:
+        register(id="agri_envs/GrapeHarvest-v1", entry_point="agri_envs.arm.grape_harvest:GrapeHarvestEnv")
+    if "agri_envs/GrapeHarvestReach-v1" not in registry:
+        from agri_envs.arm.presets import REACH_PRESET  # pure data: no pybullet
+
         register(
-            id="agri_envs/GrapeHarvest-v1",
+            id="agri_envs/GrapeHarvestReach-v1",
             entry_point="agri_envs.arm.grape_harvest:GrapeHarvestEnv",
-            max_episode_steps=1000,
+            kwargs=dict(REACH_PRESET),
         )
 
 
