@@ -132,3 +132,12 @@ register_policy(
         description="Luo 2018: energy-optimal harvesting order (eq. 11) and APF sampling path points (Alg. 1)",
     )
 )
+register_policy(
+    PolicySpec(
+        name="luo-apf-attract-only",
+        env_id="agri_envs/GrapeHarvest-v1",
+        entry_point="agri_baselines.luo_apf:make_luo_apf_attract_only",
+        env_kwargs={"control": "joint"},
+        description="Ablation of luo-apf: attraction only (eta = 0, no repulsion of eq. 15); collisions still rejected",
+    )
+)

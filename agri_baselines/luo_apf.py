@@ -32,12 +32,35 @@ import numpy as np
 
 from agri_envs.arm.collision import ArmCollisionModel, box_distance
 from agri_envs.arm.kinematics import JOINT_LIMITS, ik_branches
-from agri_envs.arm.robot_model import flange_pose_for_tip, tip_pose
+from agri_envs.arm.robot_model import TOOL_HALF_Y, TOOL_LENGTH, flange_pose_for_tip, tip_pose
 from agri_envs.arm.scene import PRE_CUT, cut_pose
 
 #: Weights omega_i of eq. 11. The paper weighs each joint by its motor's power without giving numbers; we
 #: take the rated powers of a 6-axis arm of this size (400, 400, 200, 100, 100, 50 W) as shares of the total.
 JOINT_WEIGHTS = np.array([400.0, 400.0, 200.0, 100.0, 100.0, 50.0]) / 1250.0
+
+
+#: Distance (m) at which the tool's side reaches a box when the clamp centre is that far from it: the
+#: jaw half-opening TOOL_HALF_Y (3.5 cm), the widest part of the tool around the clamp centre.
+TOOL_REACH = TOOL_HALF_Y
+#: Farthest distance (m) from the clamp to its goal in the workspace (home to the farthest pre-cut pose).
+GOAL_REACH = 0.6
+#: rho of eq. 15 (m): the tool's length. Eqs. 12-16 act on one point, the clamp centre X, but what must
+#: keep clear of a box is the whole tool, which reaches TOOL_LENGTH (15 cm) behind X toward the wrist:
+#: a box within that range of X can meet the tool, so that is the range over which it must repel
+#: ("the maximum range of the impact of the obstacle", and the paper's own remedy for its one failure,
+#: a larger safety margin between the end-effector and the cluster). The paper's first condition
+#: (U_sum = 0 and minimal at the goal) then holds for every box but the goal's own cluster, whose box is
+#: 5-7 cm from the pre-cut goal: it moves the field's minimum outward along the approach. Alg. 1 still
+#: ends at the goal, because it stops sampling within one step of X_g and places X_g itself.
+#: (rho = 5 cm, the largest range that keeps condition 1 for every box, leaves every chosen path point
+#: outside every range: the repulsion then changes nothing, as the audit of issue 12 found.)
+RHO = TOOL_LENGTH
+#: eta of eq. 15. The paper's second condition: the system must be stable, the clamp never pulled into a
+#: box. With eq. 14 and eq. 16, the repulsion at TOOL_REACH from a box (the tool's side touching it)
+#: equals the strongest attraction the clamp ever feels, k * GOAL_REACH (k = 1):
+#: eta (1/d - 1/rho) / d^2 = k D  =>  eta = k D d^2 / (1/d - 1/rho), about 3.4e-5.
+ETA = 1.0 * GOAL_REACH * TOOL_REACH**2 / (1.0 / TOOL_REACH - 1.0 / RHO)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -48,10 +71,12 @@ class LuoApfParams:
         step: Radius of the sampling neighbourhood, i.e. the distance between path points (m).
         n_samples: Samples drawn per neighbourhood.
         k_att: Attractive gain k of eq. 13 (1/m^2 scale of U).
-        eta: Repulsive gain eta of eq. 15.
-        rho: Influence range rho of an obstacle in eq. 15 (m).
+        eta: Repulsive gain eta of eq. 15 (0: the attract-only ablation); see :data:`ETA`.
+        rho: Influence range rho of an obstacle in eq. 15 (m); see :data:`RHO`.
         temperature: Temperature of the sample probabilities ``exp(-U / T)``.
-        max_resample: Neighbourhoods drawn at one path point before the planner gives up.
+        max_resample: Neighbourhoods drawn at one path point before it counts as a dead end.
+        max_backtracks: Dead ends per segment the planner backs out of (the fallback: drop the last path
+            point and sample again from the one before) before it gives up.
         max_points: Path points per segment before the planner gives up.
         max_joint_jump: Largest joint change between consecutive path points (rad): a larger one would
             switch IK branch and sweep the arm through unchecked space.
@@ -63,10 +88,11 @@ class LuoApfParams:
     step: float = 0.03
     n_samples: int = 12
     k_att: float = 1.0
-    eta: float = 1e-4
-    rho: float = 0.06
+    eta: float = ETA
+    rho: float = RHO
     temperature: float = 1e-4
     max_resample: int = 8
+    max_backtracks: int = 10
     max_points: int = 200
     max_joint_jump: float = 0.35
     max_rotation: float = 0.2
@@ -101,6 +127,12 @@ class Plan:
         success: Whether every segment was planned.
         planning_time: Wall time of the whole plan (s).
         energy: Value of eq. 11's objective for ``order``.
+        min_box_clearance: Smallest distance (m) from the clamp centre at any path point Alg. 1 chose to
+            any box still in the scene (inf when there is none). The poses the task fixes are left out:
+            the segments' goals (pre-cut poses, 5-7 cm from their own box, and home) and the straight
+            approaches to the cuts (the cut is 5 cm above its box). They are the same for every planner
+            and would hide what eq. 15 does.
+        fallbacks: How often the dead-end fallback (backtracking) fired.
     """
 
     order: tuple[int, ...]
@@ -110,6 +142,8 @@ class Plan:
     success: bool
     planning_time: float
     energy: float
+    min_box_clearance: float = math.inf
+    fallbacks: int = 0
 
     @property
     def path_length(self) -> float:
@@ -186,6 +220,13 @@ class ApfPlanner:
         self.p = params
         self.rng = rng
         self.model = ArmCollisionModel(lo, hi, margin=params.margin, spacing=params.spacing)
+        self.fallbacks = 0
+
+    def clearance(self, x: np.ndarray) -> float:
+        """Smallest distance (m) from points (N, 3) to the current boxes (inf without boxes)."""
+        if len(self.model.lo) == 0 or len(x) == 0:
+            return math.inf
+        return float(np.min(box_distance(np.asarray(x).reshape(-1, 3), self.model.lo, self.model.hi)))
 
     def set_boxes(self, lo: np.ndarray, hi: np.ndarray) -> None:
         """Replace the obstacle boxes (a harvested cluster's box leaves the scene)."""
@@ -235,6 +276,7 @@ class ApfPlanner:
             no collision-free path point was found.
         """
         p = self.p
+        q_start = q
         start = tip_pose(q)
         x, r0, rg, xg = start[:3, 3], start[:3, :3], goal[:3, :3], goal[:3, 3]
         total = max(float(np.linalg.norm(xg - x)), 1e-9)
@@ -244,6 +286,8 @@ class ApfPlanner:
         frac = 0.0
         points: list[np.ndarray] = []
         configs: list[np.ndarray] = []
+        fracs_done: list[float] = []
+        backtracks = 0
         for _ in range(p.max_points):
             if np.linalg.norm(xg - x) <= p.step and frac + rot_step >= 1.0:
                 q_goal, ok = self.solve(goal[None], q)
@@ -271,9 +315,22 @@ class ApfPlanner:
                     x, q, frac = samples[pick], q_new[pick], float(fracs[pick])
                     points.append(x.copy())
                     configs.append(q.copy())
+                    fracs_done.append(frac)
                     break
             else:
-                return None
+                # Dead end: Alg. 1 ran out of samples. Fallback: back out of the last path point and sample
+                # again from the one before (fresh samples take another way), at most max_backtracks times.
+                if backtracks >= p.max_backtracks or not points:
+                    return None
+                backtracks += 1
+                self.fallbacks += 1
+                points.pop()
+                configs.pop()
+                fracs_done.pop()
+                if points:
+                    x, q, frac = points[-1], configs[-1], fracs_done[-1]
+                else:
+                    x, q, frac = start[:3, 3], q_start, 0.0
         return None
 
     def straight(self, q: np.ndarray, target: ClusterTarget) -> tuple[list[np.ndarray], list[np.ndarray]] | None:
@@ -336,10 +393,14 @@ def plan_harvest(
     q = q_home.copy()
     points, configs, cuts = [tip_pose(q)[:3, 3]], [q.copy()], []
     success = True
+    clearance = math.inf
     home_pose = tip_pose(q_home)
     for i in (*order, None):
         goal = home_pose if i is None else targets[i].tip_pose(PRE_CUT)
         seg = planner.segment(q, goal)
+        if seg is not None:
+            # The segment's last point is its goal (a pre-cut pose, or home): fixed by the task, not chosen.
+            clearance = min(clearance, planner.clearance(np.array(seg[0][:-1])))
         if seg is not None and i is not None:
             approach = planner.straight(seg[1][-1], targets[i])
             seg = None if approach is None else (seg[0] + approach[0], seg[1] + approach[1])
@@ -356,7 +417,10 @@ def plan_harvest(
             left.remove(i)
             planner.set_boxes(*boxes())
         q = configs[-1]
-    return Plan(order, np.array(points), np.array(configs), cuts, success, time.perf_counter() - t0, energy)
+    elapsed = time.perf_counter() - t0
+    return Plan(
+        order, np.array(points), np.array(configs), cuts, success, elapsed, energy, clearance, planner.fallbacks
+    )
 
 
 # ---------------------------------------------------------------------------------------- policy adapter
@@ -470,6 +534,8 @@ class LuoApfPolicy:
             "planning_time_ms": plan.planning_time * 1000.0,
             "plan_success": plan.success,
             "energy": plan.energy,
+            "min_box_clearance": plan.min_box_clearance if math.isfinite(plan.min_box_clearance) else None,
+            "fallbacks": plan.fallbacks,
         }
 
 
@@ -479,3 +545,10 @@ def make_luo_apf(env: Any) -> LuoApfPolicy:
     if cfg.control != "joint":
         raise ValueError(f"luo-apf drives joint-delta actions: make the env with control='joint' (got {cfg.control!r})")
     return LuoApfPolicy(cfg.max_joint_step, env.unwrapped.layout)
+
+
+def make_luo_apf_attract_only(env: Any) -> LuoApfPolicy:
+    """Registry factory of the ablation: luo-apf with eta = 0 (no repulsion, eq. 15 switched off)."""
+    policy = make_luo_apf(env)
+    policy.params = dataclasses.replace(policy.params, eta=0.0)
+    return policy

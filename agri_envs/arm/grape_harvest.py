@@ -12,9 +12,8 @@ from gymnasium import spaces
 
 from agri_envs._actions import checked_action
 from agri_envs._config import StrictConfig, param
-from agri_envs.arm.kinematics import JOINT_LIMITS, nearest_ik
-from agri_envs.arm.presets import REACH_PRESET
-from agri_envs.arm.robot_model import flange_pose_for_tip, goal_vector, tip_pose
+from agri_envs.arm.kinematics import JOINT_LIMITS
+from agri_envs.arm.robot_model import goal_vector, tip_pose
 from agri_envs.arm.scene import HOME_Q, Scene, SceneParams, harvest_configurations, sample_scene
 from agri_envs.arm.sim import ArmSim
 from agri_envs.arm.task import HarvestTask, goal_errors
@@ -144,9 +143,10 @@ class GrapeHarvestEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
 
     ``Box(-1, 1, (6,), float32)``. ``control="joint"`` (default): joint-position deltas, scaled by
     ``max_joint_step`` and clipped to the joint ranges. ``control="ee"``: clamp translation (3, base
-    frame, scaled by ``max_ee_step``) and rotation vector (3, scaled by ``max_ee_rotation``), solved by the
-    analytic IK (the solution nearest the current joints; the arm stays put when the pose is out of reach,
-    ``info["ik_failed"]``). Actions outside the box are clipped; NaN or inf raises ``ValueError``.
+    frame, scaled by ``max_ee_step``) and rotation vector (3, scaled by ``max_ee_rotation``), solved by
+    damped least squares on the arm's Jacobian (differential IK, smooth through the wrist singularity;
+    ``info["ik_failed"]`` when a joint range cuts the motion). Actions outside the box are clipped; NaN
+    or inf raises ``ValueError``.
 
     ## Observation Space
 
@@ -163,7 +163,7 @@ class GrapeHarvestEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
     goal relabelled by HER never contradicts the observation; absent while the target is home). Other
     clusters (``max_clusters - 1`` slots, unharvested ones first, by index): present, box min, box max,
     cut goal (9). Obstacles (``2 + n_canes + n_leaves`` slots: cordon, trunk, canes, leaves): present,
-    box min, box max. So ``N = 22 + 16 (max_clusters - 1) + 7 (2 + n_canes + n_leaves)``: 169 by default,
+    box min, box max. So ``N = 22 + 16 (max_clusters - 1) + 7 (2 + n_canes + n_leaves)``: 142 by default,
     57 for the Reach preset. (1) The unharvested cluster nearest the clamp when the last target was cut;
     home once all are (``return_home``). Bounds: positions in [-2, 2] m, axes in [-1, 1], flags in [0, 1].
     Empty slots are zeros.
@@ -261,13 +261,14 @@ class GrapeHarvestEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
     * v0: initial release.
     * v1: learnable and honest (the training issue). The designated target's cut is no longer also in
       the observation (HER relabels only ``desired_goal``); the observation is sized by the arguments
-      (169 dims by default instead of 198, mostly padding); ``return_home`` (False: the last cut ends the
+      (142 dims by default instead of 198, mostly padding); ``return_home`` (False: the last cut ends the
       episode, so a single-goal task has one goal); the time limit follows the scene (``time_slack``)
       instead of a fixed 1000 steps; the collision penalty is ``(time_limit + 1)`` worst steps instead of
       ``collision_penalty`` = 1 (removed), so crashing early is never the best return;
       ``compute_terminated`` / ``compute_truncated``; scenes drawn at random as the paper did by default
       (``feasible_scenes`` keeps v0's filtered scenes); the single-goal preset
-      ``agri_envs/GrapeHarvestReach-v1``; reset works after ``close()``; ``render()`` without a render
+      ``agri_envs/GrapeHarvestReach-v1``; end-effector actions by differential IK (v0's analytic IK froze
+      the arm near the wrist singularity); reset works after ``close()``; ``render()`` without a render
       mode warns.
 
     ## References
@@ -474,16 +475,29 @@ class GrapeHarvestEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
         return int(math.ceil(cfg.time_slack * steps)) + approaches
 
     def _ee_target(self, a: np.ndarray) -> tuple[np.ndarray, bool]:
-        """Joint values for a clamp-pose delta (analytic IK nearest the current joints)."""
+        """Joint values for a clamp-pose delta by damped least squares on the arm's Jacobian.
+
+        Differential IK (like the controllers of panda-gym and robosuite) rather than the analytic IK:
+        near the wrist singularity (theta_5 = 0) the analytic solution nearest the current joints jumps,
+        and a learner would see the arm freeze there. ``ik_failed`` reports a motion the joint ranges cut.
+        """
         cfg = self.config
-        tip = tip_pose(self.q)
-        target = tip.copy()
-        target[:3, 3] += a[:3] * cfg.max_ee_step
-        target[:3, :3] = _rotation(a[3:] * cfg.max_ee_rotation) @ tip[:3, :3]
-        q = nearest_ik(flange_pose_for_tip(target), self.q)
-        if q is None or np.max(np.abs(q - self.q)) > 0.5:  # out of reach, or a jump to another IK branch
-            return self.q.copy(), True
-        return q, False
+        twist = np.concatenate([a[:3] * cfg.max_ee_step, a[3:] * cfg.max_ee_rotation])
+        jac = _jacobian(self.q)
+        damping = 0.02
+        lo, hi = JOINT_LIMITS[:, 0], JOINT_LIMITS[:, 1]
+        free = np.ones(6, dtype=bool)
+        for _ in range(3):  # a joint that would pass its limit is locked there, the others solve the rest
+            j = jac * free
+            dq = j.T @ np.linalg.solve(j @ j.T + damping**2 * np.eye(6), twist)
+            dq *= min(1.0, _MAX_EE_JOINT_STEP / max(float(np.max(np.abs(dq))), 1e-12))
+            over = free & ((self.q + dq < lo) | (self.q + dq > hi))
+            if not over.any():
+                break
+            free &= ~over
+        q = self.q + dq
+        clipped = np.clip(q, lo, hi)
+        return clipped, bool(np.any(clipped != q) or not free.all())
 
     def _achieved(self) -> np.ndarray:
         """The achieved goal, rounded to the observation's float32 so that rewards match ``compute_reward``."""
@@ -540,14 +554,18 @@ class GrapeHarvestEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
         }
 
 
-def _rotation(rotvec: np.ndarray) -> np.ndarray:
-    """Rotation matrix of a rotation vector (Rodrigues)."""
-    angle = float(np.linalg.norm(rotvec))
-    if angle < 1e-12:
-        return np.eye(3)
-    k = rotvec / angle
-    kx = np.array([[0.0, -k[2], k[1]], [k[2], 0.0, -k[0]], [-k[1], k[0], 0.0]])
-    return np.eye(3) + np.sin(angle) * kx + (1.0 - np.cos(angle)) * kx @ kx
+#: Largest joint change of one end-effector step (rad): the damped solution near a singularity is bounded.
+_MAX_EE_JOINT_STEP = 0.3
 
 
-__all__ = ["REACH_PRESET", "GrapeHarvestConfig", "GrapeHarvestEnv"]
+def _jacobian(q: np.ndarray, eps: float = 1e-6) -> np.ndarray:
+    """Geometric Jacobian (6, 6) of the clamp centre: linear rows, then angular rows (base frame)."""
+    t0 = tip_pose(q)
+    qs = q[None, :] + eps * np.eye(6)
+    jac = np.zeros((6, 6))
+    for j in range(6):
+        t = tip_pose(qs[j])
+        jac[:3, j] = (t[:3, 3] - t0[:3, 3]) / eps
+        r = t[:3, :3] @ t0[:3, :3].T
+        jac[3:, j] = np.array([r[2, 1] - r[1, 2], r[0, 2] - r[2, 0], r[1, 0] - r[0, 1]]) / (2.0 * eps)
+    return jac

@@ -11,9 +11,9 @@ Two ways to draw a scene (``SceneParams.feasible``):
 
 * as Luo did (sec. 4.2, the default): cutting points uniformly at random in the region of the workspace
   in front of the row, "randomly given in the configuration space of the manipulator": the arm can
-  stand at each cut and pre-cut pose without touching a box, and nothing else is checked. Leaves only
-  have to leave the clusters' space and may lie across an approach, approaches may cross each other;
-  a planner can fail there, and reports say so.
+  stand at each cut and pre-cut pose without touching a box, and nothing else is checked: a cluster's
+  box may lie across another's approach, a stem may stand close behind a cut; a planner can fail there,
+  and reports say so. Leaves are ours, not the paper's: they never block an approach or a cut pose.
 * feasible only (a documented option for training presets): every cutting pose and its pre-cut pose
   (:data:`PRE_CUT` back along the approach) has an IK solution in the home branch whose whole arm clears
   every box, and no leaf or stem blocks the clamp's straight approach corridor.
@@ -256,6 +256,7 @@ def _overlaps_any(lo: np.ndarray, hi: np.ndarray, los: list[np.ndarray], his: li
 def _try_scene(rng: np.random.Generator, params: SceneParams, n: int) -> Scene | None:
     check = _Checker()
     clusters: list[Cluster] = []
+    cors: list[tuple[np.ndarray, np.ndarray]] = []
     for _ in range(_MAX_ATTEMPTS):
         if len(clusters) == n:
             break
@@ -274,6 +275,7 @@ def _try_scene(rng: np.random.Generator, params: SceneParams, n: int) -> Scene |
         if configs is None or not check.free_with(c.box_lo, c.box_hi, list(configs)):
             continue
         check.add(c.box_lo, c.box_hi, list(configs), cor if params.feasible else None)
+        cors.append(cor)
         clusters.append(c)
     if len(clusters) < n:
         return None
@@ -302,15 +304,11 @@ def _try_scene(rng: np.random.Generator, params: SceneParams, n: int) -> Scene |
         for _attempt in range(30):
             centre = rng.uniform([0.60, -0.45, -0.42], [ROW_X, 0.45, top])
             half = rng.uniform([0.03, 0.04, 0.015], [0.06, 0.07, 0.04])
-            # Luo's random scenes: a leaf only has to leave the clusters' space (it may cross an approach).
-            free = (
-                check.free_with(centre - half, centre + half, [])
-                if params.feasible
-                else not _overlaps_any(
-                    centre - half, centre + half, [c.box_lo for c in clusters], [c.box_hi for c in clusters]
-                )
-            )
-            if free:
+            # Leaves are ours, not the paper's (its scenes hold clusters and their boxes): they never block an
+            # approach corridor or a cut pose, so that the random part stays the paper's, the clusters.
+            if check.free_with(centre - half, centre + half, []) and not _overlaps_any(
+                centre - half, centre + half, [cr[0] for cr in cors], [cr[1] for cr in cors]
+            ):
                 leaf = Obstacle("leaf", centre - half, centre + half)
                 obstacles.append(leaf)
                 check.add(leaf.lo, leaf.hi, [], None)
