@@ -48,6 +48,8 @@ def default_suite(episodes: int | None = None, only_env: str | None = None) -> l
             continue
         scenarios: list[Scenario | None] = list(list_scenarios(spec.env_id)) or [None]
         for sc in scenarios:
+            if sc and any(k in sc.env_kwargs and sc.env_kwargs[k] != v for k, v in spec.env_kwargs.items()):
+                continue  # the scenario sets an argument the policy cannot drive (e.g. luo-apf on control="ee")
             n = episodes if episodes is not None else (sc.default_episodes if sc else 20)
             entries.append(SuiteEntry(spec.env_id, spec.name, sc.name if sc else None, n))
     return entries
