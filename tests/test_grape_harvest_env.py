@@ -251,8 +251,8 @@ def test_desired_goal_is_nowhere_in_the_observation():
 def test_reach_preset_single_goal_ends_at_the_cut_and_time_limit_follows_the_task():
     env = gym.make("agri_envs/GrapeHarvestReach-v1")
     obs, info = env.reset(seed=5)
-    assert obs["observation"].shape == (57,) and info["n_clusters"] == 1 and info["final_target"]
-    assert 20 <= info["time_limit"] <= 150  # a few times the ~15 steps of the straight move, not 1000
+    assert obs["observation"].shape == (36,) and info["n_clusters"] == 1 and info["final_target"]
+    assert 15 <= info["time_limit"] <= 100  # a few times the ~8 steps of the straight move, not 1000
     goal = obs["desired_goal"].copy()
     for _ in range(info["time_limit"]):
         obs, r, te, tr, info = env.step(np.zeros(6))

@@ -164,7 +164,7 @@ class GrapeHarvestEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
     clusters (``max_clusters - 1`` slots, unharvested ones first, by index): present, box min, box max,
     cut goal (9). Obstacles (``2 + n_canes + n_leaves`` slots: cordon, trunk, canes, leaves): present,
     box min, box max. So ``N = 22 + 16 (max_clusters - 1) + 7 (2 + n_canes + n_leaves)``: 142 by default,
-    57 for the Reach preset. (1) The unharvested cluster nearest the clamp when the last target was cut;
+    36 for the Reach preset. (1) The unharvested cluster nearest the clamp when the last target was cut;
     home once all are (``return_home``). Bounds: positions in [-2, 2] m, axes in [-1, 1], flags in [0, 1].
     Empty slots are zeros.
 
@@ -242,8 +242,8 @@ class GrapeHarvestEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
     The tolerances by default are the evaluation's (1 cm, 0.2 rad: the clamp must close on the peduncle).
     ``agri_envs/GrapeHarvestReach-v1`` (and the scenario ``reach``) is this env with the kwargs preset
     :data:`~agri_envs.arm.presets.REACH_PRESET`: one
-    cluster (feasible), two leaves, one cane, ``return_home=False``, ``control="ee"``, and the learner's
-    tolerances (3 cm, 0.35 rad). Example::
+    cluster (feasible), no leaves or canes, ``return_home=False``, ``control="ee"`` with 4 cm / 0.2 rad
+    steps, and the learner's tolerances (3 cm, 0.35 rad). Example::
 
         env = gym.make("agri_envs/GrapeHarvest-v1", min_clusters=3, max_clusters=3, reward_type="dense")
         reach = gym.make("agri_envs/GrapeHarvestReach-v1")  # the single-goal preset
