@@ -15,8 +15,9 @@ orientation to the cluster's along the way. Each harvest ends with a straight ap
 :data:`~agri_envs.arm.scene.PRE_CUT` metres along the cluster's approach axis (the clamp must come in from
 the front, its pallet under the berries) and the same way back; the cut cluster's box leaves with it.
 When Alg. 1 runs out of samples at a path point (a dead end), the planner backs out of that point and
-samples again from the one before, at most ``max_backtracks`` times per segment; :attr:`Plan.fallbacks` counts how often. The repulsion's rho and
-eta follow from the paper's two conditions on the field (see :data:`RHO` and :data:`ETA`);
+samples again from the one before, at most ``max_backtracks`` times per segment; :attr:`Plan.fallbacks`
+counts how often. The repulsion's rho and eta follow from the paper's two conditions on the field
+(see :data:`RHO` and :data:`ETA`);
 ``luo-apf-attract-only`` is the ablation without it.
 
 :class:`LuoApfPolicy` is the thin SB3-style adapter: it reads the cutting points and boxes from the
