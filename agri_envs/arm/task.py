@@ -41,7 +41,7 @@ def _field(info: Any, key: str, default: float) -> np.ndarray | float:
 
 
 def _scalar_or_array(x: Any, dtype: type) -> Any:
-    arr = np.asarray(x, dtype=dtype)
+    arr: np.ndarray = np.asarray(x, dtype=dtype)
     return arr.item() if arr.ndim == 0 else arr
 
 
