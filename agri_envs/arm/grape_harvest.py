@@ -200,7 +200,7 @@ class GrapeHarvestEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
     (nearest first) -> home takes at full speed (joint space for ``control="joint"``, the clamp's
     translation and rotation for ``"ee"``), plus 10 steps for every approach and retreat. The same rule
     gives every scene argument a limit that a competent controller meets (``luo-apf`` uses about a
-    third of it). ``gym.make(..., max_episode_steps=N)`` adds a ``TimeLimit`` on top. Like Gymnasium-
+    half of it). ``gym.make(..., max_episode_steps=N)`` adds a ``TimeLimit`` on top. Like Gymnasium-
     Robotics, ``compute_terminated`` and ``compute_truncated`` decide both, batched like ``compute_reward``.
 
     ## Info
