@@ -132,6 +132,24 @@ register_policy(
         description="Luo 2018: energy-optimal harvesting order (eq. 11) and APF sampling path points (Alg. 1)",
     )
 )
+register_policy(
+    PolicySpec(
+        name="luo-apf-attract-only",
+        env_id="agri_envs/GrapeHarvest-v1",
+        entry_point="agri_baselines.luo_apf:make_luo_apf_attract_only",
+        env_kwargs={"control": "joint"},
+        description="Ablation of luo-apf: attraction only (eta = 0, no repulsion of eq. 15); collisions still rejected",
+    )
+)
+register_policy(
+    PolicySpec(
+        name="sac-her-grape-reach",
+        env_id="agri_envs/GrapeHarvest-v1",
+        entry_point="agri_training.zoo_arm:make_grape_reach_sac",
+        env_kwargs={"min_clusters": 1, "max_clusters": 1, "n_leaves": 0, "n_canes": 0, "control": "ee"},
+        description="Learned (SAC + HER, 80k steps, agri_training/zoo/sac-her-grape-reach): the single-goal preset",
+    )
+)
 
 
 def astar(occupancy: np.ndarray, start: tuple[int, int], goal: tuple[int, int]) -> list[tuple[int, int]] | None:

@@ -14,6 +14,11 @@ eqs. 6-9); when none is, it samples again. The orientation is interpolated (sler
 orientation to the cluster's along the way. Each harvest ends with a straight approach over the last
 :data:`~agri_envs.arm.scene.PRE_CUT` metres along the cluster's approach axis (the clamp must come in from
 the front, its pallet under the berries) and the same way back; the cut cluster's box leaves with it.
+When Alg. 1 runs out of samples at a path point (a dead end), the planner backs out of that point and
+samples again from the one before, at most ``max_backtracks`` times per segment; :attr:`Plan.fallbacks`
+counts how often. The repulsion's rho and eta follow from the paper's two conditions on the field
+(see :data:`RHO` and :data:`ETA`);
+``luo-apf-attract-only`` is the ablation without it.
 
 :class:`LuoApfPolicy` is the thin SB3-style adapter: it reads the cutting points and boxes from the
 GrapeHarvest-v1 observation (what the paper's vision system supplies), plans once per episode and
@@ -32,12 +37,35 @@ import numpy as np
 
 from agri_envs.arm.collision import ArmCollisionModel, box_distance
 from agri_envs.arm.kinematics import JOINT_LIMITS, ik_branches
-from agri_envs.arm.robot_model import flange_pose_for_tip, tip_pose
+from agri_envs.arm.robot_model import TOOL_HALF_Y, TOOL_LENGTH, flange_pose_for_tip, tip_pose
 from agri_envs.arm.scene import PRE_CUT, cut_pose
 
 #: Weights omega_i of eq. 11. The paper weighs each joint by its motor's power without giving numbers; we
 #: take the rated powers of a 6-axis arm of this size (400, 400, 200, 100, 100, 50 W) as shares of the total.
 JOINT_WEIGHTS = np.array([400.0, 400.0, 200.0, 100.0, 100.0, 50.0]) / 1250.0
+
+
+#: Distance (m) at which the tool's side reaches a box when the clamp centre is that far from it: the
+#: jaw half-opening TOOL_HALF_Y (3.5 cm), the widest part of the tool around the clamp centre.
+TOOL_REACH = TOOL_HALF_Y
+#: Farthest distance (m) from the clamp to its goal in the workspace (home to the farthest pre-cut pose).
+GOAL_REACH = 0.6
+#: rho of eq. 15 (m): the tool's length. Eqs. 12-16 act on one point, the clamp centre X, but what must
+#: keep clear of a box is the whole tool, which reaches TOOL_LENGTH (15 cm) behind X toward the wrist:
+#: a box within that range of X can meet the tool, so that is the range over which it must repel
+#: ("the maximum range of the impact of the obstacle", and the paper's own remedy for its one failure,
+#: a larger safety margin between the end-effector and the cluster). The paper's first condition
+#: (U_sum = 0 and minimal at the goal) then holds for every box but the goal's own cluster, whose box is
+#: 5-7 cm from the pre-cut goal: it moves the field's minimum outward along the approach. Alg. 1 still
+#: ends at the goal, because it stops sampling within one step of X_g and places X_g itself.
+#: (rho = 5 cm, the largest range that keeps condition 1 for every box, leaves every chosen path point
+#: outside every range: the repulsion then changes nothing, as the audit of issue 12 found.)
+RHO = TOOL_LENGTH
+#: eta of eq. 15. The paper's second condition: the system must be stable, the clamp never pulled into a
+#: box. With eq. 14 and eq. 16, the repulsion at TOOL_REACH from a box (the tool's side touching it)
+#: equals the strongest attraction the clamp ever feels, k * GOAL_REACH (k = 1):
+#: eta (1/d - 1/rho) / d^2 = k D  =>  eta = k D d^2 / (1/d - 1/rho), about 3.4e-5.
+ETA = 1.0 * GOAL_REACH * TOOL_REACH**2 / (1.0 / TOOL_REACH - 1.0 / RHO)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -48,10 +76,12 @@ class LuoApfParams:
         step: Radius of the sampling neighbourhood, i.e. the distance between path points (m).
         n_samples: Samples drawn per neighbourhood.
         k_att: Attractive gain k of eq. 13 (1/m^2 scale of U).
-        eta: Repulsive gain eta of eq. 15.
-        rho: Influence range rho of an obstacle in eq. 15 (m).
+        eta: Repulsive gain eta of eq. 15 (0: the attract-only ablation); see :data:`ETA`.
+        rho: Influence range rho of an obstacle in eq. 15 (m); see :data:`RHO`.
         temperature: Temperature of the sample probabilities ``exp(-U / T)``.
-        max_resample: Neighbourhoods drawn at one path point before the planner gives up.
+        max_resample: Neighbourhoods drawn at one path point before it counts as a dead end.
+        max_backtracks: Dead ends per segment the planner backs out of (the fallback: drop the last path
+            point and sample again from the one before) before it gives up.
         max_points: Path points per segment before the planner gives up.
         max_joint_jump: Largest joint change between consecutive path points (rad): a larger one would
             switch IK branch and sweep the arm through unchecked space.
@@ -63,10 +93,11 @@ class LuoApfParams:
     step: float = 0.03
     n_samples: int = 12
     k_att: float = 1.0
-    eta: float = 1e-4
-    rho: float = 0.06
+    eta: float = ETA
+    rho: float = RHO
     temperature: float = 1e-4
     max_resample: int = 8
+    max_backtracks: int = 10
     max_points: int = 200
     max_joint_jump: float = 0.35
     max_rotation: float = 0.2
@@ -101,6 +132,12 @@ class Plan:
         success: Whether every segment was planned.
         planning_time: Wall time of the whole plan (s).
         energy: Value of eq. 11's objective for ``order``.
+        min_box_clearance: Smallest distance (m) from the clamp centre at any path point Alg. 1 chose to
+            any box still in the scene (inf when there is none). The poses the task fixes are left out:
+            the segments' goals (pre-cut poses, 5-7 cm from their own box, and home) and the straight
+            approaches to the cuts (the cut is 5 cm above its box). They are the same for every planner
+            and would hide what eq. 15 does.
+        fallbacks: How often the dead-end fallback (backtracking) fired.
     """
 
     order: tuple[int, ...]
@@ -110,6 +147,8 @@ class Plan:
     success: bool
     planning_time: float
     energy: float
+    min_box_clearance: float = math.inf
+    fallbacks: int = 0
 
     @property
     def path_length(self) -> float:
@@ -186,6 +225,13 @@ class ApfPlanner:
         self.p = params
         self.rng = rng
         self.model = ArmCollisionModel(lo, hi, margin=params.margin, spacing=params.spacing)
+        self.fallbacks = 0
+
+    def clearance(self, x: np.ndarray) -> float:
+        """Smallest distance (m) from points (N, 3) to the current boxes (inf without boxes)."""
+        if len(self.model.lo) == 0 or len(x) == 0:
+            return math.inf
+        return float(np.min(box_distance(np.asarray(x).reshape(-1, 3), self.model.lo, self.model.hi)))
 
     def set_boxes(self, lo: np.ndarray, hi: np.ndarray) -> None:
         """Replace the obstacle boxes (a harvested cluster's box leaves the scene)."""
@@ -235,6 +281,7 @@ class ApfPlanner:
             no collision-free path point was found.
         """
         p = self.p
+        q_start = q
         start = tip_pose(q)
         x, r0, rg, xg = start[:3, 3], start[:3, :3], goal[:3, :3], goal[:3, 3]
         total = max(float(np.linalg.norm(xg - x)), 1e-9)
@@ -244,6 +291,8 @@ class ApfPlanner:
         frac = 0.0
         points: list[np.ndarray] = []
         configs: list[np.ndarray] = []
+        fracs_done: list[float] = []
+        backtracks = 0
         for _ in range(p.max_points):
             if np.linalg.norm(xg - x) <= p.step and frac + rot_step >= 1.0:
                 q_goal, ok = self.solve(goal[None], q)
@@ -271,9 +320,22 @@ class ApfPlanner:
                     x, q, frac = samples[pick], q_new[pick], float(fracs[pick])
                     points.append(x.copy())
                     configs.append(q.copy())
+                    fracs_done.append(frac)
                     break
             else:
-                return None
+                # Dead end: Alg. 1 ran out of samples. Fallback: back out of the last path point and sample
+                # again from the one before (fresh samples take another way), at most max_backtracks times.
+                if backtracks >= p.max_backtracks or not points:
+                    return None
+                backtracks += 1
+                self.fallbacks += 1
+                points.pop()
+                configs.pop()
+                fracs_done.pop()
+                if points:
+                    x, q, frac = points[-1], configs[-1], fracs_done[-1]
+                else:
+                    x, q, frac = start[:3, 3], q_start, 0.0
         return None
 
     def straight(self, q: np.ndarray, target: ClusterTarget) -> tuple[list[np.ndarray], list[np.ndarray]] | None:
@@ -336,10 +398,14 @@ def plan_harvest(
     q = q_home.copy()
     points, configs, cuts = [tip_pose(q)[:3, 3]], [q.copy()], []
     success = True
+    clearance = math.inf
     home_pose = tip_pose(q_home)
     for i in (*order, None):
         goal = home_pose if i is None else targets[i].tip_pose(PRE_CUT)
         seg = planner.segment(q, goal)
+        if seg is not None:
+            # The segment's last point is its goal (a pre-cut pose, or home): fixed by the task, not chosen.
+            clearance = min(clearance, planner.clearance(np.array(seg[0][:-1])))
         if seg is not None and i is not None:
             approach = planner.straight(seg[1][-1], targets[i])
             seg = None if approach is None else (seg[0] + approach[0], seg[1] + approach[1])
@@ -356,26 +422,43 @@ def plan_harvest(
             left.remove(i)
             planner.set_boxes(*boxes())
         q = configs[-1]
-    return Plan(order, np.array(points), np.array(configs), cuts, success, time.perf_counter() - t0, energy)
+    elapsed = time.perf_counter() - t0
+    return Plan(
+        order, np.array(points), np.array(configs), cuts, success, elapsed, energy, clearance, planner.fallbacks
+    )
 
 
 # ---------------------------------------------------------------------------------------- policy adapter
 
 
-def targets_from_observation(obs: np.ndarray) -> tuple[list[ClusterTarget], list[int], np.ndarray, np.ndarray]:
-    """Clusters (unharvested, with their slot indices) and other boxes from a GrapeHarvest-v1 observation."""
-    from agri_envs.arm.grape_harvest import _ARM_FEATURES, _CLUSTER_FEATURES, _OBSTACLE_FEATURES, MAX_CLUSTERS
+def targets_from_observation(
+    observation: dict[str, np.ndarray], layout: dict[str, slice]
+) -> tuple[list[ClusterTarget], np.ndarray, np.ndarray]:
+    """Unharvested clusters and the other boxes from a GrapeHarvest-v1 observation.
 
-    o = np.asarray(obs, dtype=np.float64)
-    targets, slots = [], []
-    for i in range(MAX_CLUSTERS):
-        c = o[_ARM_FEATURES + i * _CLUSTER_FEATURES :][:_CLUSTER_FEATURES]
-        if c[0] > 0.5 and c[1] < 0.5:
-            targets.append(ClusterTarget(c[2:5], c[5:8], c[8:11], c[11:14], c[14:17]))
-            slots.append(i)
-    rest = o[_ARM_FEATURES + MAX_CLUSTERS * _CLUSTER_FEATURES :].reshape(-1, _OBSTACLE_FEATURES)
+    The designated cluster's cut is ``desired_goal`` and its box the ``target_box`` slot; the other
+    clusters carry box and cut in their slots (see the env's Observation Space).
+
+    Args:
+        observation: The env's dict observation (one env, not batched).
+        layout: ``env.unwrapped.layout``: where each part of ``observation["observation"]`` sits.
+
+    Returns:
+        ``(targets, lo, hi)``: the clusters (designated first) and the minima and maxima of the stems' and
+        leaves' boxes.
+    """
+    o = np.asarray(observation["observation"], dtype=np.float64)
+    goal = np.asarray(observation["desired_goal"], dtype=np.float64)
+    targets = []
+    box = o[layout["target_box"]]
+    if box[0] > 0.5:
+        targets.append(ClusterTarget(goal[:3], goal[3:6], goal[6:9], box[1:4], box[4:7]))
+    for c in o[layout["others"]].reshape(-1, 16):
+        if c[0] > 0.5:
+            targets.append(ClusterTarget(c[7:10], c[10:13], c[13:16], c[1:4], c[4:7]))
+    rest = o[layout["obstacles"]].reshape(-1, 7)
     rest = rest[rest[:, 0] > 0.5]
-    return targets, slots, rest[:, 1:4], rest[:, 4:7]
+    return targets, rest[:, 1:4], rest[:, 4:7]
 
 
 def joints_from_observation(obs: np.ndarray) -> np.ndarray:
@@ -393,22 +476,28 @@ class LuoApfPolicy:
         params: Planner parameters.
     """
 
-    def __init__(self, max_joint_step: float, seed: int = 0, params: LuoApfParams | None = None) -> None:
+    def __init__(
+        self,
+        max_joint_step: float,
+        layout: dict[str, slice],
+        seed: int = 0,
+        params: LuoApfParams | None = None,
+    ) -> None:
         self.max_joint_step = max_joint_step
+        self.layout = layout
         self.params = params or LuoApfParams()
         self.rng = np.random.default_rng(seed)
         self.plans: list[Plan | None] = []
-        self.slots: list[list[int]] = []
         self.cursor: list[int] = []
 
-    def _start(self, env_index: int, obs: np.ndarray) -> None:
-        targets, slots, lo, hi = targets_from_observation(obs)
-        plan = plan_harvest(joints_from_observation(obs), targets, lo, hi, self.rng, self.params)
+    def _start(self, env_index: int, obs: dict[str, np.ndarray]) -> None:
+        targets, lo, hi = targets_from_observation(obs, self.layout)
+        q0 = joints_from_observation(obs["observation"])
+        plan = plan_harvest(q0, targets, lo, hi, self.rng, self.params)
         while len(self.plans) <= env_index:
             self.plans.append(None)
-            self.slots.append([])
             self.cursor.append(0)
-        self.plans[env_index], self.slots[env_index], self.cursor[env_index] = plan, slots, 1
+        self.plans[env_index], self.cursor[env_index] = plan, 1
 
     def predict(
         self,
@@ -421,11 +510,12 @@ class LuoApfPolicy:
         obs = np.asarray(observation["observation"])
         single = obs.ndim == 1
         batch = obs[None] if single else obs
+        goals = np.asarray(observation["desired_goal"]).reshape(len(batch), -1)
         starts = np.ones(len(batch), bool) if episode_start is None else np.asarray(episode_start, bool).reshape(-1)
         actions = np.zeros((len(batch), 6), dtype=np.float32)
         for k, o in enumerate(batch):
             if starts[k] or k >= len(self.plans) or self.plans[k] is None:
-                self._start(k, o)
+                self._start(k, {"observation": o, "desired_goal": goals[k]})
             plan = self.plans[k]
             assert plan is not None
             q = joints_from_observation(o)
@@ -441,14 +531,16 @@ class LuoApfPolicy:
         plan = self.plans[index] if index < len(self.plans) else None
         if plan is None:
             return {}
-        slots = self.slots[index]
+        # Clusters are numbered as the observation lists them: 1 is the env's designated one.
         return {
-            "order": "->".join(str(slots[i] + 1) for i in plan.order),
+            "order": "->".join(str(i + 1) for i in plan.order),
             "path_length_mm": plan.path_length * 1000.0,
             "path_points": len(plan.points),
             "planning_time_ms": plan.planning_time * 1000.0,
             "plan_success": plan.success,
             "energy": plan.energy,
+            "min_box_clearance": plan.min_box_clearance if math.isfinite(plan.min_box_clearance) else None,
+            "fallbacks": plan.fallbacks,
         }
 
 
@@ -457,4 +549,11 @@ def make_luo_apf(env: Any) -> LuoApfPolicy:
     cfg = env.unwrapped.config
     if cfg.control != "joint":
         raise ValueError(f"luo-apf drives joint-delta actions: make the env with control='joint' (got {cfg.control!r})")
-    return LuoApfPolicy(cfg.max_joint_step)
+    return LuoApfPolicy(cfg.max_joint_step, env.unwrapped.layout)
+
+
+def make_luo_apf_attract_only(env: Any) -> LuoApfPolicy:
+    """Registry factory of the ablation: luo-apf with eta = 0 (no repulsion, eq. 15 switched off)."""
+    policy = make_luo_apf(env)
+    policy.params = dataclasses.replace(policy.params, eta=0.0)
+    return policy

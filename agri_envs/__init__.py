@@ -11,7 +11,7 @@ until an env is made::
 
 from __future__ import annotations
 
-from gymnasium.envs.registration import register, registry
+from gymnasium.envs.registration import WrapperSpec, register, registry
 
 __version__ = "0.1.0"
 
@@ -24,13 +24,22 @@ def register_envs() -> None:
         register(
             id="agri_envs/GreenhouseNav-v1",
             entry_point="agri_envs.rover.greenhouse_nav:GreenhouseNavEnv",
-            max_episode_steps=2250,
+            # No fixed limit: the env sizes it to the mission; gym.make(..., max_episode_steps=N) still wins.
+            max_episode_steps=None,
+            additional_wrappers=(
+                WrapperSpec("SyncTimeLimit", "agri_envs.rover.greenhouse_nav:SyncTimeLimit", kwargs={}),
+            ),
         )
+    # GrapeHarvest truncates itself at a time limit that follows the scene (its info["time_limit"]).
     if "agri_envs/GrapeHarvest-v1" not in registry:
+        register(id="agri_envs/GrapeHarvest-v1", entry_point="agri_envs.arm.grape_harvest:GrapeHarvestEnv")
+    if "agri_envs/GrapeHarvestReach-v1" not in registry:
+        from agri_envs.arm.presets import REACH_PRESET  # pure data: no pybullet
+
         register(
-            id="agri_envs/GrapeHarvest-v1",
+            id="agri_envs/GrapeHarvestReach-v1",
             entry_point="agri_envs.arm.grape_harvest:GrapeHarvestEnv",
-            max_episode_steps=1000,
+            kwargs=dict(REACH_PRESET),
         )
     if "agri_envs/GreenhouseCoverage-v0" not in registry:  # the env truncates itself at its mission-sized limit
         register(

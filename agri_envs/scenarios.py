@@ -172,9 +172,10 @@ register_scenario(
     Scenario(
         _GRAPE,
         "table2",
-        {"min_clusters": 2, "max_clusters": 5},
-        "Luo sec. 4.2, Table 2: 10 trials with 2-5 clusters at random in the workspace, stems and leaves; "
-        "order, path length, path points, collision and planning time per trial.",
+        {"min_clusters": 2, "max_clusters": 5, "feasible_scenes": False},
+        "Luo sec. 4.2, Table 2: 10 trials with 2-5 clusters placed at random in the workspace as the paper did "
+        "(no check that every cut can be reached: such scenes count as failures), stems and leaves; order, "
+        "path length, path points, collision and planning time per trial.",
         default_episodes=10,
     )
 )
@@ -182,9 +183,45 @@ register_scenario(
     Scenario(
         _GRAPE,
         "table2-success",
-        {"min_clusters": 2, "max_clusters": 5},
+        {"min_clusters": 2, "max_clusters": 5, "feasible_scenes": False},
         "The Table 2 protocol over 100 seeds: the success rate with its confidence interval.",
         default_episodes=100,
+    )
+)
+register_scenario(
+    Scenario(
+        _GRAPE,
+        "table2-feasible",
+        {"min_clusters": 2, "max_clusters": 5, "feasible_scenes": True},
+        "Table 2 on pre-filtered scenes (every cut reachable along a free approach): the planner's own failures.",
+        default_episodes=100,
+    )
+)
+
+
+def _grape_reach() -> dict[str, Any]:
+    from agri_envs.arm.presets import REACH_PRESET  # pure data
+
+    return dict(REACH_PRESET)
+
+
+register_scenario(
+    Scenario(
+        _GRAPE,
+        "reach",
+        _grape_reach(),
+        "Single goal for goal-conditioned learners (= agri_envs/GrapeHarvestReach-v1): one reachable cluster, "
+        "end-effector actions, cut it and the episode ends; 3 cm / 0.35 rad tolerances.",
+        default_episodes=50,
+    )
+)
+register_scenario(
+    Scenario(
+        _GRAPE,
+        "reach-strict",
+        {**_grape_reach(), "position_tolerance": 0.01, "orientation_tolerance": 0.2},
+        "The single-goal task at the evaluation tolerances (1 cm / 0.2 rad).",
+        default_episodes=50,
     )
 )
 

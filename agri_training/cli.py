@@ -1,4 +1,4 @@
-"""The ``agri`` command line: evaluate policies, build the baseline report, list what is registered."""
+"""The ``agri`` command line: train and evaluate policies, build the baseline report, list what is registered."""
 
 from __future__ import annotations
 
@@ -44,6 +44,26 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
     out.write_text(json.dumps(result, indent=1))
     print(format_summary(result))
     print(f"wrote {out}")
+    return 0
+
+
+def _cmd_train(args: argparse.Namespace) -> int:
+    from agri_training.train import TrainRequest, train
+
+    request = TrainRequest(
+        env_id=args.env,
+        algo=args.algo,
+        out=Path(args.out),
+        seed=args.seed,
+        timesteps=args.timesteps,
+        scenario=args.scenario,
+        her=args.her,
+        overrides=parse_env_kwargs(args.hp or []),
+        hyperparams_file=Path(args.hyperparams) if args.hyperparams else None,
+        progress=not args.quiet,
+    )
+    run_dir = train(request)
+    print(f"wrote {run_dir}; evaluate it with: agri evaluate --env {args.env} --policy {run_dir} --out RESULT.json")
     return 0
 
 
@@ -197,6 +217,18 @@ def build_parser() -> argparse.ArgumentParser:
     ev.add_argument("--quiet", action="store_true", help="no progress bar")
     add_scale_arguments(ev)
     ev.set_defaults(func=_cmd_evaluate)
+    tr = sub.add_parser("train", help="train an SB3 policy; writes a weights-only run directory")
+    tr.add_argument("--env", required=True, help="env id, e.g. agri_envs/GreenhouseNav-v1")
+    tr.add_argument("--scenario", default=None, help="named preset of env arguments (agri list)")
+    tr.add_argument("--algo", required=True, choices=("ppo", "sac", "td3", "tqc"))
+    tr.add_argument("--her", action="store_true", help="HerReplayBuffer (goal-conditioned Dict envs; sac/td3/tqc)")
+    tr.add_argument("--timesteps", type=int, default=None, help="training steps (default: the YAML's n_timesteps)")
+    tr.add_argument("--seed", type=int, default=0, help="training seed, below 100000")
+    tr.add_argument("--out", required=True, help="run directory to create")
+    tr.add_argument("--hyperparams", default=None, help="YAML to use instead of agri_training/hyperparams/ALGO.yml")
+    tr.add_argument("--hp", nargs="*", metavar="KEY=VALUE", help="override hyperparameters (YAML values)")
+    tr.add_argument("--quiet", action="store_true", help="no progress bar")
+    tr.set_defaults(func=_cmd_train)
     rp = sub.add_parser(
         "report",
         help="one Markdown + HTML page over the leaderboard entries (fresh runs where stale) and training runs",

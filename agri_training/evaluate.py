@@ -8,7 +8,6 @@ first ``record_traces`` episodes also record the ``metadata["trace_keys"]`` of e
 from __future__ import annotations
 
 import dataclasses
-import json
 import math
 import subprocess
 import sys
@@ -70,7 +69,21 @@ def resolve_env_kwargs(request: EvalRequest, base: Mapping[str, Any] | None = No
         kwargs.update(get_scenario(request.env_id, request.scenario).env_kwargs)
     kwargs.update(request.env_kwargs)
     privileged = False
-    if not request.policy.endswith(".zip"):
+    from agri_training.learned import is_run_path, read_config, refuse_pickled
+
+    refuse_pickled(request.policy)
+    if is_run_path(request.policy):  # a training run: its env id and env arguments, like a baseline's needs
+        config = read_config(Path(request.policy))
+        if config["env_id"] != request.env_id:
+            raise ValueError(f"run {request.policy} was trained on {config['env_id']}, not {request.env_id}")
+        for key, value in config["env_kwargs"].items():
+            if key in request.env_kwargs and request.env_kwargs[key] != value:
+                raise ValueError(
+                    f"run {request.policy} was trained with {key}={value!r}, got {request.env_kwargs[key]!r}"
+                )
+            kwargs[key] = value
+        privileged = bool(config.get("privileged", False))
+    else:
         spec = policy_spec(request.policy)
         if spec.env_id != request.env_id:
             raise ValueError(f"policy {spec.name!r} drives {spec.env_id}, not {request.env_id}")
@@ -83,15 +96,18 @@ def resolve_env_kwargs(request: EvalRequest, base: Mapping[str, Any] | None = No
 
 
 def load_policy(name_or_path: str, env: gym.Env[Any, Any]) -> Any:
-    """A registered baseline by name, or an SB3 model from a ``.zip`` (algorithm from a sidecar ``.json``)."""
-    if not name_or_path.endswith(".zip"):
-        return make_policy(name_or_path, env)
-    import stable_baselines3 as sb3
+    """A registered policy by name (baseline or trained), or an ``agri train`` run directory, weights-only.
 
-    path = Path(name_or_path)
-    meta_path = path.with_suffix(".json")
-    algo = json.loads(meta_path.read_text())["algo"] if meta_path.exists() else "PPO"
-    return getattr(sb3, algo.upper()).load(path, device="cpu")
+    Raises:
+        ValueError: For an unknown name; :class:`agri_training.learned.UnsafeCheckpointError` for checkpoints
+            that need unpickling (SB3 ``.zip`` files).
+    """
+    from agri_training.learned import LearnedPolicy, is_run_path, refuse_pickled
+
+    refuse_pickled(name_or_path)
+    if is_run_path(name_or_path):
+        return LearnedPolicy(name_or_path, env)
+    return make_policy(name_or_path, env)
 
 
 def git_commit() -> str:

@@ -29,7 +29,7 @@ def planning_times(n: int) -> tuple[np.ndarray, float]:
     times, ok = [], []
     for seed in range(n):
         obs, _ = env.reset(seed=seed)
-        targets, _, lo, hi = targets_from_observation(obs["observation"])
+        targets, lo, hi = targets_from_observation(obs, env.unwrapped.layout)
         plan = plan_harvest(joints_from_observation(obs["observation"]), targets, lo, hi, np.random.default_rng(seed))
         times.append(plan.planning_time * 1000.0)
         ok.append(plan.success)

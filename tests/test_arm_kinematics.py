@@ -96,3 +96,26 @@ def test_pybullet_link_poses_equal_forward_kinematics():
             np.testing.assert_allclose(states[7][4], tip_pose(q)[:3, 3], atol=1e-6)
     finally:
         pb.disconnect(physicsClientId=client)
+
+
+def test_joint_ranges_are_table1_not_mirrored():
+    """Table 1's ranges are asymmetric for joints 2 and 3: a mirrored table (low <-> -high) must fail."""
+    from agri_envs.arm.kinematics import within_limits
+
+    table1 = np.radians([[-170, 170], [-60, 150], [-170, 75], [-190, 190], [-125, 125], [-360, 360]])
+    np.testing.assert_allclose(JOINT_LIMITS, table1)
+    q = np.radians([0.0, 140.0, -160.0, 0.0, 0.0, 0.0])  # inside Table 1, outside its mirror image
+    assert within_limits(q)
+    assert not within_limits(np.radians([0.0, -140.0, 0.0, 0.0, 0.0, 0.0]))
+    assert not within_limits(np.radians([0.0, 0.0, 160.0, 0.0, 0.0, 0.0]))
+    # The joint-limit clip of the env acts on the same table: a step past 150 deg stops there.
+    import gymnasium as gym
+
+    import agri_envs  # noqa: F401
+
+    env = gym.make("agri_envs/GrapeHarvest-v1", max_joint_step=0.5)
+    env.reset(seed=0)
+    for _ in range(12):
+        env.step(np.array([0.0, 1.0, 0.0, 0.0, 0.0, 0.0], dtype=np.float32))
+    assert env.unwrapped.q[1] == pytest.approx(np.radians(150.0))
+    env.close()

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import math
 from typing import Any
 
 import gymnasium as gym
@@ -11,18 +12,19 @@ from gymnasium import spaces
 
 from agri_envs._actions import checked_action
 from agri_envs._config import StrictConfig, param
-from agri_envs.arm.kinematics import JOINT_LIMITS, nearest_ik
-from agri_envs.arm.robot_model import flange_pose_for_tip, goal_vector, tip_pose
-from agri_envs.arm.scene import HOME_Q, Scene, SceneParams, sample_scene
+from agri_envs.arm.kinematics import JOINT_LIMITS
+from agri_envs.arm.robot_model import goal_vector, tip_pose
+from agri_envs.arm.scene import HOME_Q, Scene, SceneParams, harvest_configurations, sample_scene
 from agri_envs.arm.sim import ArmSim
 from agri_envs.arm.task import HarvestTask, goal_errors
 
 MAX_CLUSTERS = 5
-MAX_OBSTACLES = 14  # cordon, trunk, up to 4 canes, up to 8 leaves
-_CLUSTER_FEATURES = 17  # present, harvested, cut point (3), approach (3), pallet axis (3), box lo (3), hi (3)
-_OBSTACLE_FEATURES = 7  # present, lo (3), hi (3)
 _ARM_FEATURES = 15  # joints normalised (6), clamp position (3), approach axis (3), pallet axis (3)
-OBS_DIM = _ARM_FEATURES + MAX_CLUSTERS * _CLUSTER_FEATURES + MAX_OBSTACLES * _OBSTACLE_FEATURES
+_BOX_FEATURES = 7  # present, lo (3), hi (3)
+_GOAL_FEATURES = 9  # cut point (3), approach axis (3), pallet axis (3)
+_OTHER_FEATURES = _BOX_FEATURES + _GOAL_FEATURES  # a cluster besides the designated one: its box and its cut
+#: Stems besides the canes: the cordon and the trunk.
+_FIXED_STEMS = 2
 
 
 @dataclasses.dataclass(frozen=True)
@@ -34,6 +36,10 @@ class GrapeHarvestConfig(StrictConfig):
     n_leaves: int = param(4, "leaves placed around the clusters (fewer when no free place is found)", low=0, high=8)
     n_canes: int = param(2, "vertical canes in the row plane, besides trunk and cordon", low=0, high=4)
     cluster_tilt: float = param(0.17, "largest lean of a cluster's hanging axis", unit="rad", low=0.0, high=0.5)
+    feasible_scenes: bool = param(
+        False, "draw only scenes whose every cut is reachable along a free approach (False: at random, as Luo)"
+    )
+    return_home: bool = param(True, "after the last cut the clamp must return home (False: the last cut ends it)")
     position_tolerance: float = param(
         0.01,
         "a cutting point (or home) is reached within this distance of the clamp centre",
@@ -58,11 +64,13 @@ class GrapeHarvestConfig(StrictConfig):
     max_ee_rotation: float = param(
         0.1, "clamp rotation per step at action 1 (control='ee')", unit="rad", low=0.001, high=0.5
     )
+    time_slack: float = param(
+        4.0, "time limit: this many times the steps of the straight tour between the goals", low=1.0, high=100.0
+    )
     reward_type: str = param("sparse", "sparse (0 / -1) or dense (minus the goal error)", choices=("sparse", "dense"))
     orientation_weight: float = param(
         0.1, "dense reward: metres of penalty per radian of axis error", low=0.0, high=10.0
     )
-    collision_penalty: float = param(1.0, "penalty on a step where the arm touches a box", low=0.0, high=100.0)
     terminate_on_collision: bool = param(True, "end the episode when any link touches a box")
     show_boxes: bool = param(True, "draw the clusters' anti-collision boxes in rendered frames")
     render_width: int = param(480, "width of rendered frames", unit="px", low=64, high=4000)
@@ -78,18 +86,37 @@ class GrapeHarvestConfig(StrictConfig):
 
     def scene_params(self) -> SceneParams:
         """The scene part of the config."""
-        return SceneParams(self.min_clusters, self.max_clusters, self.n_leaves, self.n_canes, self.cluster_tilt)
+        return SceneParams(
+            self.min_clusters, self.max_clusters, self.n_leaves, self.n_canes, self.cluster_tilt, self.feasible_scenes
+        )
+
+    @property
+    def n_obstacle_slots(self) -> int:
+        """Obstacle slots of the observation: cordon, trunk, the canes and the leaves."""
+        return _FIXED_STEMS + self.n_canes + self.n_leaves
+
+    @property
+    def obs_dim(self) -> int:
+        """Length of the ``observation`` vector."""
+        others = (self.max_clusters - 1) * _OTHER_FEATURES
+        return _ARM_FEATURES + _BOX_FEATURES + others + self.n_obstacle_slots * _BOX_FEATURES
 
 
-def _segment_bounds() -> tuple[np.ndarray, np.ndarray]:
+def observation_bounds(cfg: GrapeHarvestConfig) -> tuple[np.ndarray, np.ndarray]:
     """Observation bounds: joints in [-1, 1], positions in [-2, 2] m, axes in [-1, 1], flags in [0, 1]."""
-    arm = ([-1.0] * 6 + [-2.0] * 3 + [-1.0] * 6, [1.0] * 15)
-    arm_high = [1.0] * 6 + [2.0] * 3 + [1.0] * 6
-    cluster = ([0.0, 0.0] + [-2.0] * 3 + [-1.0] * 6 + [-2.0] * 6, [1.0, 1.0] + [2.0] * 3 + [1.0] * 6 + [2.0] * 6)
-    obstacle = ([0.0] + [-2.0] * 6, [1.0] + [2.0] * 6)
-    low = arm[0] + cluster[0] * MAX_CLUSTERS + obstacle[0] * MAX_OBSTACLES
-    high = arm_high + cluster[1] * MAX_CLUSTERS + obstacle[1] * MAX_OBSTACLES
+    box = ([0.0] + [-2.0] * 6, [1.0] + [2.0] * 6)
+    goal = ([-2.0] * 3 + [-1.0] * 6, [2.0] * 3 + [1.0] * 6)
+    low = [-1.0] * 6 + goal[0] + box[0] + (box[0] + goal[0]) * (cfg.max_clusters - 1) + box[0] * cfg.n_obstacle_slots
+    high = [1.0] * 6 + goal[1] + box[1] + (box[1] + goal[1]) * (cfg.max_clusters - 1) + box[1] * cfg.n_obstacle_slots
     return np.array(low, dtype=np.float32), np.array(high, dtype=np.float32)
+
+
+def observation_layout(cfg: GrapeHarvestConfig) -> dict[str, slice]:
+    """Where each part of the ``observation`` vector sits (for policies that read it)."""
+    k0 = _ARM_FEATURES
+    k1 = k0 + _BOX_FEATURES
+    k2 = k1 + (cfg.max_clusters - 1) * _OTHER_FEATURES
+    return {"arm": slice(0, k0), "target_box": slice(k0, k1), "others": slice(k1, k2), "obstacles": slice(k2, None)}
 
 
 class GrapeHarvestEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
@@ -107,13 +134,19 @@ class GrapeHarvestEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
     any order, and return to its home pose; no link may touch a box. The arm is kinematic: an action sets
     the joint values directly, within the joint ranges.
 
+    By default the clusters are placed at random as in the paper's Table 2 tests, without checking that
+    every cut can be reached: some scenes cannot be solved, and that counts as failure. Training presets
+    set ``feasible_scenes=True``. The registered preset ``agri_envs/GrapeHarvestReach-v1`` (see the
+    Arguments) is the single-goal task a goal-conditioned learner starts with: one cluster, cut it, done.
+
     ## Action Space
 
     ``Box(-1, 1, (6,), float32)``. ``control="joint"`` (default): joint-position deltas, scaled by
     ``max_joint_step`` and clipped to the joint ranges. ``control="ee"``: clamp translation (3, base
-    frame, scaled by ``max_ee_step``) and rotation vector (3, scaled by ``max_ee_rotation``), solved by the
-    analytic IK (the solution nearest the current joints; the arm stays put when the pose is out of reach,
-    ``info["ik_failed"]``). Actions outside the box are clipped; NaN or inf raises ``ValueError``.
+    frame, scaled by ``max_ee_step``) and rotation vector (3, scaled by ``max_ee_rotation``), solved by
+    damped least squares on the arm's Jacobian (differential IK, smooth through the wrist singularity;
+    ``info["ik_failed"]`` when a joint range cuts the motion). Actions outside the box are clipped; NaN
+    or inf raises ``ValueError``.
 
     ## Observation Space
 
@@ -121,26 +154,36 @@ class GrapeHarvestEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
 
     | key | shape | meaning |
     |---|---|---|
-    | ``observation`` | (198,) | arm (15), then 5 cluster slots (17 each), then 14 obstacle slots (7 each) |
+    | ``observation`` | (N,) | arm (15), target box (7), other clusters (16 each), obstacles (7 each) |
     | ``achieved_goal`` | (9,) | clamp position, approach axis (tool z), pallet axis (tool x) |
     | ``desired_goal`` | (9,) | the same for the designated target (1) |
 
-    Arm: joints mapped to [-1, 1] over their ranges, clamp position, approach axis, pallet axis. Cluster
-    slot: present, harvested, cutting point, approach axis, pallet axis, box min, box max. Obstacle slot:
-    present, box min, box max. (1) The unharvested cluster nearest the clamp when the last target was cut;
-    home once all are. Bounds: positions in [-2, 2] m, axes in [-1, 1], flags in [0, 1]. Empty slots are zeros.
+    Arm: joints mapped to [-1, 1] over their ranges, clamp position, approach axis, pallet axis. Target
+    box: present, box min, box max of the designated cluster (its cut is only in ``desired_goal``, so a
+    goal relabelled by HER never contradicts the observation; absent while the target is home). Other
+    clusters (``max_clusters - 1`` slots, unharvested ones first, by index): present, box min, box max,
+    cut goal (9). Obstacles (``2 + n_canes + n_leaves`` slots: cordon, trunk, canes, leaves): present,
+    box min, box max. So ``N = 22 + 16 (max_clusters - 1) + 7 (2 + n_canes + n_leaves)``: 142 by default,
+    36 for the Reach preset. (1) The unharvested cluster nearest the clamp when the last target was cut;
+    home once all are (``return_home``). Bounds: positions in [-2, 2] m, axes in [-1, 1], flags in [0, 1].
+    Empty slots are zeros.
 
     ## Rewards
 
     ``reward = compute_reward(achieved_goal, desired_goal, info)``, batched over leading axes (HER):
 
-    | ``reward_type`` | formula |
-    |---|---|
-    | ``sparse`` | ``0`` if the goal is reached, else ``-1`` |
-    | ``dense`` | ``-(position error [m] + orientation_weight * axis error [rad])`` |
+    | ``reward_type`` | goal term | worst step ``w`` |
+    |---|---|---|
+    | ``sparse`` | ``0`` if the goal is reached, else ``-1`` | 1 |
+    | ``dense`` | ``-(position error [m] + orientation_weight * axis error [rad])`` | ``2 + orientation_weight * pi`` |
 
-    minus ``collision_penalty`` when ``info["collision"]``. A goal is reached within
-    ``position_tolerance`` and ``orientation_tolerance``.
+    minus ``(time_limit + 1) * w`` on a step with ``info["collision"]``. Why these weights: the goal term
+    is the standard one of goal-conditioned tasks (panda-gym, Fetch), so HER relabels it exactly; ``w`` is
+    the largest penalty one step without a collision can earn (positions differ by less than 2 m in the
+    arm's reach, axes by at most pi), so the collision penalty exceeds the worst return of any episode that
+    never crashes. Crashing is therefore never the best return, discounted or not, from any state; v0's
+    penalty of 1 made an early crash the best return and learners learned to crash. A goal is reached
+    within ``position_tolerance`` and ``orientation_tolerance``.
 
     ## Starting State
 
@@ -150,15 +193,23 @@ class GrapeHarvestEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
 
     ## Episode End
 
-    Terminated with success when every cluster is harvested and the clamp is back at its home pose;
-    terminated on contact between any link and a box when ``terminate_on_collision``. Truncated by the
-    ``TimeLimit`` wrapper (``max_episode_steps``, 1000 by default).
+    Terminated with success when the final target is reached without a collision: home after every
+    cluster is harvested (``return_home``), or the last cluster's cut otherwise. Terminated on contact
+    between any link and a box when ``terminate_on_collision``. Truncated at the episode's time limit,
+    ``info["time_limit"]`` steps: ``time_slack`` times the steps the straight tour home -> clusters
+    (nearest first) -> home takes at full speed (joint space for ``control="joint"``, the clamp's
+    translation and rotation for ``"ee"``), plus 10 steps for every approach and retreat. The same rule
+    gives every scene argument a limit that a competent controller meets (``luo-apf`` uses about a
+    half of it). ``gym.make(..., max_episode_steps=N)`` adds a ``TimeLimit`` on top. Like Gymnasium-
+    Robotics, ``compute_terminated`` and ``compute_truncated`` decide both, batched like ``compute_reward``.
 
     ## Info
 
     ``is_success``, ``collision``, ``harvested`` (clusters cut so far), ``n_clusters``, ``target_index``
-    (-1: home), ``distance`` (m) and ``angle_error`` (rad) to the designated goal, ``tip_x``, ``tip_y``,
-    ``tip_z`` (m), ``path_length`` (m, of the clamp centre), ``ik_failed``.
+    (-1: home), ``final_target`` (the designated goal is the last one), ``distance`` (m) and
+    ``angle_error`` (rad) to the designated goal, ``tip_x``, ``tip_y``, ``tip_z`` (m), ``path_length``
+    (m, of the clamp centre), ``ik_failed``, ``elapsed_steps``, ``time_limit`` (steps) and
+    ``time_limit_reached``.
 
     ## Arguments
 
@@ -172,34 +223,53 @@ class GrapeHarvestEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
     | ``n_leaves`` | 4 |  | in [0, 8] | leaves placed around the clusters (fewer when no free place is found) |
     | ``n_canes`` | 2 |  | in [0, 4] | vertical canes in the row plane, besides trunk and cordon |
     | ``cluster_tilt`` | 0.17 | rad | in [0.0, 0.5] | largest lean of a cluster's hanging axis |
+    | ``feasible_scenes`` | False |  | True or False | only scenes whose every cut is reachable (False: as Luo) |
+    | ``return_home`` | True |  | True or False | after the last cut the clamp must return home |
     | ``position_tolerance`` | 0.01 | m | in [0.001, 0.1] | a cutting point (or home) is reached within this distance |
     | ``orientation_tolerance`` | 0.2 | rad | in [0.01, 3.15] | largest angle between the clamp's and the goal's axes |
     | ``control`` | 'joint' |  | one of 'joint', 'ee' | action type: joint-position deltas or end-effector deltas |
     | ``max_joint_step`` | 0.05 | rad | in [0.001, 0.5] | joint change per step at action 1 (control='joint') |
     | ``max_ee_step`` | 0.02 | m | in [0.001, 0.1] | clamp translation per step at action 1 (control='ee') |
     | ``max_ee_rotation`` | 0.1 | rad | in [0.001, 0.5] | clamp rotation per step at action 1 (control='ee') |
+    | ``time_slack`` | 4.0 |  | in [1.0, 100.0] | time limit: this many times the straight tour's steps |
     | ``reward_type`` | 'sparse' |  | one of 'sparse', 'dense' | sparse (0 / -1) or dense (minus the goal error) |
     | ``orientation_weight`` | 0.1 |  | in [0.0, 10.0] | dense reward: metres of penalty per radian of axis error |
-    | ``collision_penalty`` | 1 |  | in [0.0, 100.0] | penalty on a step where the arm touches a box |
     | ``terminate_on_collision`` | True |  | True or False | end the episode when any link touches a box |
     | ``show_boxes`` | True |  | True or False | draw the clusters' anti-collision boxes in rendered frames |
     | ``render_width`` | 480 | px | in [64, 4000] | width of rendered frames |
     | ``render_height`` | 360 | px | in [64, 4000] | height of rendered frames |
 
-    Example::
+    The tolerances by default are the evaluation's (1 cm, 0.2 rad: the clamp must close on the peduncle).
+    ``agri_envs/GrapeHarvestReach-v1`` (and the scenario ``reach``) is this env with the kwargs preset
+    :data:`~agri_envs.arm.presets.REACH_PRESET`: one
+    cluster (feasible), no leaves or canes, ``return_home=False``, ``control="ee"`` with 4 cm / 0.2 rad
+    steps, and the learner's tolerances (3 cm, 0.35 rad). Example::
 
         env = gym.make("agri_envs/GrapeHarvest-v1", min_clusters=3, max_clusters=3, reward_type="dense")
+        reach = gym.make("agri_envs/GrapeHarvestReach-v1")  # the single-goal preset
 
     ## Baselines
 
     ``luo-apf``: the paper's energy-optimal harvesting order (eq. 11) and APF sampling path points (Alg. 1,
     eqs. 12-16) with the analytic IK and the point-set collision test (eqs. 6-9). It reads the cutting
-    points and boxes from the observation, as the paper's vision system supplies them; not privileged.
+    points (``desired_goal`` and the other clusters' slots) and boxes from the observation, as the
+    paper's vision system supplies them; not privileged. ``luo-apf-attract-only``: the same without the
+    repulsion of eq. 15 (the ablation).
 
     ## Version History
 
     * v0: initial release.
-    * v1: (in progress) see the training issue; the entry is completed with the changes.
+    * v1: learnable and honest (the training issue). The designated target's cut is no longer also in
+      the observation (HER relabels only ``desired_goal``); the observation is sized by the arguments
+      (142 dims by default instead of 198, mostly padding); ``return_home`` (False: the last cut ends the
+      episode, so a single-goal task has one goal); the time limit follows the scene (``time_slack``)
+      instead of a fixed 1000 steps; the collision penalty is ``(time_limit + 1)`` worst steps instead of
+      ``collision_penalty`` = 1 (removed), so crashing early is never the best return;
+      ``compute_terminated`` / ``compute_truncated``; scenes drawn at random as the paper did by default
+      (``feasible_scenes`` keeps v0's filtered scenes); the single-goal preset
+      ``agri_envs/GrapeHarvestReach-v1``; end-effector actions by differential IK (v0's analytic IK froze
+      the arm near the wrist singularity); reset works after ``close()``; ``render()`` without a render
+      mode warns.
 
     ## References
 
@@ -211,7 +281,7 @@ class GrapeHarvestEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
     metadata = {
         "render_modes": ["rgb_array", "human"],
         "render_fps": 20,
-        "episode_metric_keys": ("collision", "harvested", "n_clusters", "path_length"),
+        "episode_metric_keys": ("collision", "harvested", "n_clusters", "path_length", "time_limit"),
         "trace_keys": ("tip_x", "tip_y", "tip_z", "harvested"),
     }
 
@@ -222,9 +292,10 @@ class GrapeHarvestEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
         self.render_mode = render_mode
         cfg = self.config
         self.action_space = spaces.Box(-1.0, 1.0, (6,), np.float32)
-        low, high = _segment_bounds()
+        low, high = observation_bounds(cfg)
         goal_low = np.array([-2.0] * 3 + [-1.0] * 6, dtype=np.float32)
         self._obs_low, self._obs_high = low, high
+        self.layout = observation_layout(cfg)
         self.observation_space = spaces.Dict(  # type: ignore[assignment]
             {
                 "observation": spaces.Box(low, high, dtype=np.float32),
@@ -236,8 +307,9 @@ class GrapeHarvestEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
             cfg.position_tolerance,
             cfg.orientation_tolerance,
             cfg.reward_type,
-            cfg.collision_penalty,
             cfg.orientation_weight,
+            cfg.return_home,
+            cfg.terminate_on_collision,
         )
         self.sim = ArmSim(show_boxes=cfg.show_boxes)
         self._window: Any = None
@@ -245,18 +317,22 @@ class GrapeHarvestEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
         self.home_goal = goal_vector(home[:3, 3], home[:3, :3]).astype(np.float32).astype(np.float64)
         self.scene: Scene | None = None
         self.q = HOME_Q.copy()
+        self.time_limit = 0
+        self.elapsed_steps = 0
 
     # ------------------------------------------------------------------------------------------- API
 
     def reset(
         self, *, seed: int | None = None, options: dict[str, Any] | None = None
     ) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
-        """Draw a new scene (or place ``options["scene"]``) and put the arm home."""
+        """Draw a new scene (or place ``options["scene"]``) and put the arm home; reopens a closed sim."""
         super().reset(seed=seed)
         options = dict(options or {})
         scene = options.pop("scene", None)
         if options:
             raise ValueError(f"reset options {sorted(options)} unknown; allowed: ['scene']")
+        if self.sim.closed:  # Gymnasium's and SB3's checkers reset after close()
+            self.sim = ArmSim(show_boxes=self.config.show_boxes)
         self.scene = scene if scene is not None else sample_scene(self.np_random, self.config.scene_params())
         self.sim.load_scene(self.scene)
         self.q = HOME_Q.copy()
@@ -265,18 +341,22 @@ class GrapeHarvestEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
         self.task.reset(self.scene, self.home_goal, achieved)
         self._path_length = 0.0
         self._achieved_goal = achieved
+        self.elapsed_steps = 0
+        self.time_limit = self._time_limit(self.scene)
         pos, ang = goal_errors(achieved, self.task.desired_goal)
-        info = self._info({"collision": False, "is_success": False, "distance": pos, "angle_error": ang}, False)
+        outcome = {"collision": False, "is_success": False, "distance": pos, "angle_error": ang}
+        info = self._info(dict(outcome, final_target=self.task.final_target), False)
         if self.render_mode == "human":
             self.render()
         return self._observe(achieved), info
 
     def step(self, action: np.ndarray) -> tuple[dict[str, np.ndarray], float, bool, bool, dict[str, Any]]:
         """Move the arm by one action, check collisions and harvests, and score the step."""
-        if self.scene is None:
+        if self.scene is None or self.sim.closed:
             raise RuntimeError("call reset() before step()")
         a = checked_action(action, 6)
         self.task.begin_step(self._achieved_goal)
+        desired = self.task.desired_goal
         ik_failed = False
         if self.config.control == "joint":
             q_new = np.clip(self.q + a * self.config.max_joint_step, JOINT_LIMITS[:, 0], JOINT_LIMITS[:, 1])
@@ -288,23 +368,37 @@ class GrapeHarvestEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
         achieved = self._achieved()
         self._path_length += float(np.linalg.norm(achieved[:3] - self._achieved_goal[:3]))
         self._achieved_goal = achieved
-        outcome = self.task.evaluate(achieved, collision)
+        self.elapsed_steps += 1
+        outcome = self.task.evaluate(achieved, collision, self.time_limit)
         for i in outcome["harvested_now"]:
             self.sim.remove_cluster(i)
-        terminated = bool(outcome["is_success"] or (collision and self.config.terminate_on_collision))
         info = self._info(outcome, ik_failed)
+        terminated = bool(self.compute_terminated(achieved, desired, info))
+        truncated = bool(self.compute_truncated(achieved, desired, info))
+        info["time_limit_reached"] = truncated
         if self.render_mode == "human":
             self.render()
-        return self._observe(achieved), float(outcome["reward"]), terminated, False, info
+        return self._observe(achieved), float(outcome["reward"]), terminated, truncated, info
 
     def compute_reward(self, achieved_goal: np.ndarray, desired_goal: np.ndarray, info: Any) -> Any:
         """Reward for (batches of) goals, as in the Rewards section; what HER relabels with."""
         return self.task.compute_reward(achieved_goal, desired_goal, info)
 
+    def compute_terminated(self, achieved_goal: np.ndarray, desired_goal: np.ndarray, info: Any) -> Any:
+        """Whether (batches of) steps end the episode: the final target reached, or a collision."""
+        return self.task.compute_terminated(achieved_goal, desired_goal, info)
+
+    def compute_truncated(self, achieved_goal: np.ndarray, desired_goal: np.ndarray, info: Any) -> Any:
+        """Whether (batches of) steps hit the episode's time limit (and did not terminate)."""
+        return self.task.compute_truncated(achieved_goal, desired_goal, info)
+
     def render(self) -> np.ndarray | None:  # type: ignore[override]
         """An RGB frame from the fixed camera (``rgb_array``), or that frame in a pygame window (``human``)."""
         if self.render_mode is None:
+            gym.logger.warn("render() called with render_mode=None; pass render_mode='rgb_array' to gym.make")
             return None
+        if self.sim.closed:
+            raise RuntimeError("call reset() before render(): the env is closed")
         frame = self.sim.render(self.config.render_width, self.config.render_height)
         if self.render_mode == "rgb_array":
             return frame
@@ -319,7 +413,7 @@ class GrapeHarvestEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
         return None
 
     def close(self) -> None:
-        """Disconnect this env's pybullet client and close the window (idempotent)."""
+        """Disconnect this env's pybullet client and close the window (idempotent; ``reset`` reopens)."""
         self.sim.close()
         if self._window is not None:
             import pygame
@@ -347,17 +441,63 @@ class GrapeHarvestEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
 
     # -------------------------------------------------------------------------------------- helpers
 
-    def _ee_target(self, a: np.ndarray) -> tuple[np.ndarray, bool]:
-        """Joint values for a clamp-pose delta (analytic IK nearest the current joints)."""
+    def _time_limit(self, scene: Scene) -> int:
+        """Steps of the episode: ``time_slack`` x the straight tour at full speed, plus approaches."""
         cfg = self.config
-        tip = tip_pose(self.q)
-        target = tip.copy()
-        target[:3, 3] += a[:3] * cfg.max_ee_step
-        target[:3, :3] = _rotation(a[3:] * cfg.max_ee_rotation) @ tip[:3, :3]
-        q = nearest_ik(flange_pose_for_tip(target), self.q)
-        if q is None or np.max(np.abs(q - self.q)) > 0.5:  # out of reach, or a jump to another IK branch
-            return self.q.copy(), True
-        return q, False
+        joint = cfg.control == "joint"
+        home = tip_pose(HOME_Q)
+        # Nearest-first tour through the cuts (the order the task designates targets in).
+        left = list(range(len(scene.clusters)))
+        here_q, here_t = HOME_Q, home
+        steps = 0.0
+        legs: list[tuple[np.ndarray | None, np.ndarray]] = []
+        at = home[:3, 3]
+        while left:
+            i = min(left, key=lambda j: float(np.linalg.norm(scene.clusters[j].cut_point - at)))
+            left.remove(i)
+            configs = harvest_configurations(scene.clusters[i])
+            legs.append((None if configs is None else configs[1], scene.clusters[i].tip_pose()))
+            at = scene.clusters[i].cut_point
+        if cfg.return_home or not legs:
+            legs.append((HOME_Q, home))
+        for q, t in legs:
+            if joint:
+                # An unreachable cut (possible in Luo's random scenes) gets a half-turn of the slowest joint.
+                dq = math.pi / 2 if q is None else float(np.max(np.abs(q - here_q)))
+                steps += dq / cfg.max_joint_step
+                here_q = here_q if q is None else q
+            else:
+                dist = float(np.linalg.norm(t[:3, 3] - here_t[:3, 3]))
+                turn = float(np.arccos(np.clip((np.trace(here_t[:3, :3].T @ t[:3, :3]) - 1.0) / 2.0, -1.0, 1.0)))
+                steps += max(dist / cfg.max_ee_step, turn / cfg.max_ee_rotation)
+            here_t = t
+        approaches = 10 * (2 * len(scene.clusters) if cfg.return_home else 2 * len(scene.clusters) - 1)
+        return int(math.ceil(cfg.time_slack * steps)) + approaches
+
+    def _ee_target(self, a: np.ndarray) -> tuple[np.ndarray, bool]:
+        """Joint values for a clamp-pose delta by damped least squares on the arm's Jacobian.
+
+        Differential IK (like the controllers of panda-gym and robosuite) rather than the analytic IK:
+        near the wrist singularity (theta_5 = 0) the analytic solution nearest the current joints jumps,
+        and a learner would see the arm freeze there. ``ik_failed`` reports a motion the joint ranges cut.
+        """
+        cfg = self.config
+        twist = np.concatenate([a[:3] * cfg.max_ee_step, a[3:] * cfg.max_ee_rotation])
+        jac = _jacobian(self.q)
+        damping = 0.02
+        lo, hi = JOINT_LIMITS[:, 0], JOINT_LIMITS[:, 1]
+        free = np.ones(6, dtype=bool)
+        for _ in range(3):  # a joint that would pass its limit is locked there, the others solve the rest
+            j = jac * free
+            dq = j.T @ np.linalg.solve(j @ j.T + damping**2 * np.eye(6), twist)
+            dq *= min(1.0, _MAX_EE_JOINT_STEP / max(float(np.max(np.abs(dq))), 1e-12))
+            over = free & ((self.q + dq < lo) | (self.q + dq > hi))
+            if not over.any():
+                break
+            free &= ~over
+        q = self.q + dq
+        clipped = np.clip(q, lo, hi)
+        return clipped, bool(np.any(clipped != q) or not free.all())
 
     def _achieved(self) -> np.ndarray:
         """The achieved goal, rounded to the observation's float32 so that rewards match ``compute_reward``."""
@@ -366,21 +506,27 @@ class GrapeHarvestEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
 
     def _observe(self, achieved: np.ndarray) -> dict[str, np.ndarray]:
         assert self.scene is not None
-        obs = np.zeros(OBS_DIM, dtype=np.float64)
+        cfg = self.config
+        obs = np.zeros(cfg.obs_dim, dtype=np.float64)
         lo, hi = JOINT_LIMITS[:, 0], JOINT_LIMITS[:, 1]
         obs[:6] = 2.0 * (self.q - lo) / (hi - lo) - 1.0
         obs[6:15] = achieved
-        k = _ARM_FEATURES
+        target = self.task.target
+        if target >= 0:
+            c = self.scene.clusters[target]
+            k = self.layout["target_box"].start
+            obs[k], obs[k + 1 : k + 4], obs[k + 4 : k + 7] = 1.0, c.box_lo, c.box_hi
+        k = self.layout["others"].start
         for i, c in enumerate(self.scene.clusters):
-            obs[k] = 1.0
-            obs[k + 1] = float(self.task.harvested[i])
-            obs[k + 2 : k + 11] = self.task.goals[i]
-            obs[k + 11 : k + 14], obs[k + 14 : k + 17] = c.box_lo, c.box_hi
-            k += _CLUSTER_FEATURES
-        k = _ARM_FEATURES + MAX_CLUSTERS * _CLUSTER_FEATURES
-        for o in self.scene.obstacles[:MAX_OBSTACLES]:
+            if i == target or self.task.harvested[i]:
+                continue
+            obs[k], obs[k + 1 : k + 4], obs[k + 4 : k + 7] = 1.0, c.box_lo, c.box_hi
+            obs[k + 7 : k + 16] = self.task.goals[i]
+            k += _OTHER_FEATURES
+        k = self.layout["obstacles"].start
+        for o in self.scene.obstacles[: cfg.n_obstacle_slots]:
             obs[k], obs[k + 1 : k + 4], obs[k + 4 : k + 7] = 1.0, o.lo, o.hi
-            k += _OBSTACLE_FEATURES
+            k += _BOX_FEATURES
         return {
             "observation": np.clip(obs, self._obs_low, self._obs_high).astype(np.float32),
             "achieved_goal": achieved.astype(np.float32),
@@ -394,6 +540,7 @@ class GrapeHarvestEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
             "harvested": int(self.task.harvested.sum()),
             "n_clusters": len(self.task.goals),
             "target_index": self.task.target,
+            "final_target": bool(outcome["final_target"]),
             "distance": float(outcome["distance"]),
             "angle_error": float(outcome["angle_error"]),
             "tip_x": float(self._achieved_goal[0]),
@@ -401,14 +548,24 @@ class GrapeHarvestEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
             "tip_z": float(self._achieved_goal[2]),
             "path_length": self._path_length,
             "ik_failed": ik_failed,
+            "elapsed_steps": self.elapsed_steps,
+            "time_limit": self.time_limit,
+            "time_limit_reached": False,
         }
 
 
-def _rotation(rotvec: np.ndarray) -> np.ndarray:
-    """Rotation matrix of a rotation vector (Rodrigues)."""
-    angle = float(np.linalg.norm(rotvec))
-    if angle < 1e-12:
-        return np.eye(3)
-    k = rotvec / angle
-    kx = np.array([[0.0, -k[2], k[1]], [k[2], 0.0, -k[0]], [-k[1], k[0], 0.0]])
-    return np.eye(3) + np.sin(angle) * kx + (1.0 - np.cos(angle)) * kx @ kx
+#: Largest joint change of one end-effector step (rad): the damped solution near a singularity is bounded.
+_MAX_EE_JOINT_STEP = 0.3
+
+
+def _jacobian(q: np.ndarray, eps: float = 1e-6) -> np.ndarray:
+    """Geometric Jacobian (6, 6) of the clamp centre: linear rows, then angular rows (base frame)."""
+    t0 = tip_pose(q)
+    qs = q[None, :] + eps * np.eye(6)
+    jac = np.zeros((6, 6))
+    for j in range(6):
+        t = tip_pose(qs[j])
+        jac[:3, j] = (t[:3, 3] - t0[:3, 3]) / eps
+        r = t[:3, :3] @ t0[:3, :3].T
+        jac[3:, j] = np.array([r[2, 1] - r[1, 2], r[0, 2] - r[2, 0], r[1, 0] - r[0, 1]]) / (2.0 * eps)
+    return jac

@@ -7,10 +7,19 @@ by :data:`BOX_MARGIN`) is what the arm must not touch. The clamp reaches the cut
 side of the row (the cluster's *approach* axis, horizontal) with the pallet under the berries (the tool's
 x axis along the cluster's hanging axis), which is the orientation that "fits the cluster".
 
-Clusters are drawn inside the arm's reachable workspace (Luo Fig. 3): every cutting pose and its pre-cut
-pose (:data:`PRE_CUT` back along the approach) has an IK solution whose whole arm clears every box, and no
-leaf or stem blocks the clamp's straight approach corridor. Stems (trunk, cordon, canes) stand in the row
-plane behind the clusters; leaves fill the canopy around them.
+Two ways to draw a scene (``SceneParams.feasible``):
+
+* as Luo did (sec. 4.2, the default): cutting points uniformly at random in the region of the workspace
+  in front of the row, "randomly given in the configuration space of the manipulator": the arm can
+  stand at each cut and pre-cut pose without touching a box, and nothing else is checked: a cluster's
+  box may lie across another's approach, a stem may stand close behind a cut; a planner can fail there,
+  and reports say so. Leaves are ours, not the paper's: they never block an approach or a cut pose.
+* feasible only (a documented option for training presets): every cutting pose and its pre-cut pose
+  (:data:`PRE_CUT` back along the approach) has an IK solution in the home branch whose whole arm clears
+  every box, and no leaf or stem blocks the clamp's straight approach corridor.
+
+Stems (trunk, cordon, canes) stand in the row plane behind the clusters; leaves fill the canopy around
+them.
 """
 
 from __future__ import annotations
@@ -130,6 +139,7 @@ class SceneParams:
     n_leaves: int = 4
     n_canes: int = 2
     cluster_tilt: float = 0.17
+    feasible: bool = False
 
 
 def _rotate(v: np.ndarray, axis: np.ndarray, angle: float) -> np.ndarray:
@@ -239,9 +249,14 @@ def sample_scene(rng: np.random.Generator, params: SceneParams) -> Scene:
             return scene
 
 
+def _overlaps_any(lo: np.ndarray, hi: np.ndarray, los: list[np.ndarray], his: list[np.ndarray]) -> bool:
+    return any(_overlap(lo, hi, blo, bhi) for blo, bhi in zip(los, his, strict=True))
+
+
 def _try_scene(rng: np.random.Generator, params: SceneParams, n: int) -> Scene | None:
     check = _Checker()
     clusters: list[Cluster] = []
+    cors: list[tuple[np.ndarray, np.ndarray]] = []
     for _ in range(_MAX_ATTEMPTS):
         if len(clusters) == n:
             break
@@ -249,12 +264,18 @@ def _try_scene(rng: np.random.Generator, params: SceneParams, n: int) -> Scene |
         if any(np.linalg.norm(c.cut_point - o.cut_point) < 0.12 for o in clusters):
             continue
         cor = corridor(c)
-        if any(_overlap(cor[0], cor[1], lo, hi) for lo, hi in zip(check.lo, check.hi, strict=True)):
+        # Feasible scenes keep every approach corridor free; Luo's random scenes do not check it.
+        if params.feasible and _overlaps_any(cor[0], cor[1], check.lo, check.hi):
             continue
+        if not params.feasible and _overlaps_any(c.box_lo, c.box_hi, check.lo, check.hi):
+            continue  # two clusters cannot fill the same space
+        # Both: "randomly given in the configuration space of the manipulator" (sec. 4.2): the arm can
+        # stand at the cut and pre-cut poses without touching a box (C_free of eqs. 8-9).
         configs = harvest_configurations(c)
         if configs is None or not check.free_with(c.box_lo, c.box_hi, list(configs)):
             continue
-        check.add(c.box_lo, c.box_hi, list(configs), cor)
+        check.add(c.box_lo, c.box_hi, list(configs), cor if params.feasible else None)
+        cors.append(cor)
         clusters.append(c)
     if len(clusters) < n:
         return None
@@ -283,7 +304,11 @@ def _try_scene(rng: np.random.Generator, params: SceneParams, n: int) -> Scene |
         for _attempt in range(30):
             centre = rng.uniform([0.60, -0.45, -0.42], [ROW_X, 0.45, top])
             half = rng.uniform([0.03, 0.04, 0.015], [0.06, 0.07, 0.04])
-            if check.free_with(centre - half, centre + half, []):
+            # Leaves are ours, not the paper's (its scenes hold clusters and their boxes): they never block an
+            # approach corridor or a cut pose, so that the random part stays the paper's, the clusters.
+            if check.free_with(centre - half, centre + half, []) and not _overlaps_any(
+                centre - half, centre + half, [cr[0] for cr in cors], [cr[1] for cr in cors]
+            ):
                 leaf = Obstacle("leaf", centre - half, centre + half)
                 obstacles.append(leaf)
                 check.add(leaf.lo, leaf.hi, [], None)

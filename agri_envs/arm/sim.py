@@ -8,11 +8,57 @@ anti-collision boxes only.
 
 from __future__ import annotations
 
+import os
+import sys
+from typing import Any
+
 import numpy as np
-import pybullet as pb
 
 from agri_envs.arm.robot_model import URDF_PATH
 from agri_envs.arm.scene import BASE_HEIGHT, PEDUNCLE_GAP, ROW_X, Cluster, Scene
+
+
+def _flush_c_stdout() -> None:
+    """Flush the C library's stdio buffers (best effort)."""
+    try:
+        import ctypes
+
+        ctypes.CDLL(None).fflush(None)
+    except (OSError, AttributeError):
+        pass
+
+
+def _import_pybullet_quietly() -> Any:
+    """Import pybullet with the C-level stdout and stderr silenced: it prints "pybullet build time: ..."."""
+    if "pybullet" in sys.modules:
+        return sys.modules["pybullet"]
+    for stream in (sys.stdout, sys.stderr):
+        if stream is not None:
+            stream.flush()
+    try:
+        saved = [os.dup(1), os.dup(2)]
+    except OSError:  # no usable descriptors: nothing to silence
+        import pybullet
+
+        return pybullet
+    try:
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        try:
+            os.dup2(devnull, 1)
+            os.dup2(devnull, 2)
+            import pybullet
+
+            _flush_c_stdout()  # the line may sit in C's buffer when the stream is not a terminal
+        finally:
+            os.close(devnull)
+    finally:
+        for fd, copy in zip((1, 2), saved, strict=True):
+            os.dup2(copy, fd)
+            os.close(copy)
+    return pybullet
+
+
+pb = _import_pybullet_quietly()
 
 _GREEN = (0.28, 0.55, 0.22, 1.0)
 _BROWN = (0.45, 0.32, 0.2, 1.0)
@@ -48,6 +94,11 @@ class ArmSim:
         self._visual_box((0.0, 0.0, -BASE_HEIGHT / 2 - 0.2), (0.07, 0.07, BASE_HEIGHT / 2 - 0.05), (0.4, 0.4, 0.42, 1))
         for y in (-1.2, 1.2):
             self._visual_box((ROW_X, y, -BASE_HEIGHT / 2 + 0.15), (0.03, 0.03, BASE_HEIGHT / 2 + 0.15), _BROWN)
+
+    @property
+    def closed(self) -> bool:
+        """Whether :meth:`close` has disconnected the client."""
+        return self.client is None
 
     @property
     def _c(self) -> int:

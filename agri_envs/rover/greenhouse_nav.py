@@ -22,7 +22,7 @@ from agri_envs.rover.layout import (
     generate_office_corridor,
     layout_from_map,
 )
-from agri_envs.rover.task import RewardWeights, WaypointTask
+from agri_envs.rover.task import RewardWeights, WaypointTask, mission_time_limit
 from agri_envs.sim2d.crowd import Crowd, CrowdSpec
 from agri_envs.sim2d.geometry import Kind
 from agri_envs.sim2d.sensors import Lidar, SonarArray, hc_sr04, tim561
@@ -98,16 +98,22 @@ class GreenhouseNavConfig(StrictConfig):
     mission_cycles: int = param(1, "times the mission is driven in one episode (Harik sec. 3.5: 10)", low=1, high=100)
     terminate_on_collision: bool = param(True, "end the episode when the robot touches anything")
     safety_margin: float = param(
-        0.15, "clearance below which the clearance penalty applies", unit="m", low=0.0, high=1.0
+        0.25, "clearance below which the clearance penalty applies", unit="m", low=0.0, high=1.0
     )
     reward_progress: float = param(1.0, "weight of progress toward the waypoint (per metre)", low=0.0, high=100.0)
-    reward_waypoint: float = param(2.0, "bonus per waypoint reached", low=0.0, high=100.0)
+    reward_waypoint: float = param(1.0, "bonus per waypoint reached", low=0.0, high=100.0)
     reward_success: float = param(10.0, "bonus when the mission is complete", low=0.0, high=1000.0)
-    reward_collision: float = param(10.0, "penalty on collision", low=0.0, high=1000.0)
+    reward_collision: float = param(10.0, "fixed part of the crash penalty (see Rewards)", low=0.0, high=1000.0)
     reward_clearance: float = param(
-        0.05, "penalty per step at zero clearance (linear in the shortfall)", low=0.0, high=100.0
+        0.03, "penalty per step at zero clearance (linear in the shortfall)", low=0.0, high=100.0
     )
-    reward_time: float = param(0.005, "penalty per step", low=0.0, high=10.0)
+    reward_time: float = param(0.002, "penalty per step", low=0.0, high=10.0)
+    time_limit_speed_fraction: float = param(
+        0.5, "time limit: mission at this fraction of speed limits", low=0.05, high=1.0
+    )
+    time_limit_wait: float = param(
+        6.0, "default time limit: extra time per person per mission cycle", unit="s", low=0.0, high=120.0
+    )
     render_width: int = param(800, "width of rendered frames", unit="px", low=100, high=4000)
 
     def validate(self) -> None:
@@ -219,11 +225,25 @@ class GreenhouseNavEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
     | ``reward_progress`` | ``reward_progress * (d_prev - d)``, d the true distance to the current waypoint |
     | ``reward_waypoint`` | ``+reward_waypoint`` when a waypoint is reached |
     | ``reward_success`` | ``+reward_success`` when the last one is reached |
-    | ``reward_collision`` | ``-reward_collision`` on contact |
+    | ``reward_collision`` | ``-(reward_collision + T * (reward_time + reward_clearance))`` on contact (1) |
     | ``reward_clearance`` | ``-reward_clearance * max(0, safety_margin - clearance) / safety_margin`` |
     | ``reward_time`` | ``-reward_time`` every step |
 
-    Each term is reported in ``info`` under its name.
+    (1) T is the step limit in force (see Episode End). Each term is reported in ``info`` under its name.
+    Why the weights are what they are:
+
+    * **A crash always costs more than any way of avoiding it.** The crash penalty is a fixed 10 plus the
+      worst a whole episode of time and clearance penalties can add up to (T steps at zero clearance), so
+      stopping, backing off or idling until the time limit is always the better return, whatever the
+      mission and its time limit (T = 2,455 steps on the default scene: the crash costs 88.6).
+    * **Safety margins matter.** Below ``safety_margin`` (0.25 m, about half the free space on either side
+      of the robot in a default corridor) each step costs up to 0.03, 75 % of the progress reward of a step
+      at full speed (0.04): hugging a plant row or cutting a corner at 5 cm costs more than the time it saves.
+    * **Progress drives the task.** 1 per metre toward the current waypoint (a potential difference, so
+      driving back and forth earns nothing), 1 per waypoint and 10 for the whole mission: the default loop
+      returns about 58 when driven well.
+    * **Time is a tie-breaker.** 0.002 per step (4.9 for a whole default episode): enough to prefer the
+      faster of two safe paths, never enough to make a crash attractive (see the first point).
 
     ## Starting State
 
@@ -236,8 +256,14 @@ class GreenhouseNavEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
     ## Episode End
 
     Terminated when the last waypoint is reached (success) or, with ``terminate_on_collision``, when the
-    robot touches an obstacle or a person. Truncated by the ``TimeLimit`` wrapper (``max_episode_steps``,
-    2250 steps = 150 s by default).
+    robot touches an obstacle or a person. Truncated at the time limit, which by default follows the
+    mission: the route from the start through every waypoint (all ``mission_cycles``) driven at
+    ``time_limit_speed_fraction`` (0.5) of ``max_speed``, plus its corners turned at the same fraction of
+    ``max_turn_rate``, plus ``time_limit_wait`` (6 s) per person per cycle for people standing in the way.
+    The default scene gets 2,455 steps (163.7 s); ``harik-apf-gt`` needs about 1,700. An explicit
+    ``gym.make(..., max_episode_steps=N)`` wins over the computed limit. ``info["max_episode_steps"]``
+    always gives the limit in force; the truncating step sets ``info["truncated"]`` and explains it in
+    ``info["truncation_reason"]``.
 
     ## Info
 
@@ -245,7 +271,8 @@ class GreenhouseNavEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
     ``waypoint_index``, ``waypoints_reached``, ``n_waypoints``, ``distance_to_waypoint`` (m),
     ``bearing_to_waypoint`` (rad), true pose ``x``, ``y``, ``yaw``, estimated pose ``est_x``, ``est_y``,
     ``est_yaw`` (equal to the true one under ``ground_truth``, absent under ``none``), ``v``, ``w``,
-    ``path_length`` (m), ``episode_time`` (s) and the reward terms.
+    ``path_length`` (m), ``episode_time`` (s), ``max_episode_steps`` (the limit in force), ``truncated``,
+    ``truncation_reason`` (only on the truncating step) and the reward terms.
 
     ## Arguments
 
@@ -289,13 +316,15 @@ class GreenhouseNavEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
     | ``waypoint_radius`` | 0.3 | m | in [0.05, 2.0] | d_min: a waypoint is reached within this distance |
     | ``mission_cycles`` | 1 |  | in [1, 100] | times the mission is driven in one episode (Harik sec. 3.5: 10) |
     | ``terminate_on_collision`` | True |  | True or False | end the episode when the robot touches anything |
-    | ``safety_margin`` | 0.15 | m | in [0.0, 1.0] | clearance below which the clearance penalty applies |
+    | ``safety_margin`` | 0.25 | m | in [0.0, 1.0] | clearance below which the clearance penalty applies |
     | ``reward_progress`` | 1 |  | in [0.0, 100.0] | weight of progress toward the waypoint (per metre) |
-    | ``reward_waypoint`` | 2 |  | in [0.0, 100.0] | bonus per waypoint reached |
+    | ``reward_waypoint`` | 1 |  | in [0.0, 100.0] | bonus per waypoint reached |
     | ``reward_success`` | 10 |  | in [0.0, 1000.0] | bonus when the mission is complete |
-    | ``reward_collision`` | 10 |  | in [0.0, 1000.0] | penalty on collision |
-    | ``reward_clearance`` | 0.05 |  | in [0.0, 100.0] | penalty per step at zero clearance (linear in the shortfall) |
-    | ``reward_time`` | 0.005 |  | in [0.0, 10.0] | penalty per step |
+    | ``reward_collision`` | 10 |  | in [0.0, 1000.0] | fixed part of the crash penalty (see Rewards) |
+    | ``reward_clearance`` | 0.03 |  | in [0.0, 100.0] | penalty per step at zero clearance (linear in the shortfall) |
+    | ``reward_time`` | 0.002 |  | in [0.0, 10.0] | penalty per step |
+    | ``time_limit_speed_fraction`` | 0.5 |  | in [0.05, 1.0] | time limit: mission at this fraction of speed limits |
+    | ``time_limit_wait`` | 6 | s | in [0.0, 120.0] | default time limit: extra time per person per mission cycle |
     | ``render_width`` | 800 | px | in [100, 4000] | width of rendered frames |
 
     Example::
@@ -309,7 +338,13 @@ class GreenhouseNavEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
     ## Version History
 
     * v0: initial release.
-    * v1: (in progress) see the training issue; the entry is completed with the changes.
+    * v1: learnable and honest. The time limit follows the mission instead of a fixed 2,250 steps (which
+      truncated even ``harik-apf-gt`` with 4 or more rows) and ``info`` says when and why an episode was
+      truncated. The crash penalty now exceeds a whole episode of time and clearance penalties (it was 10,
+      less than a full episode of time penalty, 11.25); the safety margin grew from 0.15 to 0.25 m and its
+      penalty from 0.05 to 0.03 per step over a wider band; the waypoint bonus fell from 2 to 1 and the
+      time penalty from 0.005 to 0.002 per step. New arguments ``time_limit_speed_fraction`` and
+      ``time_limit_wait``.
 
     ## References
 
@@ -382,6 +417,10 @@ class GreenhouseNavEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
         self.action_space = spaces.Box(-1.0, 1.0, (2,), np.float32)
         self.layout: Layout | None = None
         self.world: World2D | None = None
+        #: Set by :class:`SyncTimeLimit` from ``gym.make(..., max_episode_steps=N)``; None: sized to the mission.
+        self.explicit_max_episode_steps: int | None = None
+        self.max_episode_steps = 0
+        self.time_limit_source = ""
         self._renderer: Any = None
         self._renderer_layout: Layout | None = None
         self._trail: list[tuple[float, float]] = []
@@ -412,7 +451,10 @@ class GreenhouseNavEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
         self.crowd = Crowd(self.world, self.layout.routes, CrowdSpec(tease_prob=cfg.people_tease_prob), cfg.n_people)
         self.crowd.reset(self.np_random, start)
         targets = np.tile(self.layout.targets, (cfg.mission_cycles, 1))
-        self.task = WaypointTask(targets, cfg.waypoint_radius, cfg.safety_margin, cfg.reward_weights())
+        self.max_episode_steps, self.time_limit_source = self._time_limit(targets)
+        self.task = WaypointTask(
+            targets, cfg.waypoint_radius, cfg.safety_margin, cfg.reward_weights(), self.max_episode_steps
+        )
         self.task.reset(start)
         self._start_pose = start.copy()
         self._estimate = start.copy()
@@ -454,11 +496,35 @@ class GreenhouseNavEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
         self._trail.append((float(robot.pose[0]), float(robot.pose[1])))
         outcome = self.task.evaluate(robot.pose, collided, clearance)
         terminated = bool(outcome["is_success"]) or (collided and self.config.terminate_on_collision)
+        truncated = not terminated and self._steps >= self.max_episode_steps
         obs = self._observe()
         info = self._info(outcome, clearance)
+        info["truncated"] = truncated
+        if truncated:
+            info["truncation_reason"] = (
+                f"time limit: {self.max_episode_steps} steps ({self.max_episode_steps * self.config.control_period:.1f}"
+                f" s, {self.time_limit_source}) reached at waypoint {self.task.index}/{len(self.task.targets)}"
+            )
         if self.render_mode == "human":
             self.render()
-        return obs, float(outcome["reward"]), terminated, False, info
+        return obs, float(outcome["reward"]), terminated, truncated, info
+
+    def _time_limit(self, targets: np.ndarray) -> tuple[int, str]:
+        """The episode's step limit and where it comes from (see Episode End)."""
+        if self.explicit_max_episode_steps is not None:
+            return int(self.explicit_max_episode_steps), "explicit max_episode_steps"
+        cfg = self.config
+        assert self.layout is not None
+        steps = mission_time_limit(
+            self.layout.start_pose,
+            targets,
+            cfg.max_speed,
+            cfg.max_turn_rate,
+            cfg.control_period,
+            speed_fraction=cfg.time_limit_speed_fraction,
+            wait_time=cfg.time_limit_wait * cfg.n_people * cfg.mission_cycles,
+        )
+        return steps, f"mission at {cfg.time_limit_speed_fraction:g} of the speed limits"
 
     def _update_estimate(self, dt: float) -> None:
         cfg = self.config
@@ -525,6 +591,8 @@ class GreenhouseNavEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
             w=float(self.robot.w),
             path_length=float(self._path_length),
             episode_time=self._steps * self.config.control_period,
+            max_episode_steps=int(self.max_episode_steps),
+            truncated=False,
         )
         if self.config.localization != "none":
             est = self._estimate
@@ -596,3 +664,24 @@ class GreenhouseNavEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
         if self.world is not None:
             self.world.close()
             self.world = None
+
+
+class SyncTimeLimit(gym.Wrapper[dict[str, np.ndarray], np.ndarray, dict[str, np.ndarray], np.ndarray]):
+    """Tell the env about an explicit ``gym.make(..., max_episode_steps=N)``, so that N wins over its own limit.
+
+    ``gym.make`` applies this wrapper (the registration's ``additional_wrappers``) outside the ``TimeLimit``
+    wrapper it adds for an explicit ``max_episode_steps``. The env then truncates at N itself, says why in
+    ``info``, and sizes its crash penalty to N (see the env's Rewards section). Without an explicit limit the
+    env keeps the one it computes from the mission.
+    """
+
+    def __init__(self, env: gym.Env[dict[str, np.ndarray], np.ndarray]) -> None:
+        super().__init__(env)
+        limit: int | None = None
+        inner: gym.Env[Any, Any] = env
+        while isinstance(inner, gym.Wrapper):
+            if isinstance(inner, gym.wrappers.TimeLimit):
+                limit = int(inner._max_episode_steps)
+            inner = inner.env
+        if isinstance(inner, GreenhouseNavEnv):
+            inner.explicit_max_episode_steps = limit

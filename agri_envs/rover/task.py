@@ -14,24 +14,95 @@ import numpy as np
 
 @dataclasses.dataclass(frozen=True)
 class RewardWeights:
-    """Weights of the named reward terms (see the env docstring's Rewards section)."""
+    """Weights of the named reward terms (see the env docstring's Rewards section).
+
+    Attributes:
+        progress: Reward per metre of progress toward the current waypoint.
+        waypoint: Bonus per waypoint reached.
+        success: Bonus when the mission is complete.
+        collision: Fixed part of the crash penalty; the whole penalty is :meth:`collision_cost`.
+        clearance: Penalty per step at zero clearance (linear in the shortfall below the safety margin).
+        time: Penalty per step.
+    """
 
     progress: float = 1.0
-    waypoint: float = 2.0
+    waypoint: float = 1.0
     success: float = 10.0
     collision: float = 10.0
-    clearance: float = 0.05
-    time: float = 0.005
+    clearance: float = 0.03
+    time: float = 0.002
+
+    def collision_cost(self, max_steps: int) -> float:
+        """The penalty of a crash in an episode of at most ``max_steps`` steps.
+
+        It is the fixed ``collision`` weight plus the worst the time and clearance terms can add up to over a
+        whole episode, so a crash always costs more than any way of avoiding it (idling to the time limit
+        at zero clearance included), whatever the mission and its time limit.
+        """
+        return self.collision + max_steps * (self.time + self.clearance)
+
+
+def mission_time_limit(
+    start_pose: np.ndarray,
+    targets: np.ndarray,
+    max_speed: float,
+    max_turn_rate: float,
+    control_period: float,
+    speed_fraction: float = 0.5,
+    wait_time: float = 0.0,
+) -> int:
+    """Steps a competent driver needs for a waypoint mission, at ``speed_fraction`` of the speed limits.
+
+    The route is the polyline from the start through every target; the turning is the sum of the heading
+    changes at its corners (including the first one, from the start heading). Driving the route at
+    ``speed_fraction * max_speed`` and turning at ``speed_fraction * max_turn_rate`` one after the other,
+    plus ``wait_time`` (for example for people standing in the way), gives the time limit.
+
+    Args:
+        start_pose: Robot start ``(x, y, yaw)`` (m, rad).
+        targets: ``(k, 2)`` waypoints in the order they are visited (m).
+        max_speed: Forward speed limit (m/s).
+        max_turn_rate: Turn rate limit (rad/s).
+        control_period: Seconds per step.
+        speed_fraction: Fraction of the limits the driver is granted, in (0, 1].
+        wait_time: Extra seconds granted (s), >= 0.
+
+    Returns:
+        The limit in steps (at least 1).
+
+    Raises:
+        ValueError: If ``speed_fraction`` is outside (0, 1] or ``wait_time`` is negative.
+    """
+    if not 0.0 < speed_fraction <= 1.0:
+        raise ValueError(f"speed_fraction must be in (0, 1], got {speed_fraction}")
+    if wait_time < 0.0:
+        raise ValueError(f"wait_time must be >= 0, got {wait_time}")
+    pts = np.vstack([np.asarray(start_pose, dtype=np.float64)[None, :2], np.asarray(targets, dtype=np.float64)])
+    seg = np.diff(pts, axis=0)
+    lengths = np.hypot(seg[:, 0], seg[:, 1])
+    seg = seg[lengths > 1e-9]
+    headings = np.concatenate([[float(start_pose[2])], np.arctan2(seg[:, 1], seg[:, 0])])
+    turns = np.abs(np.arctan2(np.sin(np.diff(headings)), np.cos(np.diff(headings))))
+    seconds = (
+        float(lengths.sum()) / (speed_fraction * max_speed)
+        + float(turns.sum()) / (speed_fraction * max_turn_rate)
+        + wait_time
+    )
+    return max(1, math.ceil(seconds / control_period))
 
 
 class WaypointTask:
     """Visit ``targets`` in order; a target counts as reached within ``radius`` (d_min) of the robot centre."""
 
-    def __init__(self, targets: np.ndarray, radius: float, safety_margin: float, weights: RewardWeights) -> None:
+    def __init__(
+        self, targets: np.ndarray, radius: float, safety_margin: float, weights: RewardWeights, max_steps: int
+    ) -> None:
         self.targets = np.asarray(targets, dtype=np.float64)
         self.radius = radius
         self.safety_margin = safety_margin
         self.weights = weights
+        self.max_steps = max_steps
+        self.collision_cost = weights.collision_cost(max_steps)
         self.index = 0
         self._last_distance = 0.0
 
@@ -79,8 +150,8 @@ class WaypointTask:
             "reward_progress": w.progress * progress,
             "reward_waypoint": w.waypoint * float(reached),
             "reward_success": w.success * float(success),
-            "reward_collision": -w.collision * float(collided),
-            "reward_clearance": -w.clearance * shortfall,
+            "reward_collision": -self.collision_cost * float(collided),
+            "reward_clearance": -w.clearance * min(1.0, shortfall),
             "reward_time": -w.time,
         }
         return {

@@ -1,0 +1,461 @@
+"""``agri train``: stable-baselines3 training with rl-zoo3-style YAML hyperparameters and weights-only runs.
+
+Hyperparameters live in ``agri_training/hyperparams/<algo>.yml``, keyed by env id with a ``default``
+block; an env block may hold ``scenarios: {name: {...}}`` for presets. Blocks merge
+``default`` <- env <- scenario (nested mappings key by key). Every value is plain YAML: no string is
+evaluated. The keys:
+
+| key | meaning |
+|---|---|
+| ``n_timesteps`` | training steps when ``--timesteps`` is not given |
+| ``policy`` | SB3 policy name (``MlpPolicy``, ``MultiInputPolicy``) |
+| ``n_envs`` | parallel envs |
+| ``vec_env`` | ``dummy`` (one process) or ``subproc`` (one process per env) |
+| ``env_kwargs`` | ``gym.make`` arguments (after the scenario's) |
+| ``wrappers`` | observation wrappers by name, innermost first (see ``learned.WRAPPERS``) |
+| ``normalize`` | ``false`` or ``VecNormalize`` arguments (``norm_obs``, ``norm_reward``, ``clip_obs``, ...) |
+| ``algo_kwargs`` | the algorithm's arguments (``learning_rate`` may be ``lin_3e-4``: linear decay) |
+| ``policy_kwargs`` | ``net_arch``, ``activation_fn`` (a name), ... |
+| ``her`` | ``HerReplayBuffer`` arguments, used with ``--her`` |
+| ``eval_freq``, ``eval_episodes``, ``eval_seed`` | periodic evaluation every N steps on seeds S.. S+n-1 |
+| ``checkpoint_freq`` | weights-only checkpoint every N steps (0: none) |
+| ``torch_threads`` | torch CPU threads (1 beside env workers) |
+
+A run directory holds ``policy.pt`` (the final weights, a ``state_dict``), ``normalize.json`` (the
+observation statistics), ``config.yaml`` (the resolved config), ``meta.json`` (exact command, package
+versions, git commit, wall time, machine load), ``curve.csv`` (the learning curve of the periodic
+evaluation), ``best/`` (the weights of the best periodic evaluation), ``checkpoints/step_N/`` and ``tb/``
+(TensorBoard). Training and its evaluation use seeds below :data:`HELD_OUT_SEED` (held-out suites start there).
+"""
+
+from __future__ import annotations
+
+import copy
+import csv
+import dataclasses
+import json
+import os
+import platform
+import shlex
+import sys
+import time
+from collections.abc import Callable, Mapping
+from importlib import metadata
+from pathlib import Path
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+import yaml
+
+import agri_envs  # noqa: F401  (registers the env ids)
+from agri_envs.scenarios import scenario as get_scenario
+from agri_training.learned import (
+    ALGORITHMS,
+    CONFIG_FILE,
+    NORMALIZE_FILE,
+    WEIGHTS_FILE,
+    ObsNormalization,
+    algorithm_class,
+    apply_wrappers,
+    observation_chain,
+    resolve_policy_kwargs,
+)
+
+HYPERPARAMS_DIR = Path(__file__).parent / "hyperparams"
+#: Seeds from here on are reserved for held-out evaluation suites; training never uses them.
+HELD_OUT_SEED = 100_000
+HYPERPARAM_KEYS = (
+    "n_timesteps",
+    "policy",
+    "n_envs",
+    "vec_env",
+    "env_kwargs",
+    "wrappers",
+    "normalize",
+    "algo_kwargs",
+    "policy_kwargs",
+    "her",
+    "eval_freq",
+    "eval_episodes",
+    "eval_seed",
+    "checkpoint_freq",
+    "torch_threads",
+    "scenarios",
+)
+_PACKAGES = ("agri-envs", "gymnasium", "stable-baselines3", "sb3-contrib", "torch", "numpy", "pymunk", "pybullet")
+
+
+@dataclasses.dataclass(frozen=True)
+class TrainRequest:
+    """What to train.
+
+    Attributes:
+        env_id: Registered env id.
+        algo: ``ppo``, ``sac``, ``td3`` or ``tqc``.
+        out: Run directory to create (must not hold a run already).
+        seed: Training seed; env ``i`` of ``n_envs`` resets from ``seed + i``. In [0, 100000 - n_envs).
+        timesteps: Training steps (None: the YAML's ``n_timesteps``).
+        scenario: Name of an env-argument preset (``agri list``), or None.
+        her: Use ``HerReplayBuffer`` (off-policy algorithms on goal-conditioned Dict envs).
+        overrides: Hyperparameters that replace the YAML's (same keys, merged like a block).
+        hyperparams_file: YAML to read instead of ``hyperparams/<algo>.yml``.
+        progress: Show the progress bar.
+    """
+
+    env_id: str
+    algo: str
+    out: Path
+    seed: int = 0
+    timesteps: int | None = None
+    scenario: str | None = None
+    her: bool = False
+    overrides: Mapping[str, Any] = dataclasses.field(default_factory=dict)
+    hyperparams_file: Path | None = None
+    progress: bool = True
+
+    def __post_init__(self) -> None:
+        if self.algo not in ALGORITHMS:
+            raise ValueError(f"algo must be one of {', '.join(ALGORITHMS)}, got {self.algo!r}")
+        if not 0 <= self.seed < HELD_OUT_SEED:
+            raise ValueError(f"seed must be in [0, {HELD_OUT_SEED}) (held-out suites start at {HELD_OUT_SEED})")
+        if self.timesteps is not None and self.timesteps < 1:
+            raise ValueError(f"timesteps must be >= 1, got {self.timesteps}")
+        if self.her and self.algo == "ppo":
+            raise ValueError("--her needs an off-policy algorithm (sac, td3, tqc), not ppo")
+
+
+def _merge(base: dict[str, Any], update: Mapping[str, Any]) -> dict[str, Any]:
+    out = copy.deepcopy(base)
+    for key, value in update.items():
+        if isinstance(value, Mapping) and isinstance(out.get(key), Mapping):
+            out[key] = _merge(dict(out[key]), value)
+        else:
+            out[key] = copy.deepcopy(value)
+    return out
+
+
+def _check_keys(block: Mapping[str, Any], where: str) -> None:
+    unknown = sorted(set(block) - set(HYPERPARAM_KEYS))
+    if unknown:
+        raise ValueError(f"{where}: unknown hyperparameter keys {unknown}; valid: {', '.join(HYPERPARAM_KEYS)}")
+
+
+def load_hyperparams(
+    env_id: str,
+    algo: str,
+    scenario: str | None = None,
+    overrides: Mapping[str, Any] | None = None,
+    path: Path | None = None,
+) -> dict[str, Any]:
+    """The resolved hyperparameters: ``default`` <- env block <- its scenario block <- overrides.
+
+    Raises:
+        ValueError: For unknown keys, or a file without a ``default`` block.
+    """
+    path = path or HYPERPARAMS_DIR / f"{algo}.yml"
+    data = yaml.safe_load(path.read_text()) or {}
+    if "default" not in data:
+        raise ValueError(f"{path} needs a 'default' block")
+    for key, block in data.items():
+        _check_keys(block, f"{path.name}[{key}]")
+    hp = _merge({}, data["default"])
+    env_block = dict(data.get(env_id, {}))
+    scenarios = env_block.pop("scenarios", {}) or {}
+    hp = _merge(hp, env_block)
+    if scenario is not None and scenario in scenarios:
+        _check_keys(scenarios[scenario], f"{path.name}[{env_id}].scenarios[{scenario}]")
+        hp = _merge(hp, scenarios[scenario])
+    if overrides:
+        _check_keys(overrides, "overrides")
+        hp = _merge(hp, overrides)
+    hp.pop("scenarios", None)
+    hp["hyperparams_source"] = f"{path.name}: default <- {env_id if env_id in data else '(no env block)'}" + (
+        f" <- scenarios[{scenario}]" if scenario is not None and scenario in scenarios else ""
+    )
+    return hp
+
+
+def _schedule(value: Any) -> Any:
+    """``lin_X`` -> a linear decay from X to 0 (rl-zoo3's notation); numbers pass through."""
+    if isinstance(value, str) and value.startswith("lin_"):
+        start = float(value[4:])
+
+        def linear(progress_remaining: float) -> float:
+            return progress_remaining * start
+
+        return linear
+    return value
+
+
+def resolve_config(request: TrainRequest) -> dict[str, Any]:
+    """The full, resolved training config saved as ``config.yaml`` (and read back to load the policy)."""
+    hp = load_hyperparams(request.env_id, request.algo, request.scenario, request.overrides, request.hyperparams_file)
+    env_kwargs: dict[str, Any] = {}
+    if request.scenario:
+        env_kwargs.update(get_scenario(request.env_id, request.scenario).env_kwargs)
+    env_kwargs.update(hp.get("env_kwargs", {}) or {})
+    n_envs = int(hp.get("n_envs", 1))
+    if request.seed + n_envs > HELD_OUT_SEED:
+        raise ValueError(f"seed + n_envs must stay below {HELD_OUT_SEED}")
+    eval_seed = int(hp.get("eval_seed", 10_000))
+    eval_episodes = int(hp.get("eval_episodes", 10))
+    if not 0 <= eval_seed or eval_seed + eval_episodes > HELD_OUT_SEED:
+        raise ValueError(
+            f"eval seeds must lie in [0, {HELD_OUT_SEED}), got {eval_seed}..{eval_seed + eval_episodes - 1}"
+        )
+    vec_env = hp.get("vec_env", "dummy")
+    if vec_env not in ("dummy", "subproc"):
+        raise ValueError(f"vec_env must be 'dummy' or 'subproc', got {vec_env!r}")
+    algo_kwargs = dict(hp.get("algo_kwargs", {}) or {})
+    her = dict(hp.get("her", {}) or {}) if request.her else None
+    return {
+        "env_id": request.env_id,
+        "scenario": request.scenario,
+        "env_kwargs": env_kwargs,
+        "algo": request.algo,
+        "her": her,
+        "seed": request.seed,
+        "timesteps": int(request.timesteps if request.timesteps is not None else hp.get("n_timesteps", 100_000)),
+        "policy": hp.get("policy", "MultiInputPolicy" if request.her else "MlpPolicy"),
+        "n_envs": n_envs,
+        "vec_env": vec_env,
+        "wrappers": list(hp.get("wrappers", []) or []),
+        "normalize": dict(hp["normalize"]) if hp.get("normalize") else None,
+        "algo_kwargs": algo_kwargs,
+        "policy_kwargs": dict(hp.get("policy_kwargs", {}) or {}),
+        "eval_freq": int(hp.get("eval_freq", 50_000)),
+        "eval_episodes": eval_episodes,
+        "eval_seed": eval_seed,
+        "checkpoint_freq": int(hp.get("checkpoint_freq", 0)),
+        "torch_threads": int(hp.get("torch_threads", 1)),
+        "hyperparams_source": hp["hyperparams_source"],
+        # Labelled like the baselines: a policy fed the ground-truth pose uses what a real robot lacks.
+        "privileged": env_kwargs.get("localization") == "ground_truth",
+    }
+
+
+def _env_factory(config: Mapping[str, Any], rank: int) -> Callable[[], gym.Env[Any, Any]]:
+    env_id, env_kwargs, wrappers = config["env_id"], dict(config["env_kwargs"]), list(config["wrappers"])
+
+    def make() -> gym.Env[Any, Any]:
+        from stable_baselines3.common.monitor import Monitor
+
+        env = apply_wrappers(gym.make(env_id, **env_kwargs), wrappers)
+        return Monitor(env, info_keywords=("is_success",))
+
+    return make
+
+
+def make_vec_env(config: Mapping[str, Any]) -> Any:
+    """The training VecEnv: ``n_envs`` copies (Dummy or Subproc), then ``VecNormalize`` if declared."""
+    from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv, VecNormalize
+
+    fns = [_env_factory(config, i) for i in range(config["n_envs"])]
+    venv: Any = SubprocVecEnv(fns, start_method="forkserver") if config["vec_env"] == "subproc" else DummyVecEnv(fns)
+    venv.seed(config["seed"])
+    if config["normalize"]:
+        norm = dict(config["normalize"])
+        if "gamma" not in norm and "gamma" in config["algo_kwargs"]:
+            norm["gamma"] = config["algo_kwargs"]["gamma"]
+        venv = VecNormalize(venv, **norm)
+    return venv
+
+
+class _LivePolicy:
+    """The policy being trained, driving a raw env through the training wrappers and current statistics."""
+
+    def __init__(self, model: Any, env: gym.Env[Any, Any], wrappers: list[Any]) -> None:
+        self.model = model
+        _, self._chain = observation_chain(env, wrappers)
+        self.normalization: ObsNormalization | None = None
+
+    def predict(
+        self, observation: Any, state: Any = None, episode_start: Any = None, deterministic: bool = True
+    ) -> tuple[np.ndarray, Any]:
+        for w in self._chain:
+            observation = w.observation(observation)
+        if self.normalization is not None:
+            observation = self.normalization.normalize(observation)
+        return self.model.predict(observation, state, episode_start, deterministic)  # type: ignore[no-any-return]
+
+
+def save_weights(model: Any, folder: Path) -> None:
+    """Write the policy's ``state_dict`` (tensors only) and the observation statistics into ``folder``."""
+    import torch
+
+    folder.mkdir(parents=True, exist_ok=True)
+    state = {k: v.detach().cpu().clone() for k, v in model.policy.state_dict().items()}
+    torch.save(state, folder / WEIGHTS_FILE)
+    venv = model.get_vec_normalize_env()
+    stats = ObsNormalization.from_vec_normalize(venv) if venv is not None else None
+    if stats is not None:
+        (folder / NORMALIZE_FILE).write_text(json.dumps(stats.to_json()))
+
+
+def _make_callback(config: Mapping[str, Any], run_dir: Path, progress: bool) -> Any:
+    from stable_baselines3.common.callbacks import BaseCallback
+
+    from agri_training.evaluate import run_episode
+
+    class TrainMonitor(BaseCallback):  # type: ignore[misc]
+        """Periodic evaluation on fixed seeds, checkpoints, best weights, curve CSV and the progress bar."""
+
+        def __init__(self) -> None:
+            super().__init__()
+            self.t0 = time.perf_counter()
+            self.next_eval = 0
+            self.next_ckpt = config["checkpoint_freq"] or -1
+            self.best: tuple[float, float] | None = None
+            self.rows: list[dict[str, Any]] = []
+            self.bar: Any = None
+            self.eval_env: gym.Env[Any, Any] | None = None
+            self.live: _LivePolicy | None = None
+
+        def _on_training_start(self) -> None:
+            self.eval_env = gym.make(config["env_id"], **config["env_kwargs"])
+            self.live = _LivePolicy(self.model, self.eval_env, config["wrappers"])
+            if progress:
+                from tqdm import tqdm
+
+                self.bar = tqdm(total=config["timesteps"], unit="step", desc="agri train", file=sys.stderr)
+
+        def _on_step(self) -> bool:
+            n = self.num_timesteps
+            if self.bar is not None:
+                self.bar.update(n - self.bar.n)
+            if n >= self.next_eval:
+                self.evaluate()
+                self.next_eval = n + config["eval_freq"]
+            if self.next_ckpt > 0 and n >= self.next_ckpt:
+                save_weights(self.model, run_dir / "checkpoints" / f"step_{n}")
+                self.next_ckpt = n + config["checkpoint_freq"]
+            return True
+
+        def _on_training_end(self) -> None:
+            self.evaluate()
+            if self.bar is not None:
+                self.bar.close()
+            if self.eval_env is not None:
+                self.eval_env.close()
+
+        def evaluate(self) -> None:
+            assert self.live is not None and self.eval_env is not None
+            if self.rows and self.rows[-1]["timesteps"] == self.num_timesteps:
+                return
+            venv = self.model.get_vec_normalize_env()
+            self.live.normalization = ObsNormalization.from_vec_normalize(venv) if venv is not None else None
+            records = [
+                run_episode(self.eval_env, self.live, config["eval_seed"] + i, None)["record"]
+                for i in range(config["eval_episodes"])
+            ]
+            success = float(np.mean([r["is_success"] for r in records]))
+            row = {
+                "timesteps": self.num_timesteps,
+                "wall_time_s": round(time.perf_counter() - self.t0, 1),
+                "success_rate": success,
+                "mean_return": float(np.mean([r["return"] for r in records])),
+                "mean_length": float(np.mean([r["steps"] for r in records])),
+            }
+            if "collision" in records[0]:
+                row["collision_rate"] = float(np.mean([bool(r["collision"]) for r in records]))
+            if records[0].get("min_clearance") is not None:
+                row["mean_min_clearance"] = float(np.mean([r["min_clearance"] for r in records]))
+            self.rows.append(row)
+            for key, value in row.items():
+                if key != "timesteps":
+                    self.logger.record(f"eval/{key}", value)
+            score = (success, row["mean_return"])
+            if self.best is None or score > self.best:
+                self.best = score
+                save_weights(self.model, run_dir / "best")
+                (run_dir / "best" / "eval.json").write_text(json.dumps(row, indent=1))
+            self.write_curve()
+            if self.bar is not None:
+                self.bar.set_postfix(success=f"{success:.0%}", ret=f"{row['mean_return']:.1f}")
+            else:
+                print(f"[{self.num_timesteps}] eval success {success:.0%} return {row['mean_return']:.1f}", flush=True)
+
+        def write_curve(self) -> None:
+            keys = list(dict.fromkeys(k for r in self.rows for k in r))
+            with (run_dir / "curve.csv").open("w", newline="") as fh:
+                writer = csv.DictWriter(fh, fieldnames=keys)
+                writer.writeheader()
+                writer.writerows(self.rows)
+
+    return TrainMonitor()
+
+
+def package_versions() -> dict[str, str]:
+    """Installed versions of the packages a run depends on."""
+    out = {"python": platform.python_version()}
+    for name in _PACKAGES:
+        try:
+            out[name] = metadata.version(name)
+        except metadata.PackageNotFoundError:
+            continue
+    return out
+
+
+def train(request: TrainRequest, command: str | None = None) -> Path:
+    """Train and write the run directory; return it.
+
+    Raises:
+        ValueError: For a bad request or hyperparameters, or an ``out`` folder that already holds a run.
+    """
+    import torch
+
+    from agri_training.evaluate import git_commit
+
+    config = resolve_config(request)
+    run_dir = Path(request.out)
+    if (run_dir / CONFIG_FILE).exists():
+        raise ValueError(f"{run_dir} already holds a run; pass another --out")
+    run_dir.mkdir(parents=True, exist_ok=True)
+    command = command or " ".join(shlex.quote(a) for a in ["agri", *sys.argv[1:]])
+    (run_dir / CONFIG_FILE).write_text(yaml.safe_dump(config, sort_keys=False))
+    torch.set_num_threads(config["torch_threads"])
+    cls = algorithm_class(config["algo"])
+    venv = make_vec_env(config)
+    algo_kwargs = {k: _schedule(v) for k, v in config["algo_kwargs"].items()}
+    if config["her"] is not None:
+        from stable_baselines3 import HerReplayBuffer
+
+        algo_kwargs.update(replay_buffer_class=HerReplayBuffer, replay_buffer_kwargs=dict(config["her"]))
+    model = cls(
+        config["policy"],
+        venv,
+        policy_kwargs=resolve_policy_kwargs(config["policy_kwargs"]),
+        tensorboard_log=str(run_dir / "tb"),
+        seed=config["seed"],
+        device="cpu",
+        verbose=0,
+        **algo_kwargs,
+    )
+    callback = _make_callback(config, run_dir, request.progress)
+    load_before = os.getloadavg()
+    t0 = time.perf_counter()
+    started = time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())
+    try:
+        model.learn(total_timesteps=config["timesteps"], callback=callback, tb_log_name="run")
+    finally:
+        wall = time.perf_counter() - t0
+        save_weights(model, run_dir)
+        venv.close()
+        meta = {
+            "command": command,
+            "started_utc": started,
+            "wall_time_s": round(wall, 1),
+            "timesteps_done": int(model.num_timesteps),
+            "git_commit": git_commit(),
+            "packages": package_versions(),
+            "cpu_count": os.cpu_count(),
+            "load_average_start": [round(x, 2) for x in load_before],
+            "load_average_end": [round(x, 2) for x in os.getloadavg()],
+            "best_eval": json.loads((run_dir / "best" / "eval.json").read_text())
+            if (run_dir / "best" / "eval.json").exists()
+            else None,
+        }
+        (run_dir / "meta.json").write_text(json.dumps(meta, indent=1))
+        (run_dir / "command.txt").write_text(command + "\n")
+    return run_dir
