@@ -119,3 +119,26 @@ def test_hyperparameters_resolve_and_stay_strict(tmp_path):
         TrainRequest(ENV_ID, "ppo", tmp_path, her=True)
     with pytest.raises(ValueError, match="eval seeds"):
         resolve_config(TrainRequest(ENV_ID, "ppo", tmp_path, overrides={"eval_seed": 99_995}))
+
+
+def test_a_registered_trained_policy_loads_by_name(tiny_run, monkeypatch, capsys):
+    import agri_baselines
+    import agri_training.learned as learned
+    from agri_training.cli import main
+
+    monkeypatch.setattr(learned, "ZOO_DIR", tiny_run.parent)
+    spec = agri_baselines.PolicySpec(
+        name=tiny_run.name,
+        env_id=ENV_ID,
+        entry_point="agri_training.learned:load_zoo_policy",
+        env_kwargs={"localization": "ground_truth"},
+        privileged=True,
+        learned=True,
+        algo="ppo",
+        train_command="test",
+    )
+    monkeypatch.setitem(agri_baselines._REGISTRY, spec.name, spec)
+    env = gym.make(ENV_ID, localization="ground_truth", **TINY_ENV)
+    assert isinstance(load_policy(spec.name, env), LearnedPolicy)
+    assert main(["list"]) == 0
+    assert f"{spec.name} [{ENV_ID}] (privileged) (learned, ppo)" in capsys.readouterr().out
