@@ -48,6 +48,9 @@ class PolicySpec:
         env_kwargs: Env arguments the policy requires (merged into the user's, conflicts are errors).
         privileged: True when the policy uses information a real robot would not have.
         description: One line for tables and reports.
+        learned: True for a trained policy (its weights ship in ``agri_training/zoo/NAME``).
+        algo: The training algorithm of a learned policy (``ppo``, ``sac``, ``td3``, ``tqc``).
+        train_command: The ``agri train`` command that reproduces a learned policy.
     """
 
     name: str
@@ -56,6 +59,9 @@ class PolicySpec:
     env_kwargs: Mapping[str, Any] = dataclasses.field(default_factory=dict)
     privileged: bool = False
     description: str = ""
+    learned: bool = False
+    algo: str = ""
+    train_command: str = ""
 
 
 _REGISTRY: dict[str, PolicySpec] = {}
@@ -90,7 +96,7 @@ def make_policy(name: str, env: gym.Env[Any, Any]) -> Any:
     spec = policy_spec(name)
     module_name, attr = spec.entry_point.split(":")
     factory = getattr(importlib.import_module(module_name), attr)
-    return factory(env)
+    return factory(env, spec.name) if spec.learned else factory(env)
 
 
 register_policy(

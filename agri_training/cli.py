@@ -164,6 +164,7 @@ def _cmd_list(args: argparse.Namespace) -> int:
     print("policies:")
     for p in list_policies():
         flag = " (privileged)" if p.privileged else ""
+        flag += f" (learned, {p.algo})" if p.learned else ""
         print(f"  {p.name} [{p.env_id}]{flag}: {p.description}")
     return 0
 

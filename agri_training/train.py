@@ -421,6 +421,16 @@ def train(request: TrainRequest, command: str | None = None) -> Path:
     if config["her"] is not None:
         from stable_baselines3 import HerReplayBuffer
 
+        probe = gym.make(config["env_id"], **config["env_kwargs"])
+        limit = probe.spec.max_episode_steps if probe.spec is not None else None
+        probe.close()
+        starts = int(config["algo_kwargs"].get("learning_starts", 100))
+        if limit is not None and starts <= limit:
+            raise ValueError(
+                f"with --her, algo_kwargs.learning_starts ({starts}) must exceed the episode limit ({limit}): "
+                "HER samples only finished episodes"
+            )
+
         algo_kwargs.update(replay_buffer_class=HerReplayBuffer, replay_buffer_kwargs=dict(config["her"]))
     model = cls(
         config["policy"],

@@ -100,12 +100,12 @@ class GreenhouseNavConfig(StrictConfig):
     safety_margin: float = param(
         0.25, "clearance below which the clearance penalty applies", unit="m", low=0.0, high=1.0
     )
-    reward_progress: float = param(1.0, "weight of progress toward the waypoint (per metre)", low=0.0, high=100.0)
+    reward_progress: float = param(3.0, "weight of progress toward the waypoint (per metre)", low=0.0, high=100.0)
     reward_waypoint: float = param(1.0, "bonus per waypoint reached", low=0.0, high=100.0)
     reward_success: float = param(10.0, "bonus when the mission is complete", low=0.0, high=1000.0)
     reward_collision: float = param(10.0, "fixed part of the crash penalty (see Rewards)", low=0.0, high=1000.0)
     reward_clearance: float = param(
-        0.03, "penalty per step at zero clearance (linear in the shortfall)", low=0.0, high=100.0
+        0.05, "penalty per step at zero clearance (linear in the shortfall)", low=0.0, high=100.0
     )
     reward_time: float = param(0.002, "penalty per step", low=0.0, high=10.0)
     time_limit_speed_fraction: float = param(
@@ -235,13 +235,14 @@ class GreenhouseNavEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
     * **A crash always costs more than any way of avoiding it.** The crash penalty is a fixed 10 plus the
       worst a whole episode of time and clearance penalties can add up to (T steps at zero clearance), so
       stopping, backing off or idling until the time limit is always the better return, whatever the
-      mission and its time limit (T = 2,455 steps on the default scene: the crash costs 88.6).
+      mission and its time limit (T = 2,455 steps on the default scene: the crash costs 137.7).
     * **Safety margins matter.** Below ``safety_margin`` (0.25 m, about half the free space on either side
-      of the robot in a default corridor) each step costs up to 0.03, 75 % of the progress reward of a step
-      at full speed (0.04): hugging a plant row or cutting a corner at 5 cm costs more than the time it saves.
-    * **Progress drives the task.** 1 per metre toward the current waypoint (a potential difference, so
+      of the robot in a default corridor) each step costs up to 0.05, 42 % of the progress reward of a step
+      at full speed (0.12): hugging a plant row or cutting a corner at 5 cm costs more than the time it saves.
+    * **Progress drives the task.** 3 per metre toward the current waypoint (a potential difference, so
       driving back and forth earns nothing), 1 per waypoint and 10 for the whole mission: the default loop
-      returns about 58 when driven well.
+      returns about 135 when driven well, the same order as a crash, so that driving on stays worth its risk
+      (with 1 per metre PPO learned to stand still: no success in 350k steps).
     * **Time is a tie-breaker.** 0.002 per step (4.9 for a whole default episode): enough to prefer the
       faster of two safe paths, never enough to make a crash attractive (see the first point).
 
@@ -317,11 +318,11 @@ class GreenhouseNavEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
     | ``mission_cycles`` | 1 |  | in [1, 100] | times the mission is driven in one episode (Harik sec. 3.5: 10) |
     | ``terminate_on_collision`` | True |  | True or False | end the episode when the robot touches anything |
     | ``safety_margin`` | 0.25 | m | in [0.0, 1.0] | clearance below which the clearance penalty applies |
-    | ``reward_progress`` | 1 |  | in [0.0, 100.0] | weight of progress toward the waypoint (per metre) |
+    | ``reward_progress`` | 3 |  | in [0.0, 100.0] | weight of progress toward the waypoint (per metre) |
     | ``reward_waypoint`` | 1 |  | in [0.0, 100.0] | bonus per waypoint reached |
     | ``reward_success`` | 10 |  | in [0.0, 1000.0] | bonus when the mission is complete |
     | ``reward_collision`` | 10 |  | in [0.0, 1000.0] | fixed part of the crash penalty (see Rewards) |
-    | ``reward_clearance`` | 0.03 |  | in [0.0, 100.0] | penalty per step at zero clearance (linear in the shortfall) |
+    | ``reward_clearance`` | 0.05 |  | in [0.0, 100.0] | penalty per step at zero clearance (linear in the shortfall) |
     | ``reward_time`` | 0.002 |  | in [0.0, 10.0] | penalty per step |
     | ``time_limit_speed_fraction`` | 0.5 |  | in [0.05, 1.0] | time limit: mission at this fraction of speed limits |
     | ``time_limit_wait`` | 6 | s | in [0.0, 120.0] | default time limit: extra time per person per mission cycle |
@@ -342,8 +343,8 @@ class GreenhouseNavEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
       truncated even ``harik-apf-gt`` with 4 or more rows) and ``info`` says when and why an episode was
       truncated. The crash penalty now exceeds a whole episode of time and clearance penalties (it was 10,
       less than a full episode of time penalty, 11.25); the safety margin grew from 0.15 to 0.25 m and its
-      penalty from 0.05 to 0.03 per step over a wider band; the waypoint bonus fell from 2 to 1 and the
-      time penalty from 0.005 to 0.002 per step. New arguments ``time_limit_speed_fraction`` and
+      penalty applies over that wider band; progress pays 3 per metre instead of 1; the waypoint bonus fell
+      from 2 to 1 and the time penalty from 0.005 to 0.002 per step. New arguments ``time_limit_speed_fraction`` and
       ``time_limit_wait``.
 
     ## References

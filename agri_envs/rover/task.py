@@ -25,11 +25,11 @@ class RewardWeights:
         time: Penalty per step.
     """
 
-    progress: float = 1.0
+    progress: float = 3.0
     waypoint: float = 1.0
     success: float = 10.0
     collision: float = 10.0
-    clearance: float = 0.03
+    clearance: float = 0.05
     time: float = 0.002
 
     def collision_cost(self, max_steps: int) -> float:

@@ -1,0 +1,144 @@
+"""agri train and weights-only loading: run directories, hyperparameter YAML, refusal of pickled checkpoints."""
+
+import json
+from pathlib import Path
+
+import gymnasium as gym
+import numpy as np
+import pytest
+import torch
+import yaml
+
+import agri_envs  # noqa: F401
+from agri_training.evaluate import EvalRequest, evaluate, load_policy
+from agri_training.learned import LearnedPolicy, UnsafeCheckpointError, load_weights
+from agri_training.train import TrainRequest, load_hyperparams, resolve_config, train
+
+ENV_ID = "agri_envs/GreenhouseNav-v1"
+TINY_ENV = {"n_rows": 1, "row_length": 3.0, "n_people": 0, "max_episode_steps": 40}
+TINY_HP = {
+    "n_envs": 2,
+    "env_kwargs": TINY_ENV,
+    "algo_kwargs": {"n_steps": 32, "batch_size": 32, "n_epochs": 1},
+    "policy_kwargs": {"net_arch": {"pi": [16], "vf": [16]}},
+    "eval_freq": 64,
+    "eval_episodes": 1,
+    "checkpoint_freq": 64,
+}
+
+
+@pytest.fixture(scope="module")
+def tiny_run(tmp_path_factory):
+    out = tmp_path_factory.mktemp("runs") / "tiny"
+    train(TrainRequest(ENV_ID, "ppo", out, seed=3, timesteps=128, overrides=TINY_HP, progress=False), "test")
+    return out
+
+
+def test_run_directory_holds_everything(tiny_run):
+    for name in ("policy.pt", "normalize.json", "config.yaml", "meta.json", "curve.csv", "command.txt"):
+        assert (tiny_run / name).is_file(), name
+    assert (tiny_run / "best" / "policy.pt").is_file()
+    assert any((tiny_run / "checkpoints").iterdir())
+    assert any((tiny_run / "tb").rglob("events.out.tfevents*"))
+    meta = json.loads((tiny_run / "meta.json").read_text())
+    assert meta["command"] == "test" and meta["timesteps_done"] >= 128 and meta["wall_time_s"] > 0
+    assert "stable-baselines3" in meta["packages"] and meta["git_commit"]
+    config = yaml.safe_load((tiny_run / "config.yaml").read_text())
+    assert config["env_kwargs"]["localization"] == "ground_truth" and config["privileged"]
+    curve = (tiny_run / "curve.csv").read_text().splitlines()
+    assert curve[0].startswith("timesteps,wall_time_s,success_rate") and len(curve) >= 3
+
+
+def test_loaded_policy_acts_like_the_trained_network(tiny_run):
+    env = gym.make(ENV_ID, localization="ground_truth", **TINY_ENV)
+    policy = load_policy(str(tiny_run), env)
+    assert isinstance(policy, LearnedPolicy)
+    saved = torch.load(tiny_run / "policy.pt", weights_only=True)
+    for key, value in policy.model.policy.state_dict().items():
+        assert torch.equal(value, saved[key]), key
+    obs, _ = env.reset(seed=5)
+    stats = json.loads((tiny_run / "normalize.json").read_text())
+    flat = gym.spaces.flatten(env.observation_space, obs)
+    z = np.clip((flat - np.array(stats["mean"][""])) / np.sqrt(np.array(stats["var"][""]) + stats["epsilon"]), -10, 10)
+    np.testing.assert_allclose(policy.transform(obs), z, rtol=1e-5, atol=1e-5)
+    with torch.no_grad():
+        mean = policy.model.policy.get_distribution(torch.as_tensor(z[None], dtype=torch.float32)).distribution.mean
+    action, _ = policy.predict(obs, deterministic=True)
+    np.testing.assert_allclose(action, np.clip(mean.numpy()[0], -1, 1), rtol=1e-5, atol=1e-6)
+
+
+def test_evaluate_a_run_like_a_baseline(tiny_run):
+    result = evaluate(EvalRequest(ENV_ID, str(tiny_run), episodes=2, seed=100_000), progress=False)
+    assert result["summary"]["episodes"] == 2 and result["privileged"]
+    assert result["env_kwargs"]["localization"] == "ground_truth"
+    with pytest.raises(ValueError, match="trained with localization"):
+        evaluate(EvalRequest(ENV_ID, str(tiny_run), episodes=1, env_kwargs={"localization": "none"}), progress=False)
+
+
+class _Payload:
+    """Pickles to a call that writes a marker file: what a malicious checkpoint would run."""
+
+    def __init__(self, marker: Path) -> None:
+        self.marker = marker
+
+    def __reduce__(self):
+        return (Path.write_text, (self.marker, "code ran"))
+
+
+def test_pickled_code_in_a_checkpoint_never_runs(tiny_run, tmp_path):
+    marker = tmp_path / "ran.txt"
+    evil = tmp_path / "evil"
+    evil.mkdir()
+    (evil / "config.yaml").write_text((tiny_run / "config.yaml").read_text())
+    torch.save({"weight": torch.zeros(1), "payload": _Payload(marker)}, evil / "policy.pt")
+    env = gym.make(ENV_ID, localization="ground_truth", **TINY_ENV)
+    with pytest.raises(UnsafeCheckpointError, match="weights-only"):
+        LearnedPolicy(evil, env)
+    with pytest.raises(UnsafeCheckpointError):
+        load_weights(evil / "policy.pt")
+    assert not marker.exists()
+    with pytest.raises(UnsafeCheckpointError, match="unpickling"):
+        load_policy(str(tmp_path / "model.zip"), env)
+
+
+def test_hyperparameters_resolve_and_stay_strict(tmp_path):
+    hp = load_hyperparams(ENV_ID, "ppo")
+    assert hp["wrappers"] == ["FlattenObservation"] and hp["algo_kwargs"]["n_steps"] == 1024
+    assert load_hyperparams(ENV_ID, "ppo", overrides={"n_envs": 2})["n_envs"] == 2
+    assert load_hyperparams("agri_envs/GrapeHarvest-v1", "sac")["policy"] == "MultiInputPolicy"
+    with pytest.raises(ValueError, match="unknown hyperparameter keys"):
+        load_hyperparams(ENV_ID, "ppo", overrides={"n_env": 2})
+    bad = tmp_path / "bad.yml"
+    bad.write_text("default:\n  wrappers: [os.system]\n")
+    request = TrainRequest(ENV_ID, "ppo", tmp_path / "r", hyperparams_file=bad)
+    with pytest.raises(ValueError, match="not allowed"):
+        train(request)
+    with pytest.raises(ValueError, match="seed"):
+        TrainRequest(ENV_ID, "ppo", tmp_path, seed=100_000)
+    with pytest.raises(ValueError, match="off-policy"):
+        TrainRequest(ENV_ID, "ppo", tmp_path, her=True)
+    with pytest.raises(ValueError, match="eval seeds"):
+        resolve_config(TrainRequest(ENV_ID, "ppo", tmp_path, overrides={"eval_seed": 99_995}))
+
+
+def test_a_registered_trained_policy_loads_by_name(tiny_run, monkeypatch, capsys):
+    import agri_baselines
+    import agri_training.learned as learned
+    from agri_training.cli import main
+
+    monkeypatch.setattr(learned, "ZOO_DIR", tiny_run.parent)
+    spec = agri_baselines.PolicySpec(
+        name=tiny_run.name,
+        env_id=ENV_ID,
+        entry_point="agri_training.learned:load_zoo_policy",
+        env_kwargs={"localization": "ground_truth"},
+        privileged=True,
+        learned=True,
+        algo="ppo",
+        train_command="test",
+    )
+    monkeypatch.setitem(agri_baselines._REGISTRY, spec.name, spec)
+    env = gym.make(ENV_ID, localization="ground_truth", **TINY_ENV)
+    assert isinstance(load_policy(spec.name, env), LearnedPolicy)
+    assert main(["list"]) == 0
+    assert f"{spec.name} [{ENV_ID}] (privileged) (learned, ppo)" in capsys.readouterr().out
