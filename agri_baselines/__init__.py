@@ -151,9 +151,13 @@ register_policy(
     PolicySpec(
         name="sac-her-grape-reach",
         env_id="agri_envs/GrapeHarvest-v1",
-        entry_point="agri_training.zoo_arm:make_grape_reach_sac",
+        entry_point="agri_training.learned:load_zoo_policy",
         env_kwargs={"min_clusters": 1, "max_clusters": 1, "n_leaves": 0, "n_canes": 0, "control": "ee"},
         description="Learned (SAC + HER, 80k steps, agri_training/zoo/sac-her-grape-reach): the single-goal preset",
+        learned=True,
+        algo="sac",
+        train_command="agri train --env agri_envs/GrapeHarvest-v1 --scenario reach --algo sac --her --seed 0 "
+        "--out runs/grape-reach-sac-her",
     )
 )
 

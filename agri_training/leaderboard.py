@@ -465,12 +465,16 @@ def load_entries(entries_dir: Path | str = ENTRIES_DIR) -> list[dict[str, Any]]:
 
 
 def all_baseline_pairs(suites: Iterable[Suite]) -> list[tuple[Suite, dict[str, Any]]]:
-    """Every registered baseline on every suite of its env."""
+    """Every registered policy (baselines and shipped learned ones) on every suite of its env it can run."""
     from agri_baselines import list_policies
 
     pairs = []
     for suite in suites:
         for spec in list_policies(suite.env_id):
+            # a policy that needs other env arguments than the suite pins cannot run it (luo-apf drives joints,
+            # the reach suite end-effector steps; the learned reach policy is sized for one cluster)
+            if any(k in suite.env_kwargs and suite.env_kwargs[k] != v for k, v in spec.env_kwargs.items()):
+                continue
             pairs.append((suite, policy_reference(spec.name)))
     return pairs
 

@@ -116,7 +116,8 @@ def _env_for(job: EpisodeJob) -> tuple[gym.Env[Any, Any], tuple[str, ...]]:
         _CACHE.popitem(last=False)[1][0].close()
     from agri_training.multiagent import is_multiagent, make_env
 
-    env: Any = make_env(job.env_id, job.env_kwargs) if is_multiagent(job.env_id) else gym.make(job.env_id, **job.env_kwargs)
+    multi = is_multiagent(job.env_id)  # PettingZoo envs (the robot chain) are not Gymnasium ids
+    env: Any = make_env(job.env_id, job.env_kwargs) if multi else gym.make(job.env_id, **job.env_kwargs)
     _CACHE[key] = (env, tuple(getattr(env, "unwrapped", env).metadata.get("trace_keys", ())))
     return _CACHE[key]
 
