@@ -128,8 +128,10 @@ class Suite:
             raise ValueError(f"name must be lowercase letters, digits and '-', got {self.name!r}")
         if not isinstance(self.version, int) or self.version < 1:
             raise ValueError(f"version must be an integer >= 1, got {self.version!r}")
-        if not self.env_id.startswith("agri_envs/"):
-            raise ValueError(f"env_id must be an agri_envs id, got {self.env_id!r}")
+        from agri_training.multiagent import is_multiagent
+
+        if not (self.env_id.startswith("agri_envs/") or is_multiagent(self.env_id)):
+            raise ValueError(f"env_id must be an agri_envs id or a multi-agent env of the package, got {self.env_id!r}")
         if self.seed_start < HELD_OUT_SEED:
             raise ValueError(f"seeds.start must be >= {HELD_OUT_SEED} (held out from training), got {self.seed_start}")
         if self.episodes < 1:

@@ -185,12 +185,14 @@ def _level_document(row: Row, k: int, seeds: list[int], bar: Any) -> dict[str, A
     import gymnasium as gym
 
     from agri_training.evaluate import load_policy, run_episode
+    from agri_training.multiagent import is_multiagent, make_env
 
     bar.start_block(f"traces: {doc['policy']} on {doc['label']}")
-    env = gym.make(doc["env_id"], **doc["env_kwargs"])
+    multi = is_multiagent(doc["env_id"])
+    env: Any = make_env(doc["env_id"], doc["env_kwargs"]) if multi else gym.make(doc["env_id"], **doc["env_kwargs"])
     try:
         name = lb._policy_argument(entry["policy"])
-        keys = tuple(env.unwrapped.metadata.get("trace_keys", ()))
+        keys = tuple(getattr(env, "unwrapped", env).metadata.get("trace_keys", ()))
         for seed in seeds:
             # a fresh policy per episode, as the evaluator's workers build it: the re-run is the counted episode
             ep = run_episode(env, load_policy(name, env), seed, keys)
