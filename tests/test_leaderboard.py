@@ -175,9 +175,11 @@ def test_committed_leaderboard_covers_every_baseline_and_is_current():
 
     entries = lb.load_entries()
     have = {(e["suite"]["name"], e["policy"]["name"]) for e in entries}
-    for suite in lb.load_suites():
-        for spec in list_policies(suite.env_id):
-            assert (suite.name, spec.name) in have, f"no entry for {spec.name} on {suite.name}"
+    pairs = {(suite.name, ref["name"]) for suite, ref in lb.all_baseline_pairs(lb.load_suites())}
+    assert pairs <= have, f"no entries for {sorted(pairs - have)}"
+    for env_id in {s.env_id for s in lb.load_suites()}:  # every policy of an env runs on some suite of it
+        for spec in list_policies(env_id):
+            assert any(name == spec.name for _, name in pairs), f"{spec.name} runs on no suite"
     assert lb.leaderboard_is_current()
 
 
