@@ -106,15 +106,13 @@ def collect_rows(
         episodes: Override the suites' episode counts (a quick look; then nothing committed is used).
         ray: Run fresh episodes as Ray tasks (see :func:`agri_training.evaluate.evaluate_many`).
     """
-    from agri_baselines import list_policies
-
     rows: list[Row] = []
     todo: list[tuple[lb.Suite, dict[str, Any]]] = []
     for suite in suites:
         if episodes is not None:
             suite = dataclasses.replace(suite, episodes=episodes)
         have = {e["policy"]["name"]: e for e in entries if e["suite"]["name"] == suite.name}
-        refs = [lb.policy_reference(spec.name) for spec in list_policies(suite.env_id)]
+        refs = [ref for _, ref in lb.all_baseline_pairs([suite])]  # the policies that can run this suite
         refs += [e["policy"] for e in have.values() if e["policy"]["kind"] == "learned"]
         for ref in refs:
             entry = have.get(ref["name"])
