@@ -90,20 +90,7 @@ class GreenhouseCoverageConfig(StrictConfig):
 
     def layout_params(self) -> LayoutParams:
         """The scene part of the config."""
-        return LayoutParams(
-            n_rows=self.n_rows,
-            row_length=self.row_length,
-            corridor_width=self.corridor_width,
-            row_width=self.row_width,
-            headland=self.headland,
-            plant_spacing=self.plant_spacing,
-            plant_jitter=self.plant_jitter,
-            growth=self.growth,
-            post_spacing=self.post_spacing,
-            row_incline=self.row_incline,
-            row_bend=self.row_bend,
-            corridor_width_jitter=self.corridor_width_jitter,
-        )
+        return LayoutParams.from_config(self)
 
     def mission_time(self) -> float:
         """The episode time limit (s): ``time_limit``, or three times the serpentine at full speed plus turns."""

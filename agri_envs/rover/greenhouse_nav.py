@@ -144,18 +144,7 @@ class GreenhouseNavConfig(StrictConfig):
 
     def layout_params(self) -> LayoutParams:
         """The scene part of the config."""
-        return LayoutParams(
-            n_rows=self.n_rows,
-            row_length=self.row_length,
-            corridor_width=self.corridor_width,
-            row_width=self.row_width,
-            headland=self.headland,
-            plant_spacing=self.plant_spacing,
-            plant_jitter=self.plant_jitter,
-            growth=self.growth,
-            post_spacing=self.post_spacing,
-            n_trees=self.n_trees,
-        )
+        return LayoutParams.from_config(self)
 
     def office_params(self) -> OfficeParams:
         """The office-corridor scene part of the config."""

@@ -54,6 +54,12 @@ class LayoutParams:
     row_bend: float = 0.0  # m: each row bows sideways by a uniform offset in [-row_bend, row_bend] at mid-length
     corridor_width_jitter: float = 0.0  # m: each corridor's width is corridor_width + U(-jitter, jitter)
 
+    @classmethod
+    def from_config(cls, config: object) -> LayoutParams:
+        """The scene part of an env config: every field of this class the config also has (others keep defaults)."""
+        names = [f.name for f in dataclasses.fields(cls) if hasattr(config, f.name)]
+        return cls(**{name: getattr(config, name) for name in names})
+
     def max_intrusion(self) -> float:
         """How far plants or leaves can reach past the edge of a row bed at this growth (m)."""
         g = self.growth
