@@ -35,6 +35,14 @@ def _check_level(level: float) -> None:
         raise ValueError(f"level must be in (0, 1), got {level}")
 
 
+def _check_counts(successes: int, n: int, level: float) -> None:
+    if n < 1:
+        raise ValueError(f"n must be >= 1, got {n}")
+    if not 0 <= successes <= n:
+        raise ValueError(f"successes must be in [0, n={n}], got {successes}")
+    _check_level(level)
+
+
 def _z(level: float) -> float:
     return NormalDist().inv_cdf(0.5 + level / 2.0)
 
@@ -53,11 +61,7 @@ def wilson_interval(successes: int, n: int, level: float = LEVEL) -> tuple[float
     Raises:
         ValueError: For ``n < 1``, ``successes`` outside [0, n] or ``level`` outside (0, 1).
     """
-    if n < 1:
-        raise ValueError(f"n must be >= 1, got {n}")
-    if not 0 <= successes <= n:
-        raise ValueError(f"successes must be in [0, n={n}], got {successes}")
-    _check_level(level)
+    _check_counts(successes, n, level)
     z = _z(level)
     p = successes / n
     denom = 1.0 + z * z / n
@@ -82,11 +86,7 @@ def clopper_pearson_interval(successes: int, n: int, level: float = LEVEL) -> tu
     Raises:
         ValueError: For ``n < 1``, ``successes`` outside [0, n] or ``level`` outside (0, 1).
     """
-    if n < 1:
-        raise ValueError(f"n must be >= 1, got {n}")
-    if not 0 <= successes <= n:
-        raise ValueError(f"successes must be in [0, n={n}], got {successes}")
-    _check_level(level)
+    _check_counts(successes, n, level)
     from scipy.stats import beta
 
     a = (1.0 - level) / 2.0

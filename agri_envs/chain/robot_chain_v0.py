@@ -770,11 +770,7 @@ class RobotChainEnv(ParallelEnv):  # type: ignore[misc]
                 f"collisions {self._collisions}   max gap {self._max_gap:.2f} m"
             ]
         )
-        frame = rd.finish()
-        if self.render_mode == "human":
-            rd.show(self.metadata["render_fps"])
-            return None
-        return frame
+        return rd.present(self.render_mode, self.metadata["render_fps"])
 
     @staticmethod
     def _sonar_origin(pose: np.ndarray, mount: np.ndarray) -> tuple[float, float]:
@@ -782,10 +778,13 @@ class RobotChainEnv(ParallelEnv):  # type: ignore[misc]
         return pose[0] + c * mount[0] - s * mount[1], pose[1] + s * mount[0] + c * mount[1]
 
     def close(self) -> None:
-        """Release the renderer (idempotent)."""
+        """Release the renderer and the pymunk world (idempotent; ``reset()`` builds a new world)."""
         if self._renderer is not None:
             self._renderer.close()
             self._renderer = None
+        if self.world is not None:
+            self.world.close()
+            self.world = None
 
 
 def parallel_env(render_mode: str | None = None, **kwargs: Any) -> RobotChainEnv:

@@ -562,14 +562,13 @@ class GreenhouseCoverageEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
                 f"corridors {sum(bool(c.all()) for c in self.task.covered)}/{self.n_corridors}"
             ]
         )
-        frame = rd.finish()
-        if self.render_mode == "human":
-            rd.show(self.metadata["render_fps"])
-            return None
-        return frame
+        return rd.present(self.render_mode, self.metadata["render_fps"])
 
     def close(self) -> None:
-        """Release the renderer (idempotent)."""
+        """Release the renderer and the pymunk world (idempotent; ``reset()`` builds a new world)."""
         if self._renderer is not None:
             self._renderer.close()
             self._renderer = None
+        if self.world is not None:
+            self.world.close()
+            self.world = None

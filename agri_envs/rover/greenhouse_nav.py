@@ -640,11 +640,7 @@ class GreenhouseNavEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
                 f"{len(self.task.targets)}   clearance {self.world.clearance(self.robot):.2f} m"
             ]
         )
-        frame = rd.finish()
-        if self.render_mode == "human":
-            rd.show(self.metadata["render_fps"])
-            return None
-        return frame
+        return rd.present(self.render_mode, self.metadata["render_fps"])
 
     def close(self) -> None:
         """Release the renderer and the pymunk world (idempotent; ``reset()`` builds a new world)."""

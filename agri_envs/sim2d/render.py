@@ -198,6 +198,14 @@ class TopDownRenderer:
         self.surface.blit(self._overlay, (0, 0))
         return np.transpose(np.array(self._pg.surfarray.pixels3d(self.surface)), (1, 0, 2)).copy()
 
+    def present(self, render_mode: str | None, fps: float) -> np.ndarray | None:
+        """Compose the frame: return it (``"rgb_array"``), or show it in the window and return None (``"human"``)."""
+        frame = self.finish()
+        if render_mode == "human":
+            self.show(fps)
+            return None
+        return frame
+
     def show(self, fps: float) -> None:
         """Show the current frame in a window ("human" render mode)."""
         pg = self._pg
