@@ -102,7 +102,7 @@ def make_policy(name: str, env: gym.Env[Any, Any]) -> Any:
 register_policy(
     PolicySpec(
         name="harik-apf-gt",
-        env_id="agri_envs/GreenhouseNav-v1",
+        env_id="agri_envs/GreenhouseNav-v2",
         entry_point="agri_baselines.harik_apf:make_harik_apf_gt",
         env_kwargs={"localization": "ground_truth", "full_scan": True},
         privileged=True,
@@ -112,7 +112,7 @@ register_policy(
 register_policy(
     PolicySpec(
         name="harik-apf",
-        env_id="agri_envs/GreenhouseNav-v1",
+        env_id="agri_envs/GreenhouseNav-v2",
         entry_point="agri_baselines.harik_apf:make_harik_apf_slam",
         env_kwargs={"localization": "none", "full_scan": True},
         privileged=False,
@@ -122,7 +122,7 @@ register_policy(
 register_policy(
     PolicySpec(
         name="harik-apf-hector-plain",
-        env_id="agri_envs/GreenhouseNav-v1",
+        env_id="agri_envs/GreenhouseNav-v2",
         entry_point="agri_baselines.harik_apf:make_harik_apf_hector_plain",
         env_kwargs={"localization": "none", "full_scan": True},
         privileged=False,

@@ -15,7 +15,7 @@ and wait (no forward motion) until the front is free, still turning toward the w
 corridor experiment (sec. 3.4).
 
 :class:`HarikApfController` is the pure algorithm (no Gymnasium); :class:`HarikApfPolicy` adapts it to
-SB3's ``predict`` on GreenhouseNav-v1 observations.
+SB3's ``predict`` on GreenhouseNav-v2 observations.
 """
 
 from __future__ import annotations
@@ -214,7 +214,7 @@ class HarikApfController:
 
 
 class HarikApfPolicy:
-    """SB3-style ``predict`` adapter of :class:`HarikApfController` for GreenhouseNav-v1.
+    """SB3-style ``predict`` adapter of :class:`HarikApfController` for GreenhouseNav-v2.
 
     Reads the ``waypoint`` (d, alpha from the env's localization), ``scan`` and ``sonar`` observation keys,
     so the env must be made with ``full_scan=True`` and a localization other than ``"none"``. One

@@ -6,7 +6,7 @@ until an env is made::
     import gymnasium as gym
     import agri_envs  # noqa: F401
 
-    env = gym.make("agri_envs/GreenhouseNav-v1", n_rows=4, growth=0.5)
+    env = gym.make("agri_envs/GreenhouseNav-v2", n_rows=4, growth=0.5)
 """
 
 from __future__ import annotations
@@ -20,9 +20,9 @@ __all__ = ["__version__", "register_envs"]
 
 def register_envs() -> None:
     """Register all agri_envs ids with Gymnasium (idempotent)."""
-    if "agri_envs/GreenhouseNav-v1" not in registry:
+    if "agri_envs/GreenhouseNav-v2" not in registry:
         register(
-            id="agri_envs/GreenhouseNav-v1",
+            id="agri_envs/GreenhouseNav-v2",
             entry_point="agri_envs.rover.greenhouse_nav:GreenhouseNavEnv",
             # No fixed limit: the env sizes it to the mission; gym.make(..., max_episode_steps=N) still wins.
             max_episode_steps=None,

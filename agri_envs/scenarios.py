@@ -2,8 +2,8 @@
 
 A scenario is data only (env id, arguments, a description), so users can build the same env by hand::
 
-    kwargs = scenario("agri_envs/GreenhouseNav-v1", "sim-loop").env_kwargs
-    env = gym.make("agri_envs/GreenhouseNav-v1", **kwargs)
+    kwargs = scenario("agri_envs/GreenhouseNav-v2", "sim-loop").env_kwargs
+    env = gym.make("agri_envs/GreenhouseNav-v2", **kwargs)
 """
 
 from __future__ import annotations
@@ -67,7 +67,7 @@ def list_scenarios(env_id: str | None = None) -> list[Scenario]:
     return [s for (e, _), s in _SCENARIOS.items() if env_id is None or e == env_id]
 
 
-_NAV = "agri_envs/GreenhouseNav-v1"
+_NAV = "agri_envs/GreenhouseNav-v2"
 # Harik & Korsaeth 2018. The paper's simulations (secs. 3.2-3.3) had no people; its corridor runs had
 # colleagues walking by (secs. 2.4, 3.5). The scenarios named after a section reproduce its set-up; the
 # "-people" variants add walking people to the same set-up.

@@ -5,7 +5,7 @@ Suites
 
         name: greenhouse-corridor        # unique; the file is <name>.yaml
         version: 1                       # bump on any change: entries of other versions are stale
-        env_id: agri_envs/GreenhouseNav-v1
+        env_id: agri_envs/GreenhouseNav-v2
         scenario: corridor               # optional: the named preset it was copied from (informational)
         description: Harik sec. 3.4 ...
         env_kwargs: {scene: corridor, n_people: 1}   # pinned here, not looked up by scenario name

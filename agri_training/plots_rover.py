@@ -1,4 +1,4 @@
-"""Report section of GreenhouseNav-v1: trajectory on the greenhouse map, d(t) and alpha(t) (Harik Figs. 7-9)."""
+"""Report section of GreenhouseNav-v2: trajectory on the greenhouse map, d(t) and alpha(t) (Harik Figs. 7-9)."""
 
 from __future__ import annotations
 
@@ -266,7 +266,7 @@ def _slug(text: str) -> str:
 
 
 def report_section(results: list[dict[str, Any]], out_dir: Path) -> str:
-    """Markdown (with PNG plots written to ``out_dir``) for the GreenhouseNav-v1 results, one part per suite.
+    """Markdown (with PNG plots written to ``out_dir``) for the GreenhouseNav-v2 results, one part per suite.
 
     Each part has a table of the policies (failures counted by cause, safety stops, localization error
     with 95 % intervals), the failed seeds, and plots: for a single mission the lead policy's trajectory

@@ -32,7 +32,7 @@ from agri_training.stats import newcombe_interval, paired_comparison, wilson_int
 
 #: Per-env report sections: env id -> ``"module:function"`` (see the module docstring).
 SECTION_HOOKS: dict[str, str] = {
-    "agri_envs/GreenhouseNav-v1": "agri_training.plots_rover:report_section",
+    "agri_envs/GreenhouseNav-v2": "agri_training.plots_rover:report_section",
     "agri_envs/GrapeHarvest-v1": "agri_training.plots_arm:report_section",
     "robot_chain_v0": "agri_training.plots_chain:report_section",
     "agri_envs/GreenhouseCoverage-v0": "agri_training.plots_coverage:report_section",
@@ -46,7 +46,7 @@ PAPER_RATES: dict[str, tuple[int, int, str]] = {
 
 #: The suite whose baseline results are drawn as bands on an env's learning curves (default: its first).
 CURVE_SUITES: dict[str, str] = {
-    "agri_envs/GreenhouseNav-v1": "greenhouse-sim-loop",
+    "agri_envs/GreenhouseNav-v2": "greenhouse-sim-loop",
     "agri_envs/GrapeHarvest-v1": "grape-table2",
 }
 

@@ -1,4 +1,4 @@
-"""Speed of GreenhouseNav-v1 (full 811-beam LIDAR every step) next to Gymnasium's BipedalWalker-v3.
+"""Speed of GreenhouseNav-v2 (full 811-beam LIDAR every step) next to Gymnasium's BipedalWalker-v3.
 
 Prints steps/s (random actions, one process, median of several runs, both envs measured in this run)
 and the cost of one LIDAR scan in microseconds (numba kernel vs the per-ray pymunk reference).
@@ -42,7 +42,7 @@ def steps_per_second(env_id: str, steps: int, runs: int, **kwargs: object) -> fl
 
 def scan_cost_us(repeats: int = 2000) -> tuple[float, float, int, int]:
     """Microseconds per full scan on the default scene: numba kernel, and the per-ray pymunk reference."""
-    env = gym.make("agri_envs/GreenhouseNav-v1", n_people=0)
+    env = gym.make("agri_envs/GreenhouseNav-v2", n_people=0)
     env.reset(seed=0)
     e = env.unwrapped
     world, lidar, pose = e.world, e.lidar, e.robot.pose
@@ -66,9 +66,9 @@ def main() -> None:
     parser.add_argument("--steps", type=int, default=20000)
     parser.add_argument("--runs", type=int, default=5)
     args = parser.parse_args()
-    ours = steps_per_second("agri_envs/GreenhouseNav-v1", args.steps, args.runs, terminate_on_collision=False)
+    ours = steps_per_second("agri_envs/GreenhouseNav-v2", args.steps, args.runs, terminate_on_collision=False)
     ours_full = steps_per_second(
-        "agri_envs/GreenhouseNav-v1", args.steps, args.runs, terminate_on_collision=False, full_scan=True
+        "agri_envs/GreenhouseNav-v2", args.steps, args.runs, terminate_on_collision=False, full_scan=True
     )
     try:
         peer = steps_per_second("BipedalWalker-v3", args.steps, args.runs)
@@ -77,8 +77,8 @@ def main() -> None:
         peer = float("nan")
     fast, slow, n_circles, n_capsules = scan_cost_us()
     print(f"{'env':<46}{'steps/s':>10}{'vs peer':>9}")
-    print(f"{'agri_envs/GreenhouseNav-v1 (811-beam scan)':<46}{ours:>10.0f}{ours / peer:>8.2f}x")
-    print(f"{'agri_envs/GreenhouseNav-v1 full_scan=True':<46}{ours_full:>10.0f}{ours_full / peer:>8.2f}x")
+    print(f"{'agri_envs/GreenhouseNav-v2 (811-beam scan)':<46}{ours:>10.0f}{ours / peer:>8.2f}x")
+    print(f"{'agri_envs/GreenhouseNav-v2 full_scan=True':<46}{ours_full:>10.0f}{ours_full / peer:>8.2f}x")
     print(f"{'BipedalWalker-v3 (gymnasium, box2d)':<46}{peer:>10.0f}{1.0:>8.2f}x")
     print(
         f"one 811-beam scan, {n_circles} circles + {n_capsules} capsules: numba {fast:.1f} us, "

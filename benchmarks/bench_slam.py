@@ -1,4 +1,4 @@
-"""Hector SLAM speed and accuracy on recorded GreenhouseNav-v1 drives, next to KISS-ICP on the same scans.
+"""Hector SLAM speed and accuracy on recorded GreenhouseNav-v2 drives, next to KISS-ICP on the same scans.
 
 Records drives of the privileged ``harik-apf-gt`` controller (811-beam scans with the env's noise and
 dropouts, people walking), then replays the scans through
@@ -31,7 +31,7 @@ from agri_baselines.hector_slam import HectorSlam, HectorSlamConfig
 from agri_envs.scenarios import scenario
 from agri_training.evaluate import localization_errors, start_frame_to_world
 
-ENV_ID = "agri_envs/GreenhouseNav-v1"
+ENV_ID = "agri_envs/GreenhouseNav-v2"
 
 
 def record(scenario_name: str, seed: int) -> tuple[np.ndarray, np.ndarray, gym.Env]:

@@ -1,4 +1,4 @@
-"""DummyVecEnv against SubprocVecEnv for GreenhouseNav-v1 training envs (random actions, steps/s).
+"""DummyVecEnv against SubprocVecEnv for GreenhouseNav-v2 training envs (random actions, steps/s).
 
 python benchmarks/bench_vec_env.py --n-envs 4 --steps 2000
 """
@@ -17,7 +17,7 @@ from agri_training.train import TrainRequest, make_vec_env, resolve_config
 def rate(vec_env: str, n_envs: int, steps: int) -> float:
     """Env steps per second of ``n_envs`` training envs stepped together (VecNormalize included)."""
     config = resolve_config(
-        TrainRequest("agri_envs/GreenhouseNav-v1", "ppo", "unused", overrides={"n_envs": n_envs, "vec_env": vec_env})
+        TrainRequest("agri_envs/GreenhouseNav-v2", "ppo", "unused", overrides={"n_envs": n_envs, "vec_env": vec_env})
     )
     venv = make_vec_env(config)
     venv.reset()

@@ -70,7 +70,7 @@ def _noop(i: int) -> int:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--env", default="agri_envs/GreenhouseNav-v1")
+    parser.add_argument("--env", default="agri_envs/GreenhouseNav-v2")
     parser.add_argument("--policy", default="harik-apf")
     parser.add_argument("--scenario", default="sim-loop")
     parser.add_argument("--episodes", type=int, default=20)

@@ -1,4 +1,4 @@
-"""Profile PPO training on GreenhouseNav-v1: the share of wall time spent in the env against the learner.
+"""Profile PPO training on GreenhouseNav-v2: the share of wall time spent in the env against the learner.
 
 Trains with the committed PPO hyperparameters for ``--timesteps`` steps under cProfile and prints the
 cumulative time of the env's ``step``/``reset`` (physics, sensors, reward), of SB3's rollout collection
@@ -26,7 +26,7 @@ def main() -> None:
     args = parser.parse_args()
     out = Path(tempfile.mkdtemp()) / "run"
     request = TrainRequest(
-        "agri_envs/GreenhouseNav-v1",
+        "agri_envs/GreenhouseNav-v2",
         "ppo",
         out,
         timesteps=args.timesteps,

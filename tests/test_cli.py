@@ -20,7 +20,7 @@ def test_evaluate_writes_json(tmp_path, capsys):
         [
             "evaluate",
             "--env",
-            "agri_envs/GreenhouseNav-v1",
+            "agri_envs/GreenhouseNav-v2",
             "--policy",
             "harik-apf-gt",
             "--episodes",
@@ -51,7 +51,7 @@ def test_evaluate_errors_are_clear(tmp_path, capsys):
         [
             "evaluate",
             "--env",
-            "agri_envs/GreenhouseNav-v1",
+            "agri_envs/GreenhouseNav-v2",
             "--policy",
             "harik-apf-gt",
             "--episodes",
@@ -68,7 +68,7 @@ def test_evaluate_errors_are_clear(tmp_path, capsys):
         [
             "evaluate",
             "--env",
-            "agri_envs/GreenhouseNav-v1",
+            "agri_envs/GreenhouseNav-v2",
             "--policy",
             "harik-apf-gt",
             "--episodes",
@@ -81,7 +81,7 @@ def test_evaluate_errors_are_clear(tmp_path, capsys):
         ]
     )
     assert rc == 2 and "needs full_scan=True" in capsys.readouterr().err
-    rc = main(["evaluate", "--env", "agri_envs/GreenhouseNav-v1", "--policy", "nope", "--out", "x.json"])
+    rc = main(["evaluate", "--env", "agri_envs/GreenhouseNav-v2", "--policy", "nope", "--out", "x.json"])
     assert rc == 2 and "unknown policy" in capsys.readouterr().err
 
 

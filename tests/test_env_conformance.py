@@ -28,7 +28,7 @@ ENV_IDS = sorted(env_id for env_id in gym.registry if env_id.startswith("agri_en
 
 #: Argument sets beyond the defaults, per env id (short episodes, other scenes and modes).
 EXTRA_KWARGS: dict[str, list[dict[str, Any]]] = {
-    "agri_envs/GreenhouseNav-v1": [
+    "agri_envs/GreenhouseNav-v2": [
         {"scene": "corridor", "n_people": 1, "full_scan": True, "localization": "none"},
         {"localization": "odometry", "lidar_beams": 30, "growth": 0.6, "n_trees": 3, "n_rows": 2},
     ],
@@ -72,7 +72,7 @@ def env_ids(check: str) -> list[Any]:
 
 
 def test_every_env_of_the_package_is_covered():
-    assert {"agri_envs/GreenhouseNav-v1", "agri_envs/GrapeHarvest-v1"} <= set(ENV_IDS)
+    assert {"agri_envs/GreenhouseNav-v2", "agri_envs/GrapeHarvest-v1"} <= set(ENV_IDS)
     assert set(EXTRA_KWARGS) <= set(ENV_IDS), "EXTRA_KWARGS names an env that is not registered"
 
 

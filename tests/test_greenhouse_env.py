@@ -1,4 +1,4 @@
-"""GreenhouseNav-v1: API checkers, determinism, pickling, config strictness, bad actions, rendering."""
+"""GreenhouseNav-v2: API checkers, determinism, pickling, config strictness, bad actions, rendering."""
 
 import math
 import pickle
@@ -14,7 +14,7 @@ from rollouts import assert_same, rollout
 import agri_envs  # noqa: F401
 from agri_envs.rover.greenhouse_nav import GreenhouseNavConfig
 
-ENV_ID = "agri_envs/GreenhouseNav-v1"
+ENV_ID = "agri_envs/GreenhouseNav-v2"
 SMALL = {"n_rows": 1, "row_length": 3.0}
 
 
@@ -50,7 +50,7 @@ def test_pickled_env_continues_identically():
 def _digest_in_subprocess():
     code = (
         "import gymnasium as gym, numpy as np, hashlib, agri_envs\n"
-        "env = gym.make('agri_envs/GreenhouseNav-v1', terminate_on_collision=False)\n"
+        "env = gym.make('agri_envs/GreenhouseNav-v2', terminate_on_collision=False)\n"
         "obs, _ = env.reset(seed=11); h = hashlib.sha256()\n"
         "rng = np.random.default_rng(0)\n"
         "for _ in range(200):\n"

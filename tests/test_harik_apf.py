@@ -14,7 +14,7 @@ from agri_envs.rover import robot as rover
 from agri_envs.sim2d.sensors import tim561
 from agri_training.evaluate import run_episode
 
-ENV_ID = "agri_envs/GreenhouseNav-v1"
+ENV_ID = "agri_envs/GreenhouseNav-v2"
 
 
 @pytest.fixture

@@ -12,7 +12,7 @@ from agri_baselines.hector_slam import HectorSlam, HectorSlamConfig, interpolate
 from agri_envs.sim2d.gridmap import rasterize
 from agri_training.evaluate import localization_errors, run_episode, start_frame_to_world
 
-ENV_ID = "agri_envs/GreenhouseNav-v1"
+ENV_ID = "agri_envs/GreenhouseNav-v2"
 
 
 def compose(a, b):

@@ -13,7 +13,7 @@ from agri_training import leaderboard as lb
 SUITE = {
     "name": "tiny-rover",
     "version": 1,
-    "env_id": "agri_envs/GreenhouseNav-v1",
+    "env_id": "agri_envs/GreenhouseNav-v2",
     "description": "two short rows",
     "env_kwargs": {"n_rows": 1, "row_length": 3, "n_people": 0},
     "seeds": {"start": 100000, "episodes": 2},
@@ -33,7 +33,7 @@ def write_suite(folder: Path, doc: dict) -> Path:
 
 def test_committed_suites_are_valid_and_held_out():
     suites = lb.load_suites()
-    assert {s.env_id for s in suites} >= {"agri_envs/GreenhouseNav-v1", "agri_envs/GrapeHarvest-v1"}
+    assert {s.env_id for s in suites} >= {"agri_envs/GreenhouseNav-v2", "agri_envs/GrapeHarvest-v1"}
     for s in suites:
         # per level; the long repeatability missions (10 loops each) run fewer
         assert s.seed_start >= lb.HELD_OUT_SEED and s.episodes * len(s.levels()) >= lb.MIN_EPISODES or (
@@ -202,7 +202,7 @@ def test_worker_pool_gives_the_serial_result(board):
 def test_learned_policy_reference_pins_the_weights(tmp_path):
     run = tmp_path / "ppo_nav"
     run.mkdir()
-    (run / "config.yaml").write_text(yaml.safe_dump({"env_id": "agri_envs/GreenhouseNav-v1", "algo": "ppo"}))
+    (run / "config.yaml").write_text(yaml.safe_dump({"env_id": "agri_envs/GreenhouseNav-v2", "algo": "ppo"}))
     (run / "policy.pt").write_bytes(b"weights v1")
     ref = lb.policy_reference(str(run))
     assert ref["kind"] == "learned" and ref["name"] == "ppo_nav" and ref["privileged"] is False

@@ -1,4 +1,4 @@
-"""GreenhouseNav-v1's learnability changes: mission-sized time limits and honest crash costs."""
+"""GreenhouseNav-v2's learnability changes: mission-sized time limits and honest crash costs."""
 
 import gymnasium as gym
 import numpy as np
@@ -8,7 +8,7 @@ import agri_envs  # noqa: F401
 from agri_envs.rover.task import RewardWeights, mission_time_limit
 from agri_training.evaluate import load_policy, run_episode
 
-ENV_ID = "agri_envs/GreenhouseNav-v1"
+ENV_ID = "agri_envs/GreenhouseNav-v2"
 SMALL = {"n_rows": 1, "row_length": 3.0, "n_people": 0}
 
 

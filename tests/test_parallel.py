@@ -14,7 +14,7 @@ from agri_training.evaluate import EvalRequest, evaluate, evaluate_many, load_po
 from agri_training.multiagent import is_multiagent, make_env
 from agri_training.parallel import EpisodeError, EpisodeJob, run_episodes, run_job
 
-NAV = "agri_envs/GreenhouseNav-v1"
+NAV = "agri_envs/GreenhouseNav-v2"
 GRAPE = "agri_envs/GrapeHarvest-v1"
 SMALL_NAV = {"n_rows": 1, "row_length": 3}
 
@@ -55,7 +55,7 @@ def test_pool_documents_equal_serial():
 @pytest.mark.parametrize("spec", list_policies(), ids=lambda s: s.name)
 def test_reused_env_equals_fresh_one(spec):
     """A worker reuses its env across the seeds it is handed, in any order: nothing may leak between episodes."""
-    small = {GRAPE: {"max_clusters": 3}, "agri_envs/GreenhouseNav-v1": SMALL_NAV}.get(spec.env_id, {})
+    small = {GRAPE: {"max_clusters": 3}, "agri_envs/GreenhouseNav-v2": SMALL_NAV}.get(spec.env_id, {})
     small = {k: v for k, v in small.items() if k not in spec.env_kwargs}  # e.g. the one-cluster reach policy
     kwargs, _ = resolve_env_kwargs(EvalRequest(spec.env_id, spec.name, env_kwargs=small))
     seeds = [5, 1, 5]
@@ -99,7 +99,7 @@ def test_worker_failure_names_seed(tmp_path):
     """In a worker process: a checkpoint that is not there fails every job; the first one is named."""
     bad = tmp_path / "broken.zip"
     jobs = [EpisodeJob(NAV, SMALL_NAV, str(bad), s) for s in (11, 12)]
-    with pytest.raises(EpisodeError, match=r"episode with seed 1[12] of .*broken\.zip on agri_envs/GreenhouseNav-v1"):
+    with pytest.raises(EpisodeError, match=r"episode with seed 1[12] of .*broken\.zip on agri_envs/GreenhouseNav-v2"):
         run_episodes(jobs, workers=2)
 
 

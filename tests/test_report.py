@@ -13,7 +13,7 @@ from agri_training.report import Row, comparison_table, find_runs, markdown_to_h
 SUITE = {
     "name": "tiny-rover",
     "version": 1,
-    "env_id": "agri_envs/GreenhouseNav-v1",
+    "env_id": "agri_envs/GreenhouseNav-v2",
     "scenario": "sim-loop",
     "env_kwargs": {"n_rows": 1, "row_length": 3, "n_people": 0},
     "seeds": {"start": 100000, "episodes": 2},
@@ -24,7 +24,7 @@ SUITE = {
 }
 
 
-def fake_run(root, env_id="agri_envs/GreenhouseNav-v1"):
+def fake_run(root, env_id="agri_envs/GreenhouseNav-v2"):
     run = root / "ppo_nav_1"
     run.mkdir(parents=True)
     (run / "config.yaml").write_text(yaml.safe_dump({"env_id": env_id, "algo": "ppo"}))
@@ -70,7 +70,7 @@ def test_report_from_entries_and_fresh_runs(tmp_path, capsys):
         "harik-apf-hector-plain.json",
         "harik-apf.json",
     ]
-    assert "GreenhouseNav-v1_learning_success.png" in md and "_d_alpha.png" in md and "_trajectory.png" in md
+    assert "GreenhouseNav-v2_learning_success.png" in md and "_d_alpha.png" in md and "_trajectory.png" in md
     for line in md.splitlines():
         if line.startswith("!["):
             assert (out / line.split("(")[1].rstrip(")")).stat().st_size > 10_000
@@ -116,7 +116,7 @@ def test_find_runs(tmp_path):
     (tmp_path / "no_config").mkdir()
     (tmp_path / "no_config" / "progress.csv").write_text("a,b\n1,2\n")
     (run,) = find_runs(tmp_path)
-    assert run["env_id"] == "agri_envs/GreenhouseNav-v1" and len(run["rows"]) == 10
+    assert run["env_id"] == "agri_envs/GreenhouseNav-v2" and len(run["rows"]) == 10
     assert find_runs(tmp_path / "missing") == []
 
 
@@ -130,11 +130,11 @@ def test_progress_names_the_block_and_prints_no_rows_per_episode(capsys):
 
     kwargs = {"n_rows": 1, "row_length": 3, "n_people": 0}
     requests = [
-        EvalRequest("agri_envs/GreenhouseNav-v1", "harik-apf-gt", 2, 100000, env_kwargs=kwargs, label="a"),
-        EvalRequest("agri_envs/GreenhouseNav-v1", "harik-apf-gt", 2, 100002, env_kwargs=kwargs, label="b"),
+        EvalRequest("agri_envs/GreenhouseNav-v2", "harik-apf-gt", 2, 100000, env_kwargs=kwargs, label="a"),
+        EvalRequest("agri_envs/GreenhouseNav-v2", "harik-apf-gt", 2, 100002, env_kwargs=kwargs, label="b"),
     ]
     docs = evaluate_many(requests, progress=True, workers=1)
     err = capsys.readouterr().err
-    assert "[1/2] harik-apf-gt on GreenhouseNav-v1 [a]" in err and "[2/2] harik-apf-gt on GreenhouseNav-v1 [b]" in err
+    assert "[1/2] harik-apf-gt on GreenhouseNav-v2 [a]" in err and "[2/2] harik-apf-gt on GreenhouseNav-v2 [b]" in err
     assert "4/4" in err and "success 2/2 of 2" in err  # one bar over the whole run (its ETA), per-block counts
     assert "seed" not in err and [d["label"] for d in docs] == ["a", "b"]

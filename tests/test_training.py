@@ -14,7 +14,7 @@ from agri_training.evaluate import EvalRequest, evaluate, load_policy
 from agri_training.learned import LearnedPolicy, UnsafeCheckpointError, load_weights
 from agri_training.train import TrainRequest, load_hyperparams, resolve_config, train
 
-ENV_ID = "agri_envs/GreenhouseNav-v1"
+ENV_ID = "agri_envs/GreenhouseNav-v2"
 TINY_ENV = {"n_rows": 1, "row_length": 3.0, "n_people": 0, "max_episode_steps": 40}
 TINY_HP = {
     "n_envs": 2,

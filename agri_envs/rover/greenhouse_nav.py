@@ -1,4 +1,4 @@
-"""GreenhouseNav-v1: waypoint navigation of a LIDAR rover between greenhouse rows (Harik 2018)."""
+"""GreenhouseNav-v2: waypoint navigation of a LIDAR rover between greenhouse rows (Harik 2018)."""
 
 from __future__ import annotations
 
@@ -33,7 +33,7 @@ LOCALIZATION_MODES = ("ground_truth", "odometry", "none")
 
 @dataclasses.dataclass(frozen=True)
 class GreenhouseNavConfig(StrictConfig):
-    """Arguments of ``agri_envs/GreenhouseNav-v1`` (each one a ``gym.make`` keyword)."""
+    """Arguments of ``agri_envs/GreenhouseNav-v2`` (each one a ``gym.make`` keyword)."""
 
     # Scene
     scene: str = param(
@@ -103,9 +103,9 @@ class GreenhouseNavConfig(StrictConfig):
     reward_progress: float = param(3.0, "weight of progress toward the waypoint (per metre)", low=0.0, high=100.0)
     reward_waypoint: float = param(1.0, "bonus per waypoint reached", low=0.0, high=100.0)
     reward_success: float = param(10.0, "bonus when the mission is complete", low=0.0, high=1000.0)
-    reward_collision: float = param(10.0, "fixed part of the crash penalty (see Rewards)", low=0.0, high=1000.0)
+    reward_collision: float = param(20.0, "fixed part of the crash penalty (see Rewards)", low=0.0, high=1000.0)
     reward_clearance: float = param(
-        0.05, "penalty per step at zero clearance (linear in the shortfall)", low=0.0, high=100.0
+        6.0, "penalty per metre driven at zero clearance (linear in the shortfall)", low=0.0, high=100.0
     )
     reward_time: float = param(0.002, "penalty per step", low=0.0, high=10.0)
     time_limit_speed_fraction: float = param(
@@ -319,7 +319,7 @@ class GreenhouseNavEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
 
     Example::
 
-        env = gym.make("agri_envs/GreenhouseNav-v1", n_rows=4, growth=0.6, n_people=3, full_scan=True)
+        env = gym.make("agri_envs/GreenhouseNav-v2", n_rows=4, growth=0.6, n_people=3, full_scan=True)
 
     ## Baselines
 
@@ -454,7 +454,7 @@ class GreenhouseNavEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
         clearance = self.world.clearance(self.robot)
         self._min_clearance = clearance
         self._trail = [(float(start[0]), float(start[1]))]
-        outcome = self.task.evaluate(self.robot.pose, False, clearance)
+        outcome = self.task.evaluate(self.robot.pose, False, clearance, step=False)
         obs = self._observe()
         info = self._info(outcome, clearance)
         if self.render_mode == "human":
@@ -478,13 +478,14 @@ class GreenhouseNavEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
         self.crowd.sync_from_world()
         before = robot.pose
         collided = self.world.drive(robot, v_cmd, w_cmd, dt)
-        self._path_length += math.hypot(robot.pose[0] - before[0], robot.pose[1] - before[1])
+        travelled = math.hypot(robot.pose[0] - before[0], robot.pose[1] - before[1])
+        self._path_length += travelled
         self._update_estimate(dt)
         self._steps += 1
         clearance = self.world.clearance(robot)
         self._min_clearance = min(self._min_clearance, clearance)
         self._trail.append((float(robot.pose[0]), float(robot.pose[1])))
-        outcome = self.task.evaluate(robot.pose, collided, clearance)
+        outcome = self.task.evaluate(robot.pose, collided, clearance, travelled)
         terminated = bool(outcome["is_success"]) or (collided and self.config.terminate_on_collision)
         truncated = not terminated and self._steps >= self.max_episode_steps
         obs = self._observe()

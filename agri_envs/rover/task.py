@@ -21,25 +21,27 @@ class RewardWeights:
         waypoint: Bonus per waypoint reached.
         success: Bonus when the mission is complete.
         collision: Fixed part of the crash penalty; the whole penalty is :meth:`collision_cost`.
-        clearance: Penalty per step at zero clearance (linear in the shortfall below the safety margin).
+        clearance: Penalty per metre driven at zero clearance (linear in the shortfall below the safety
+            margin).
         time: Penalty per step.
     """
 
     progress: float = 3.0
     waypoint: float = 1.0
     success: float = 10.0
-    collision: float = 10.0
-    clearance: float = 0.05
+    collision: float = 20.0
+    clearance: float = 6.0
     time: float = 0.002
 
-    def collision_cost(self, max_steps: int) -> float:
-        """The penalty of a crash in an episode of at most ``max_steps`` steps.
+    def collision_cost(self, steps_left: int) -> float:
+        """The penalty of a crash with ``steps_left`` steps to go before the time limit.
 
-        It is the fixed ``collision`` weight plus the worst the time and clearance terms can add up to over a
-        whole episode, so a crash always costs more than any way of avoiding it (idling to the time limit
-        at zero clearance included), whatever the mission and its time limit.
+        It is the fixed ``collision`` weight plus what stopping on the spot and waiting out the time limit
+        would cost instead: the time penalty of the remaining steps (a robot that stands still drives no
+        metres, so it pays no clearance penalty). A crash therefore always costs more than stopping, by
+        at least ``collision``, whatever the mission, its time limit and the moment of the crash.
         """
-        return self.collision + max_steps * (self.time + self.clearance)
+        return self.collision + max(0, steps_left) * self.time
 
 
 def mission_time_limit(
@@ -102,13 +104,14 @@ class WaypointTask:
         self.safety_margin = safety_margin
         self.weights = weights
         self.max_steps = max_steps
-        self.collision_cost = weights.collision_cost(max_steps)
+        self.steps = 0
         self.index = 0
         self._last_distance = 0.0
 
     def reset(self, pose: np.ndarray) -> None:
         """Start the mission with the robot at ``pose``."""
         self.index = 0
+        self.steps = 0
         self._last_distance = self.distance(pose)
 
     @property
@@ -133,9 +136,21 @@ class WaypointTask:
         a = theta - pose[2]
         return math.atan2(math.sin(a), math.cos(a))
 
-    def evaluate(self, pose: np.ndarray, collided: bool, clearance: float) -> dict[str, float | bool | int]:
-        """Advance the mission for the robot's new pose and return the step's outcome and reward terms."""
+    def evaluate(
+        self, pose: np.ndarray, collided: bool, clearance: float, travelled: float = 0.0, step: bool = True
+    ) -> dict[str, float | bool | int]:
+        """Advance the mission for the robot's new pose and return the step's outcome and reward terms.
+
+        Args:
+            pose: The robot's true pose ``(x, y, yaw)`` after the step.
+            collided: Whether the robot touched anything during the step.
+            clearance: Distance from the robot's body to the nearest obstacle or person (m).
+            travelled: Distance the robot's centre moved during the step (m).
+            step: False for the outcome at reset, which is not a step (no time passes).
+        """
         w = self.weights
+        if step:
+            self.steps += 1
         d = self.distance(pose)
         progress = self._last_distance - d
         reached = False
@@ -150,9 +165,9 @@ class WaypointTask:
             "reward_progress": w.progress * progress,
             "reward_waypoint": w.waypoint * float(reached),
             "reward_success": w.success * float(success),
-            "reward_collision": -self.collision_cost * float(collided),
-            "reward_clearance": -w.clearance * min(1.0, shortfall),
-            "reward_time": -w.time,
+            "reward_collision": -w.collision_cost(self.max_steps - self.steps) * float(collided),
+            "reward_clearance": -w.clearance * min(1.0, shortfall) * travelled,
+            "reward_time": -w.time * float(step),
         }
         return {
             **terms,
