@@ -22,25 +22,42 @@ def _drive(env, action, seed=0):
             return total, term, trunc, info
 
 
-def test_crash_costs_more_than_idling_to_the_time_limit():
+def test_crash_costs_more_than_stopping_and_waiting_out_the_limit():
     env = gym.make(ENV_ID, **SMALL)
     idle_return, _, idle_trunc, idle_info = _drive(env, [0.0, 0.0])
     crash_return, crash_term, _, crash_info = _drive(env, [1.0, 0.3])  # full speed, curving into the row on the left
     assert idle_trunc and crash_term and crash_info["collision"]
     assert crash_return < idle_return
     limit = crash_info["max_episode_steps"]
+    steps = round(crash_info["episode_time"] * 15)
     w = RewardWeights()
-    # The crash alone outweighs a whole episode at the worst time and clearance penalty.
-    assert -crash_info["reward_collision"] > limit * (w.time + w.clearance)
+    # The crash costs its fixed part plus the time penalty of every step it leaves unused.
+    assert -crash_info["reward_collision"] == pytest.approx(w.collision + (limit - steps) * w.time)
+    assert -crash_info["reward_collision"] > (limit - steps) * w.time + 0.5 * w.collision
     assert idle_info["max_episode_steps"] == limit
 
 
-def test_crash_cost_grows_with_the_time_limit():
+def test_crash_cost_covers_a_longer_time_limit():
     a = gym.make(ENV_ID, **SMALL)
     b = gym.make(ENV_ID, **SMALL, max_episode_steps=20_000)
     costs = [-_drive(e, [1.0, 0.3])[3]["reward_collision"] for e in (a, b)]
     w = RewardWeights()
-    assert costs[1] > 20_000 * (w.time + w.clearance) > costs[0]
+    assert costs[1] - costs[0] == pytest.approx((20_000 - a.unwrapped.max_episode_steps) * w.time)
+
+
+def test_clearance_penalty_is_paid_per_metre_driven_inside_the_margin():
+    w = RewardWeights()
+    env = gym.make(ENV_ID, **SMALL, safety_margin=1.0)  # every pose is inside a 1 m margin
+    env.reset(seed=0)
+    _, _, _, _, info = env.step(np.zeros(2, np.float32))
+    assert info["reward_clearance"] == 0.0  # standing still costs time only
+    for _ in range(10):
+        _, _, _, _, info = env.step(np.array([1.0, 0.0], np.float32))
+    before = info["path_length"]
+    _, _, _, _, info = env.step(np.array([1.0, 0.0], np.float32))
+    shortfall = 1.0 - info["clearance"]
+    assert 0 < shortfall < 1
+    assert info["reward_clearance"] == pytest.approx(-w.clearance * shortfall * (info["path_length"] - before))
 
 
 def test_default_limit_follows_the_mission():

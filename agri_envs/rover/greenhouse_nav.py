@@ -105,7 +105,7 @@ class GreenhouseNavConfig(StrictConfig):
     reward_success: float = param(10.0, "bonus when the mission is complete", low=0.0, high=1000.0)
     reward_collision: float = param(20.0, "fixed part of the crash penalty (see Rewards)", low=0.0, high=1000.0)
     reward_clearance: float = param(
-        6.0, "penalty per metre driven at zero clearance (linear in the shortfall)", low=0.0, high=100.0
+        6.0, "penalty per metre driven at zero clearance (linear in shortfall)", low=0.0, high=100.0
     )
     reward_time: float = param(0.002, "penalty per step", low=0.0, high=10.0)
     time_limit_speed_fraction: float = param(
@@ -211,27 +211,34 @@ class GreenhouseNavEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
 
     | term | formula |
     |---|---|
-    | ``reward_progress`` | ``reward_progress * (d_prev - d)``, d the true distance to the current waypoint |
+    | ``reward_progress`` | ``reward_progress * (g_prev - g)``, g = d + (max_speed / max_turn_rate) * abs(alpha) |
     | ``reward_waypoint`` | ``+reward_waypoint`` when a waypoint is reached |
     | ``reward_success`` | ``+reward_success`` when the last one is reached |
-    | ``reward_collision`` | ``-(reward_collision + T * (reward_time + reward_clearance))`` on contact (1) |
-    | ``reward_clearance`` | ``-reward_clearance * max(0, safety_margin - clearance) / safety_margin`` |
+    | ``reward_collision`` | ``-(reward_collision + (T - t) * reward_time)`` on contact at step t (1) |
+    | ``reward_clearance`` | ``-reward_clearance * s * ds``, s = ``max(0, safety_margin - clearance) / safety_margin`` |
     | ``reward_time`` | ``-reward_time`` every step |
 
-    (1) T is the step limit in force (see Episode End). Each term is reported in ``info`` under its name.
-    Why the weights are what they are:
+    (1) T is the step limit in force (see Episode End); g is the distance to go to the current waypoint
+    (d its true distance, alpha its true bearing): a turn toward the waypoint counts as the metres the
+    robot could drive in the time the turn takes; ``ds`` is the distance the robot drove in the step
+    (m). Each term is reported in ``info`` under its name. Why the weights are what they are:
 
-    * **A crash always costs more than any way of avoiding it.** The crash penalty is a fixed 10 plus the
-      worst a whole episode of time and clearance penalties can add up to (T steps at zero clearance), so
-      stopping, backing off or idling until the time limit is always the better return, whatever the
-      mission and its time limit (T = 2,455 steps on the default scene: the crash costs 137.7).
-    * **Safety margins matter.** Below ``safety_margin`` (0.25 m, about half the free space on either side
-      of the robot in a default corridor) each step costs up to 0.05, 42 % of the progress reward of a step
-      at full speed (0.12): hugging a plant row or cutting a corner at 5 cm costs more than the time it saves.
-    * **Progress drives the task.** 3 per metre toward the current waypoint (a potential difference, so
-      driving back and forth earns nothing), 1 per waypoint and 10 for the whole mission: the default loop
-      returns about 135 when driven well, the same order as a crash, so that driving on stays worth its risk
-      (with 1 per metre PPO learned to stand still: no success in 350k steps).
+    * **A crash always costs more than any way of avoiding it.** The cheapest way to avoid a crash is to
+      stop and wait: a robot that stands still drives no metres, so it pays only the time penalty of the
+      steps left. The crash costs exactly that plus a fixed 20, whatever the mission, its time limit and
+      the moment of the crash (20 + 4.9 at the start of the default mission). In v1 the crash also carried
+      a whole episode of clearance penalty (137.7 on the default scene); PPO then learned to stand still
+      in three 1.2M-step runs.
+    * **Safety margins matter.** Inside ``safety_margin`` (0.25 m, about half the free space on either
+      side of the robot in a default corridor) every metre driven costs up to 6, twice the progress it
+      earns: driving past an obstacle closer than half the margin loses more than the progress gains, so
+      hugging a row or cutting a corner at 5 cm never pays. The penalty is per metre, not per step, so
+      that waiting for a person to step aside costs nothing but time.
+    * **Progress drives the task.** 3 per metre of distance to go (a potential difference, so driving or
+      turning back and forth earns nothing; with distance alone, PPO stopped at the first waypoint, where
+      the next one lies 90 deg to the side and turning earned nothing), 1 per waypoint and 10 for the
+      whole mission: the default loop returns about 128 when driven well (with 1 per metre PPO learned to
+      stand still).
     * **Time is a tie-breaker.** 0.002 per step (4.9 for a whole default episode): enough to prefer the
       faster of two safe paths, never enough to make a crash attractive (see the first point).
 
@@ -310,8 +317,8 @@ class GreenhouseNavEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
     | ``reward_progress`` | 3 |  | in [0.0, 100.0] | weight of progress toward the waypoint (per metre) |
     | ``reward_waypoint`` | 1 |  | in [0.0, 100.0] | bonus per waypoint reached |
     | ``reward_success`` | 10 |  | in [0.0, 1000.0] | bonus when the mission is complete |
-    | ``reward_collision`` | 10 |  | in [0.0, 1000.0] | fixed part of the crash penalty (see Rewards) |
-    | ``reward_clearance`` | 0.05 |  | in [0.0, 100.0] | penalty per step at zero clearance (linear in the shortfall) |
+    | ``reward_collision`` | 20 |  | in [0.0, 1000.0] | fixed part of the crash penalty (see Rewards) |
+    | ``reward_clearance`` | 6 |  | in [0.0, 100.0] | penalty per metre driven at zero clearance (linear in shortfall) |
     | ``reward_time`` | 0.002 |  | in [0.0, 10.0] | penalty per step |
     | ``time_limit_speed_fraction`` | 0.5 |  | in [0.05, 1.0] | time limit: mission at this fraction of speed limits |
     | ``time_limit_wait`` | 6 | s | in [0.0, 120.0] | default time limit: extra time per person per mission cycle |
@@ -335,6 +342,11 @@ class GreenhouseNavEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
       penalty applies over that wider band; progress pays 3 per metre instead of 1; the waypoint bonus fell
       from 2 to 1 and the time penalty from 0.005 to 0.002 per step. New arguments ``time_limit_speed_fraction`` and
       ``time_limit_wait``.
+    * v2: the crash penalty is the fixed part (now 20) plus the time penalty of the steps left, instead of
+      a whole episode of time and clearance penalties; the clearance penalty is paid per metre driven inside
+      the margin (6 per metre at zero clearance) instead of per step (0.05), so that stopping costs only
+      time; progress counts the heading error toward the waypoint as distance to go. With v1's penalties
+      PPO learned to stand still.
 
     ## References
 
@@ -443,7 +455,12 @@ class GreenhouseNavEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
         targets = np.tile(self.layout.targets, (cfg.mission_cycles, 1))
         self.max_episode_steps, self.time_limit_source = self._time_limit(targets)
         self.task = WaypointTask(
-            targets, cfg.waypoint_radius, cfg.safety_margin, cfg.reward_weights(), self.max_episode_steps
+            targets,
+            cfg.waypoint_radius,
+            cfg.safety_margin,
+            cfg.reward_weights(),
+            self.max_episode_steps,
+            turn_distance=cfg.max_speed / cfg.max_turn_rate,
         )
         self.task.reset(start)
         self._start_pose = start.copy()

@@ -17,7 +17,8 @@ class RewardWeights:
     """Weights of the named reward terms (see the env docstring's Rewards section).
 
     Attributes:
-        progress: Reward per metre of progress toward the current waypoint.
+        progress: Reward per metre of progress toward the current waypoint (distance to go, see
+            :meth:`WaypointTask.to_go`).
         waypoint: Bonus per waypoint reached.
         success: Bonus when the mission is complete.
         collision: Fixed part of the crash penalty; the whole penalty is :meth:`collision_cost`.
@@ -94,13 +95,24 @@ def mission_time_limit(
 
 
 class WaypointTask:
-    """Visit ``targets`` in order; a target counts as reached within ``radius`` (d_min) of the robot centre."""
+    """Visit ``targets`` in order; a target counts as reached within ``radius`` (d_min) of the robot centre.
+
+    Progress is measured on the distance to go (:meth:`to_go`): the distance to the current target plus
+    ``turn_distance`` metres per radian of heading error, so turning toward the target is progress too.
+    """
 
     def __init__(
-        self, targets: np.ndarray, radius: float, safety_margin: float, weights: RewardWeights, max_steps: int
+        self,
+        targets: np.ndarray,
+        radius: float,
+        safety_margin: float,
+        weights: RewardWeights,
+        max_steps: int,
+        turn_distance: float = 0.0,
     ) -> None:
         self.targets = np.asarray(targets, dtype=np.float64)
         self.radius = radius
+        self.turn_distance = turn_distance
         self.safety_margin = safety_margin
         self.weights = weights
         self.max_steps = max_steps
@@ -112,7 +124,7 @@ class WaypointTask:
         """Start the mission with the robot at ``pose``."""
         self.index = 0
         self.steps = 0
-        self._last_distance = self.distance(pose)
+        self._last_distance = self.to_go(pose)
 
     @property
     def done(self) -> bool:
@@ -136,6 +148,14 @@ class WaypointTask:
         a = theta - pose[2]
         return math.atan2(math.sin(a), math.cos(a))
 
+    def to_go(self, pose: np.ndarray) -> float:
+        """Distance to go to the current target: ``d + turn_distance * |alpha|`` (m).
+
+        With ``turn_distance = max_speed / max_turn_rate`` this is the time a robot at its speed limits needs
+        to turn toward the target and drive there, in metres of driving.
+        """
+        return self.distance(pose) + self.turn_distance * abs(self.bearing(pose))
+
     def evaluate(
         self, pose: np.ndarray, collided: bool, clearance: float, travelled: float = 0.0, step: bool = True
     ) -> dict[str, float | bool | int]:
@@ -152,13 +172,15 @@ class WaypointTask:
         if step:
             self.steps += 1
         d = self.distance(pose)
-        progress = self._last_distance - d
+        to_go = self.to_go(pose)
+        progress = self._last_distance - to_go
         reached = False
         if not self.done and d < self.radius:
             self.index += 1
             reached = True
             d = self.distance(pose)
-        self._last_distance = d
+            to_go = self.to_go(pose)
+        self._last_distance = to_go
         success = self.done
         shortfall = max(0.0, self.safety_margin - clearance) / self.safety_margin if self.safety_margin > 0 else 0.0
         terms = {
