@@ -115,3 +115,26 @@ def test_harik_apf_gt_meets_the_default_limit_on_held_out_scenes(kwargs):
     record = run_episode(env, policy, 100_000, None)["record"]
     assert record["is_success"], record
     assert not record["truncated"]
+
+
+def test_turning_counts_as_progress_on_the_distance_to_go():
+    w = RewardWeights()
+    env = gym.make(ENV_ID, **SMALL)
+    _, info0 = env.reset(seed=0)
+    turn_distance = env.unwrapped.config.max_speed / env.unwrapped.config.max_turn_rate
+
+    def to_go(info):
+        return info["distance_to_waypoint"] + turn_distance * abs(info["bearing_to_waypoint"])
+
+    earned = 0.0
+    for _ in range(15):  # turn in place, away from the waypoint
+        _, _, _, _, info = env.step(np.array([0.0, 1.0], np.float32))
+        earned += info["reward_progress"]
+    assert abs(info["bearing_to_waypoint"]) - abs(info0["bearing_to_waypoint"]) > 0.3
+    assert earned == pytest.approx(w.progress * (to_go(info0) - to_go(info)), rel=1e-6)
+    assert earned < -0.3 * w.progress * turn_distance
+    back = 0.0
+    for _ in range(15):  # and back toward it
+        _, _, _, _, info = env.step(np.array([0.0, -1.0], np.float32))
+        back += info["reward_progress"]
+    assert back > 0.0
