@@ -190,6 +190,7 @@ class GreenhouseNavEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
     | ``sonar`` | (6,) | [0, 1] | sonar ranges / 4 m: front, left front, left rear, back, right rear, right front |
     | ``velocity`` | (2,) | [-1, 1] | achieved ``u / max_speed`` and ``r / max_turn_rate`` |
     | ``waypoint`` | (3,) | [0, 1] x [-1, 1]^2 | d / diagonal, sin(alpha), cos(alpha) from the estimated pose (1) |
+    | ``next_waypoint`` | (3,) | [0, 1] x [-1, 1]^2 | the same for the waypoint after it (the last one: itself) (1) |
     | ``target`` | (2,) | [-1, 1] | current waypoint in the robot's start frame / diagonal (2) |
     | ``scan`` | (811,) | [0, 1] | full-resolution scan / 10 m (only when ``full_scan=True``) |
 
@@ -345,8 +346,9 @@ class GreenhouseNavEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
     * v2: the crash penalty is the fixed part (now 20) plus the time penalty of the steps left, instead of
       a whole episode of time and clearance penalties; the clearance penalty is paid per metre driven inside
       the margin (6 per metre at zero clearance) instead of per step (0.05), so that stopping costs only
-      time; progress counts the heading error toward the waypoint as distance to go. With v1's penalties
-      PPO learned to stand still.
+      time; progress counts the heading error toward the waypoint as distance to go; new observation
+      ``next_waypoint`` (the route is known, so a driver can line up for the next leg). With v1's
+      penalties PPO learned to stand still.
 
     ## References
 
@@ -412,7 +414,9 @@ class GreenhouseNavEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
         if cfg.localization == "none":
             obs["target"] = spaces.Box(-1.0, 1.0, (2,), np.float32)
         else:
-            obs["waypoint"] = spaces.Box(np.array([0, -1, -1], np.float32), np.ones(3, np.float32), dtype=np.float32)
+            polar = spaces.Box(np.array([0, -1, -1], np.float32), np.ones(3, np.float32), dtype=np.float32)
+            obs["waypoint"] = polar
+            obs["next_waypoint"] = polar
         if cfg.full_scan:
             obs["scan"] = spaces.Box(0.0, 1.0, (n,), np.float32)
         self.observation_space = spaces.Dict(obs)  # type: ignore[assignment]
@@ -570,12 +574,18 @@ class GreenhouseNavEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
         if self.config.localization == "none":
             obs["target"] = np.clip(self._in_start_frame(self.task.current) / self.diagonal, -1, 1).astype(np.float32)
         else:
-            d = self.task.distance(self._estimate)
-            alpha = self.task.bearing(self._estimate)
-            obs["waypoint"] = np.array([min(1.0, d / self.diagonal), math.sin(alpha), math.cos(alpha)], np.float32)
+            obs["waypoint"] = self._polar(self.task.current)
+            obs["next_waypoint"] = self._polar(self.task.following)
         if self.config.full_scan:
             obs["scan"] = (scan / self.lidar.spec.max_range).astype(np.float32)
         return obs
+
+    def _polar(self, point: np.ndarray) -> np.ndarray:
+        """``[d / diagonal, sin(alpha), cos(alpha)]`` of ``point`` seen from the estimated pose."""
+        x, y, yaw = self._estimate
+        d = math.hypot(point[0] - x, point[1] - y)
+        alpha = math.atan2(point[1] - y, point[0] - x) - yaw
+        return np.array([min(1.0, d / self.diagonal), math.sin(alpha), math.cos(alpha)], np.float32)
 
     def _in_start_frame(self, point: np.ndarray) -> np.ndarray:
         x0, y0, th0 = self._start_pose

@@ -136,6 +136,11 @@ class WaypointTask:
         """The target being driven to (the last one once done)."""
         return self.targets[min(self.index, len(self.targets) - 1)]
 
+    @property
+    def following(self) -> np.ndarray:
+        """The target after the current one (the last one when the current is the last)."""
+        return self.targets[min(self.index + 1, len(self.targets) - 1)]
+
     def distance(self, pose: np.ndarray) -> float:
         """Distance d (eq. 2) from the robot centre to the current target (m)."""
         t = self.current
