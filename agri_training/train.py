@@ -13,6 +13,7 @@ evaluated. The keys:
 | ``vec_env`` | ``dummy`` (one process) or ``subproc`` (one process per env) |
 | ``env_kwargs`` | ``gym.make`` arguments (after the scenario's) |
 | ``wrappers`` | observation wrappers by name, innermost first (see ``learned.WRAPPERS``) |
+| ``train_wrappers`` | training-only curricula by name, inside ``wrappers`` (see ``curricula.TRAIN_WRAPPERS``) |
 | ``normalize`` | ``false`` or ``VecNormalize`` arguments (``norm_obs``, ``norm_reward``, ``clip_obs``, ...) |
 | ``algo_kwargs`` | the algorithm's arguments (``learning_rate`` may be ``lin_3e-4``: linear decay) |
 | ``policy_kwargs`` | ``net_arch``, ``activation_fn`` (a name), ... |
@@ -50,6 +51,7 @@ import yaml
 
 import agri_envs  # noqa: F401  (registers the env ids)
 from agri_envs.scenarios import scenario as get_scenario
+from agri_training.curricula import apply_train_wrappers
 from agri_training.learned import (
     ALGORITHMS,
     CONFIG_FILE,
@@ -72,6 +74,7 @@ HYPERPARAM_KEYS = (
     "vec_env",
     "env_kwargs",
     "wrappers",
+    "train_wrappers",
     "normalize",
     "algo_kwargs",
     "policy_kwargs",
@@ -221,6 +224,7 @@ def resolve_config(request: TrainRequest) -> dict[str, Any]:
         "n_envs": n_envs,
         "vec_env": vec_env,
         "wrappers": list(hp.get("wrappers", []) or []),
+        "train_wrappers": list(hp.get("train_wrappers", []) or []),
         "normalize": dict(hp["normalize"]) if hp.get("normalize") else None,
         "algo_kwargs": algo_kwargs,
         "policy_kwargs": dict(hp.get("policy_kwargs", {}) or {}),
@@ -237,11 +241,12 @@ def resolve_config(request: TrainRequest) -> dict[str, Any]:
 
 def _env_factory(config: Mapping[str, Any], rank: int) -> Callable[[], gym.Env[Any, Any]]:
     env_id, env_kwargs, wrappers = config["env_id"], dict(config["env_kwargs"]), list(config["wrappers"])
+    curricula = list(config.get("train_wrappers", []))
 
     def make() -> gym.Env[Any, Any]:
         from stable_baselines3.common.monitor import Monitor
 
-        env = apply_wrappers(gym.make(env_id, **env_kwargs), wrappers)
+        env = apply_wrappers(apply_train_wrappers(gym.make(env_id, **env_kwargs), curricula), wrappers)
         return Monitor(env, info_keywords=("is_success",))
 
     return make

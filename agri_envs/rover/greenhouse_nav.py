@@ -249,7 +249,10 @@ class GreenhouseNavEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
     start on their routes at least 3 m away. With ``layout_seed=-1`` the plant jitter, leaves and trees
     are drawn anew from the episode seed; otherwise they come from ``layout_seed`` (the same greenhouse
     every episode). ``reset(options={"growth": g, "n_trees": k, "layout_seed": s})`` overrides these
-    three scene arguments for one episode.
+    three scene arguments for one episode. ``reset(options={"start_waypoint": k})`` starts the mission at
+    waypoint k instead: the robot stands on waypoint k - 1 facing along the leg that led there (same
+    jitter), waypoints before k count as reached, and the time limit covers the rest of the route (a
+    training curriculum; evaluation always starts at 0).
 
     ## Episode End
 
@@ -439,7 +442,8 @@ class GreenhouseNavEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
         super().reset(seed=seed)
         cfg = self.config
         overrides = dict(options or {})
-        allowed = {"growth", "n_trees", "layout_seed"}
+        start_waypoint = overrides.pop("start_waypoint", 0)
+        allowed = {"growth", "n_trees", "layout_seed", "start_waypoint"}
         if set(overrides) - allowed:
             raise ValueError(f"reset options {sorted(set(overrides) - allowed)} unknown; allowed: {sorted(allowed)}")
         if overrides:
@@ -452,12 +456,17 @@ class GreenhouseNavEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
         else:
             self.layout = layout_from_map(self._map_geometry, np.asarray(cfg.waypoints))
         self.world = World2D(self.layout.geometry, n_movers=cfg.n_people)
-        start = self.layout.start_pose + self.np_random.uniform([-0.05, -0.05, -0.1], [0.05, 0.05, 0.1])
+        targets = np.tile(self.layout.targets, (cfg.mission_cycles, 1))
+        if isinstance(start_waypoint, bool) or not isinstance(start_waypoint, (int, np.integer)):
+            raise ValueError(f"reset option start_waypoint must be an int, got {start_waypoint!r}")
+        if not 0 <= start_waypoint < len(targets):
+            raise ValueError(f"reset option start_waypoint must be in [0, {len(targets) - 1}], got {start_waypoint}")
+        start_pose = self._arrival_pose(targets, int(start_waypoint))
+        start = start_pose + self.np_random.uniform([-0.05, -0.05, -0.1], [0.05, 0.05, 0.1])
         self.robot = self.world.add_robot(self.robot_spec, start)
         self.crowd = Crowd(self.world, self.layout.routes, CrowdSpec(tease_prob=cfg.people_tease_prob), cfg.n_people)
         self.crowd.reset(self.np_random, start)
-        targets = np.tile(self.layout.targets, (cfg.mission_cycles, 1))
-        self.max_episode_steps, self.time_limit_source = self._time_limit(targets)
+        self.max_episode_steps, self.time_limit_source = self._time_limit(start_pose, targets[start_waypoint:])
         self.task = WaypointTask(
             targets,
             cfg.waypoint_radius,
@@ -466,7 +475,7 @@ class GreenhouseNavEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
             self.max_episode_steps,
             turn_distance=cfg.max_speed / cfg.max_turn_rate,
         )
-        self.task.reset(start)
+        self.task.reset(start, index=int(start_waypoint))
         self._start_pose = start.copy()
         self._estimate = start.copy()
         self._gyro_bias = float(self.np_random.normal(0.0, cfg.odometry_gyro_bias)) if cfg.odometry_gyro_bias else 0.0
@@ -521,14 +530,27 @@ class GreenhouseNavEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
             self.render()
         return obs, float(outcome["reward"]), terminated, truncated, info
 
-    def _time_limit(self, targets: np.ndarray) -> tuple[int, str]:
+    def _arrival_pose(self, targets: np.ndarray, k: int) -> np.ndarray:
+        """Where the mission starts: the layout's start for ``k = 0``, else waypoint ``k - 1`` as reached.
+
+        The robot stands on waypoint ``k - 1`` facing along the leg that led there (from the start or from
+        waypoint ``k - 2``), as a driver that just reached it would.
+        """
+        assert self.layout is not None
+        if k == 0:
+            return self.layout.start_pose
+        here = targets[k - 1]
+        before = targets[k - 2] if k >= 2 else self.layout.start_pose[:2]
+        return np.array([here[0], here[1], math.atan2(here[1] - before[1], here[0] - before[0])])
+
+    def _time_limit(self, start_pose: np.ndarray, targets: np.ndarray) -> tuple[int, str]:
         """The episode's step limit and where it comes from (see Episode End)."""
         if self.explicit_max_episode_steps is not None:
             return int(self.explicit_max_episode_steps), "explicit max_episode_steps"
         cfg = self.config
         assert self.layout is not None
         steps = mission_time_limit(
-            self.layout.start_pose,
+            start_pose,
             targets,
             cfg.max_speed,
             cfg.max_turn_rate,

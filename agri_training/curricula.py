@@ -1,0 +1,70 @@
+"""Training-time curricula: wrappers that change where training episodes start, never how they are scored.
+
+They are declared in a hyperparameter block's ``train_wrappers`` (by name, like ``wrappers``) and wrap
+only the training envs: periodic evaluation, ``agri evaluate`` and the leaderboard run the plain env.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+
+
+class RandomStartWaypoint(gym.Wrapper[Any, Any, Any, Any]):
+    """Start a share of GreenhouseNav's training episodes at a random waypoint of the mission.
+
+    A long waypoint mission shows a learner its later legs (and the turns between them) only once it masters
+    the earlier ones; starting some episodes on the way (``reset(options={"start_waypoint": k})``, the
+    robot standing on waypoint k - 1 as if it had just reached it) shows every leg from the start.
+
+    Args:
+        env: A GreenhouseNav env (anything whose reset takes the ``start_waypoint`` option).
+        prob: Share of the episodes that start at a waypoint drawn uniformly from 1 .. n - 1, in [0, 1].
+    """
+
+    def __init__(self, env: gym.Env[Any, Any], prob: float = 0.5) -> None:
+        if not 0.0 <= prob <= 1.0:
+            raise ValueError(f"RandomStartWaypoint: prob must be in [0, 1], got {prob}")
+        super().__init__(env)
+        self.prob = prob
+        self._rng = np.random.default_rng(0)
+        self._n_targets = 0
+
+    def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None) -> tuple[Any, dict[str, Any]]:
+        """Reset, at a random waypoint with probability ``prob`` (once the mission's length is known)."""
+        if seed is not None:
+            self._rng = np.random.default_rng([seed, 1])
+        options = dict(options or {})
+        if "start_waypoint" not in options and self._n_targets > 1 and self._rng.random() < self.prob:
+            options["start_waypoint"] = int(self._rng.integers(1, self._n_targets))
+        obs, info = self.env.reset(seed=seed, options=options or None)
+        self._n_targets = int(info["n_waypoints"])
+        return obs, info
+
+
+#: Training wrappers a config may declare (by name; nothing is imported from a string).
+TRAIN_WRAPPERS: dict[str, type[gym.Wrapper[Any, Any, Any, Any]]] = {"RandomStartWaypoint": RandomStartWaypoint}
+
+
+def apply_train_wrappers(env: gym.Env[Any, Any], wrappers: Sequence[str | Mapping[str, Any]]) -> gym.Env[Any, Any]:
+    """Wrap ``env`` in the declared training wrappers, innermost first (names from :data:`TRAIN_WRAPPERS`).
+
+    Raises:
+        ValueError: For a wrapper that is not in :data:`TRAIN_WRAPPERS`, or a malformed entry.
+    """
+    for item in wrappers:
+        kwargs: dict[str, Any] = {}
+        if isinstance(item, str):
+            name = item
+        elif isinstance(item, Mapping) and len(item) == 1:
+            name, given = next(iter(item.items()))
+            kwargs = dict(given or {})
+        else:
+            raise ValueError(f"a training wrapper is a name or a one-key mapping {{name: kwargs}}, got {item!r}")
+        if name not in TRAIN_WRAPPERS:
+            raise ValueError(f"training wrapper {name!r} is not allowed; allowed: {', '.join(TRAIN_WRAPPERS)}")
+        env = TRAIN_WRAPPERS[name](env, **kwargs)
+    return env
