@@ -1,0 +1,74 @@
+"""Training curricula: GreenhouseNav's start_waypoint reset option and the RandomStartWaypoint wrapper."""
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+import agri_envs  # noqa: F401
+from agri_training.curricula import RandomStartWaypoint, apply_train_wrappers
+
+ENV_ID = "agri_envs/GreenhouseNav-v2"
+
+
+def test_start_waypoint_places_the_robot_on_the_previous_waypoint():
+    env = gym.make(ENV_ID)
+    _, info0 = env.reset(seed=3)
+    targets = env.unwrapped.task.targets.copy()
+    for k in (1, 2, 5, len(targets) - 1):
+        _, info = env.reset(seed=3, options={"start_waypoint": k})
+        assert info["waypoint_index"] == k and info["waypoints_reached"] == k
+        assert np.hypot(info["x"] - targets[k - 1][0], info["y"] - targets[k - 1][1]) < 0.08
+        before = targets[k - 2] if k >= 2 else env.unwrapped.layout.start_pose[:2]
+        heading = np.arctan2(*(targets[k - 1] - before)[::-1])
+        assert abs(np.angle(np.exp(1j * (info["yaw"] - heading)))) <= 0.1 + 1e-9
+        assert info["max_episode_steps"] < info0["max_episode_steps"]
+    # The default start is unchanged by the option's existence.
+    a, ia = env.reset(seed=3)
+    b, ib = env.reset(seed=3, options={"start_waypoint": 0})
+    assert all(np.array_equal(a[key], b[key]) for key in a) and ia["x"] == ib["x"]
+
+
+def test_a_late_start_can_finish_the_mission():
+    env = gym.make(ENV_ID, n_people=0)
+    n = len(env.unwrapped.layout.targets) if env.unwrapped.layout is not None else 8
+    _, info = env.reset(seed=0, options={"start_waypoint": n - 1})
+    task = env.unwrapped.task
+    assert not task.done
+    # Drive straight at the last waypoint: reaching it ends the episode with success.
+    for _ in range(400):
+        b = info["bearing_to_waypoint"]
+        _, _, term, trunc, info = env.step(np.array([1.0 if abs(b) < 0.3 else 0.0, np.clip(2 * b, -1, 1)], np.float32))
+        if term or trunc:
+            break
+    assert info["is_success"] and not info["collision"]
+
+
+@pytest.mark.parametrize("bad", [-1, 8, 2.5, "1", True])
+def test_bad_start_waypoint(bad):
+    env = gym.make(ENV_ID)
+    with pytest.raises(ValueError, match="start_waypoint"):
+        env.reset(seed=0, options={"start_waypoint": bad})
+
+
+def test_random_start_waypoint_is_seeded_and_respects_prob():
+    def starts(prob, seed):
+        env = RandomStartWaypoint(gym.make(ENV_ID, n_people=0), prob=prob)
+        out = [env.reset(seed=seed)[1]["waypoint_index"]]
+        out += [env.reset()[1]["waypoint_index"] for _ in range(11)]
+        return out
+
+    assert starts(0.0, 0) == [0] * 12
+    always = starts(1.0, 0)
+    assert always[0] == 0 and all(1 <= k <= 7 for k in always[1:]) and len(set(always[1:])) > 2
+    assert starts(0.5, 4) == starts(0.5, 4)
+    half = starts(0.5, 4)
+    assert 0 in half[1:] and any(k > 0 for k in half)
+
+
+def test_train_wrappers_are_allow_listed():
+    env = gym.make(ENV_ID)
+    assert isinstance(apply_train_wrappers(env, [{"RandomStartWaypoint": {"prob": 0.3}}]), RandomStartWaypoint)
+    with pytest.raises(ValueError, match="not allowed"):
+        apply_train_wrappers(env, ["TimeLimit"])
+    with pytest.raises(ValueError, match="prob"):
+        RandomStartWaypoint(env, prob=1.5)
