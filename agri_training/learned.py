@@ -50,6 +50,54 @@ WEIGHTS_FILE = "policy.pt"
 NORMALIZE_FILE = "normalize.json"
 
 
+class ActionRepeat(gym.Wrapper[Any, Any, Any, Any]):
+    """Apply each action for ``repeat`` env steps (a policy acting at 1 / repeat of the env's rate).
+
+    The reward is the sum over the held steps; the episode ends as soon as one of them ends it.
+    """
+
+    def __init__(self, env: gym.Env[Any, Any], repeat: int) -> None:
+        if repeat < 1:
+            raise ValueError(f"action_repeat must be >= 1, got {repeat}")
+        super().__init__(env)
+        self.repeat = repeat
+
+    def step(self, action: Any) -> tuple[Any, float, bool, bool, dict[str, Any]]:
+        """Step the env up to ``repeat`` times with ``action``."""
+        total = 0.0
+        for _ in range(self.repeat):
+            obs, reward, terminated, truncated, info = self.env.step(action)
+            total += float(reward)
+            if terminated or truncated:
+                break
+        return obs, total, terminated, truncated, info
+
+
+class HeldActions:
+    """The evaluation side of :class:`ActionRepeat`: ask the network every ``repeat`` steps, hold its action.
+
+    ``episode_start`` (as the evaluator passes it) restarts the count, so episode i is driven the same way
+    whatever ran before it.
+    """
+
+    def __init__(self, repeat: int) -> None:
+        if repeat < 1:
+            raise ValueError(f"action_repeat must be >= 1, got {repeat}")
+        self.repeat = repeat
+        self._count = 0
+        self._held: tuple[np.ndarray, Any] | None = None
+
+    def __call__(self, decide: Any, episode_start: Any) -> tuple[np.ndarray, Any]:
+        """The held action, or ``decide()`` when it is time for a new one."""
+        if episode_start is not None and bool(np.asarray(episode_start).any()):
+            self._count = 0
+        if self._held is None or self._count % self.repeat == 0:
+            self._held = decide()
+        self._count += 1
+        assert self._held is not None
+        return self._held
+
+
 class UnsafeCheckpointError(ValueError):
     """A checkpoint that can only be read by unpickling it (which could run arbitrary code)."""
 
@@ -311,6 +359,7 @@ class LearnedPolicy:
         self.model.policy.set_training_mode(False)
         norm = folder / NORMALIZE_FILE
         self.normalization = ObsNormalization.from_json(json.loads(norm.read_text())) if norm.is_file() else None
+        self._hold = HeldActions(int(self.config.get("action_repeat", 1)))
 
     def transform(self, observation: Any) -> Any:
         """The raw env observation as the network saw it in training (wrappers, then normalisation)."""
@@ -327,8 +376,14 @@ class LearnedPolicy:
         episode_start: np.ndarray | None = None,
         deterministic: bool = True,
     ) -> tuple[np.ndarray, Any]:
-        """SB3's ``predict`` on the env's raw (unwrapped, unnormalised) observation."""
-        return self.model.predict(self.transform(observation), state, episode_start, deterministic)  # type: ignore[no-any-return]
+        """SB3's ``predict`` on the env's raw (unwrapped, unnormalised) observation.
+
+        A run trained with ``action_repeat`` k holds each action for k calls, as in training.
+        """
+        return self._hold(
+            lambda: self.model.predict(self.transform(observation), state, episode_start, deterministic),
+            episode_start,
+        )
 
 
 def zoo_path(name: str) -> Path:

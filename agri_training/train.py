@@ -13,6 +13,7 @@ evaluated. The keys:
 | ``vec_env`` | ``dummy`` (one process) or ``subproc`` (one process per env) |
 | ``env_kwargs`` | ``gym.make`` arguments (after the scenario's) |
 | ``wrappers`` | observation wrappers by name, innermost first (see ``learned.WRAPPERS``) |
+| ``action_repeat`` | env steps per action (1: every step); evaluation holds actions the same way |
 | ``train_wrappers`` | training-only curricula by name, inside ``wrappers`` (see ``curricula.TRAIN_WRAPPERS``) |
 | ``normalize`` | ``false`` or ``VecNormalize`` arguments (``norm_obs``, ``norm_reward``, ``clip_obs``, ...) |
 | ``algo_kwargs`` | the algorithm's arguments (``learning_rate`` may be ``lin_3e-4``: linear decay) |
@@ -57,6 +58,8 @@ from agri_training.learned import (
     CONFIG_FILE,
     NORMALIZE_FILE,
     WEIGHTS_FILE,
+    ActionRepeat,
+    HeldActions,
     ObsNormalization,
     algorithm_class,
     apply_wrappers,
@@ -75,6 +78,7 @@ HYPERPARAM_KEYS = (
     "env_kwargs",
     "wrappers",
     "train_wrappers",
+    "action_repeat",
     "normalize",
     "algo_kwargs",
     "policy_kwargs",
@@ -225,6 +229,7 @@ def resolve_config(request: TrainRequest) -> dict[str, Any]:
         "vec_env": vec_env,
         "wrappers": list(hp.get("wrappers", []) or []),
         "train_wrappers": list(hp.get("train_wrappers", []) or []),
+        "action_repeat": int(hp.get("action_repeat", 1)),
         "normalize": dict(hp["normalize"]) if hp.get("normalize") else None,
         "algo_kwargs": algo_kwargs,
         "policy_kwargs": dict(hp.get("policy_kwargs", {}) or {}),
@@ -242,11 +247,13 @@ def resolve_config(request: TrainRequest) -> dict[str, Any]:
 def _env_factory(config: Mapping[str, Any], rank: int) -> Callable[[], gym.Env[Any, Any]]:
     env_id, env_kwargs, wrappers = config["env_id"], dict(config["env_kwargs"]), list(config["wrappers"])
     curricula = list(config.get("train_wrappers", []))
+    repeat = int(config.get("action_repeat", 1))
 
     def make() -> gym.Env[Any, Any]:
         from stable_baselines3.common.monitor import Monitor
 
-        env = apply_wrappers(apply_train_wrappers(gym.make(env_id, **env_kwargs), curricula), wrappers)
+        env = apply_train_wrappers(gym.make(env_id, **env_kwargs), curricula)
+        env = apply_wrappers(ActionRepeat(env, repeat) if repeat > 1 else env, wrappers)
         return Monitor(env, info_keywords=("is_success",))
 
     return make
@@ -270,10 +277,11 @@ def make_vec_env(config: Mapping[str, Any]) -> Any:
 class _LivePolicy:
     """The policy being trained, driving a raw env through the training wrappers and current statistics."""
 
-    def __init__(self, model: Any, env: gym.Env[Any, Any], wrappers: list[Any]) -> None:
+    def __init__(self, model: Any, env: gym.Env[Any, Any], wrappers: list[Any], action_repeat: int = 1) -> None:
         self.model = model
         _, self._chain = observation_chain(env, wrappers)
         self.normalization: ObsNormalization | None = None
+        self._hold = HeldActions(action_repeat)
 
     def predict(
         self, observation: Any, state: Any = None, episode_start: Any = None, deterministic: bool = True
@@ -282,7 +290,7 @@ class _LivePolicy:
             observation = w.observation(observation)
         if self.normalization is not None:
             observation = self.normalization.normalize(observation)
-        return self.model.predict(observation, state, episode_start, deterministic)  # type: ignore[no-any-return]
+        return self._hold(lambda: self.model.predict(observation, state, episode_start, deterministic), episode_start)
 
 
 def save_weights(model: Any, folder: Path) -> None:
@@ -319,7 +327,7 @@ def _make_callback(config: Mapping[str, Any], run_dir: Path, progress: bool) -> 
 
         def _on_training_start(self) -> None:
             self.eval_env = gym.make(config["env_id"], **config["env_kwargs"])
-            self.live = _LivePolicy(self.model, self.eval_env, config["wrappers"])
+            self.live = _LivePolicy(self.model, self.eval_env, config["wrappers"], config["action_repeat"])
             if progress:
                 from tqdm import tqdm
 
