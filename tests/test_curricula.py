@@ -72,3 +72,40 @@ def test_train_wrappers_are_allow_listed():
         apply_train_wrappers(env, ["TimeLimit"])
     with pytest.raises(ValueError, match="prob"):
         RandomStartWaypoint(env, prob=1.5)
+
+
+def test_action_repeat_sums_the_held_steps_and_stops_at_the_end():
+    from agri_training.learned import ActionRepeat
+
+    plain = gym.make(ENV_ID, n_people=0)
+    held = ActionRepeat(gym.make(ENV_ID, n_people=0), 4)
+    plain.reset(seed=2)
+    held.reset(seed=2)
+    action = np.array([1.0, 0.2], np.float32)
+    for _ in range(3):
+        rewards = [plain.step(action)[1] for _ in range(4)]
+        obs, reward, *_ = held.step(action)
+        assert reward == pytest.approx(sum(rewards))
+    assert held.unwrapped.task.steps == plain.unwrapped.task.steps == 12
+    crash = ActionRepeat(gym.make(ENV_ID, n_rows=1, row_length=3.0, n_people=0), 1000)
+    crash.reset(seed=0)
+    _, _, term, _, info = crash.step(np.array([1.0, 0.3], np.float32))  # into the row: ends at the contact
+    assert term and info["collision"] and crash.unwrapped.task.steps < 1000
+    with pytest.raises(ValueError, match="action_repeat"):
+        ActionRepeat(plain, 0)
+
+
+def test_held_actions_ask_every_k_steps_and_restart_with_the_episode():
+    from agri_training.learned import HeldActions
+
+    hold = HeldActions(3)
+    calls = []
+
+    def decide():
+        calls.append(len(calls))
+        return np.array([float(len(calls))]), None
+
+    out = [hold(decide, np.array([i == 0]))[0][0] for i in range(7)]
+    assert out == [1, 1, 1, 2, 2, 2, 3]
+    assert hold(decide, np.array([True]))[0][0] == 4  # a new episode asks at once
+    assert HeldActions(1)(decide, None)[0][0] == 5
