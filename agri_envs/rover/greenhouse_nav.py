@@ -107,7 +107,7 @@ class GreenhouseNavConfig(StrictConfig):
     reward_clearance: float = param(
         6.0, "penalty per metre driven at zero clearance (linear in shortfall)", low=0.0, high=100.0
     )
-    reward_time: float = param(0.002, "penalty per step", low=0.0, high=10.0)
+    reward_time: float = param(0.01, "penalty per step", low=0.0, high=10.0)
     time_limit_speed_fraction: float = param(
         0.5, "time limit: mission at this fraction of speed limits", low=0.05, high=1.0
     )
@@ -323,7 +323,7 @@ class GreenhouseNavEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
     | ``reward_success`` | 10 |  | in [0.0, 1000.0] | bonus when the mission is complete |
     | ``reward_collision`` | 20 |  | in [0.0, 1000.0] | fixed part of the crash penalty (see Rewards) |
     | ``reward_clearance`` | 6 |  | in [0.0, 100.0] | penalty per metre driven at zero clearance (linear in shortfall) |
-    | ``reward_time`` | 0.002 |  | in [0.0, 10.0] | penalty per step |
+    | ``reward_time`` | 0.01 |  | in [0.0, 10.0] | penalty per step |
     | ``time_limit_speed_fraction`` | 0.5 |  | in [0.05, 1.0] | time limit: mission at this fraction of speed limits |
     | ``time_limit_wait`` | 6 | s | in [0.0, 120.0] | default time limit: extra time per person per mission cycle |
     | ``render_width`` | 800 | px | in [100, 4000] | width of rendered frames |

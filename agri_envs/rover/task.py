@@ -32,7 +32,7 @@ class RewardWeights:
     success: float = 10.0
     collision: float = 20.0
     clearance: float = 6.0
-    time: float = 0.002
+    time: float = 0.01
 
     def collision_cost(self, steps_left: int) -> float:
         """The penalty of a crash with ``steps_left`` steps to go before the time limit.
