@@ -227,7 +227,7 @@ class GreenhouseNavEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
     * **A crash always costs more than any way of avoiding it.** The cheapest way to avoid a crash is to
       stop and wait: a robot that stands still drives no metres, so it pays only the time penalty of the
       steps left. The crash costs exactly that plus a fixed 20, whatever the mission, its time limit and
-      the moment of the crash (20 + 4.9 at the start of the default mission). In v1 the crash also carried
+      the moment of the crash (20 + 24.6 at the start of the default mission). In v1 the crash also carried
       a whole episode of clearance penalty (137.7 on the default scene); PPO then learned to stand still
       in three 1.2M-step runs.
     * **Safety margins matter.** Inside ``safety_margin`` (0.25 m, about half the free space on either
@@ -238,10 +238,12 @@ class GreenhouseNavEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
     * **Progress drives the task.** 3 per metre of distance to go (a potential difference, so driving or
       turning back and forth earns nothing; with distance alone, PPO stopped at the first waypoint, where
       the next one lies 90 deg to the side and turning earned nothing), 1 per waypoint and 10 for the
-      whole mission: the default loop returns about 128 when driven well (with 1 per metre PPO learned to
+      whole mission: the default loop returns about 129 when driven well (with 1 per metre PPO learned to
       stand still).
-    * **Time is a tie-breaker.** 0.002 per step (4.9 for a whole default episode): enough to prefer the
-      faster of two safe paths, never enough to make a crash attractive (see the first point).
+    * **Waiting costs.** 0.01 per step (24.6 over the default time limit): a twelfth of what a step at full
+      speed earns (0.12), enough that standing still is a place to wait for a person to step aside, never
+      to rest (at 0.002 per step PPO stopped for good at the first hard turn in six runs); a crash still
+      costs 20 more than waiting out the limit (see the first point).
 
     ## Starting State
 
@@ -349,7 +351,8 @@ class GreenhouseNavEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
     * v2: the crash penalty is the fixed part (now 20) plus the time penalty of the steps left, instead of
       a whole episode of time and clearance penalties; the clearance penalty is paid per metre driven inside
       the margin (6 per metre at zero clearance) instead of per step (0.05), so that stopping costs only
-      time; progress counts the heading error toward the waypoint as distance to go; new observation
+      time; the time penalty rose from 0.002 to 0.01 per step; progress counts the heading error toward
+      the waypoint as distance to go; new observation
       ``next_waypoint`` (the route is known, so a driver can line up for the next leg). With v1's
       penalties PPO learned to stand still.
 
