@@ -1,4 +1,6 @@
-"""Training-time curricula: wrappers that change where training episodes start, never how they are scored.
+"""Training-time curricula: wrappers that change where training episodes start or what a crash costs early on.
+
+Evaluation never sees them.
 
 They are declared in a hyperparameter block's ``train_wrappers`` (by name, like ``wrappers``) and wrap
 only the training envs: periodic evaluation, ``agri evaluate`` and the leaderboard run the plain env.
@@ -45,8 +47,48 @@ class RandomStartWaypoint(gym.Wrapper[Any, Any, Any, Any]):
         return obs, info
 
 
+class CrashCostRamp(gym.Wrapper[Any, Any, Any, Any]):
+    """Phase a crash's penalty in over the first part of training: cheap crashes first, the env's cost later.
+
+    A learner whose first random drives end in a crash that costs more than idling to the time limit learns
+    to stand still before it learns to steer. This wrapper gives back part of each crash's penalty: the
+    share charged grows linearly from ``start`` to 1 over this env's first ``ramp_steps`` steps, after which
+    the env's reward is unchanged. It reads the penalty from ``info["reward_collision"]`` (GreenhouseNav).
+
+    Args:
+        env: The training env.
+        start: Share of the crash penalty charged at first, in [0, 1].
+        ramp_steps: Env steps (of this env copy) over which the share reaches 1, >= 1.
+    """
+
+    def __init__(self, env: gym.Env[Any, Any], start: float = 0.1, ramp_steps: int = 400_000) -> None:
+        if not 0.0 <= start <= 1.0:
+            raise ValueError(f"CrashCostRamp: start must be in [0, 1], got {start}")
+        if ramp_steps < 1:
+            raise ValueError(f"CrashCostRamp: ramp_steps must be >= 1, got {ramp_steps}")
+        super().__init__(env)
+        self.start = start
+        self.ramp_steps = ramp_steps
+        self.steps = 0
+
+    @property
+    def share(self) -> float:
+        """The share of the crash penalty charged now."""
+        return self.start + (1.0 - self.start) * min(1.0, self.steps / self.ramp_steps)
+
+    def step(self, action: Any) -> tuple[Any, float, bool, bool, dict[str, Any]]:
+        """Step the env; refund ``1 - share`` of a crash's penalty."""
+        obs, reward, terminated, truncated, info = self.env.step(action)
+        self.steps += 1
+        penalty = -float(info.get("reward_collision", 0.0))
+        return obs, float(reward) + (1.0 - self.share) * penalty, terminated, truncated, info
+
+
 #: Training wrappers a config may declare (by name; nothing is imported from a string).
-TRAIN_WRAPPERS: dict[str, type[gym.Wrapper[Any, Any, Any, Any]]] = {"RandomStartWaypoint": RandomStartWaypoint}
+TRAIN_WRAPPERS: dict[str, type[gym.Wrapper[Any, Any, Any, Any]]] = {
+    "RandomStartWaypoint": RandomStartWaypoint,
+    "CrashCostRamp": CrashCostRamp,
+}
 
 
 def apply_train_wrappers(env: gym.Env[Any, Any], wrappers: Sequence[str | Mapping[str, Any]]) -> gym.Env[Any, Any]:
