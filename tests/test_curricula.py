@@ -109,3 +109,26 @@ def test_held_actions_ask_every_k_steps_and_restart_with_the_episode():
     assert out == [1, 1, 1, 2, 2, 2, 3]
     assert hold(decide, np.array([True]))[0][0] == 4  # a new episode asks at once
     assert HeldActions(1)(decide, None)[0][0] == 5
+
+
+def test_crash_cost_ramp_refunds_a_shrinking_share_of_the_crash():
+    from agri_training.curricula import CrashCostRamp
+
+    def crash(env):
+        env.reset(seed=0)
+        while True:
+            _, reward, term, trunc, info = env.step(np.array([1.0, 0.3], np.float32))  # into the row
+            if term or trunc:
+                return reward, info
+
+    small = {"n_rows": 1, "row_length": 3.0, "n_people": 0}
+    plain_reward, info = crash(gym.make(ENV_ID, **small))
+    ramp = CrashCostRamp(gym.make(ENV_ID, **small), start=0.25, ramp_steps=10_000)
+    reward, _ = crash(ramp)
+    share = 0.25 + 0.75 * ramp.steps / 10_000
+    assert ramp.share == pytest.approx(share)
+    assert reward == pytest.approx(plain_reward + (1 - share) * -info["reward_collision"])
+    done = CrashCostRamp(gym.make(ENV_ID, **small), start=0.25, ramp_steps=1)
+    assert crash(done)[0] == pytest.approx(plain_reward)  # after the ramp: the env's own reward
+    with pytest.raises(ValueError, match="start"):
+        CrashCostRamp(gym.make(ENV_ID, **small), start=2.0)
