@@ -491,8 +491,12 @@ class ApoorvaChainPolicy:
             # (the paper's own reading, kept): the controller then drives on and turns with the residual
             # force, sliding round the obstacle. A push along the robot's y axis instead turns with the
             # robot and only spins it in place (11/20 on seeds 100000-100019 against 20/20).
-            if near and wants and not waiting and self._escape_left[k] == 0 and (
-                moved[k] < p.stuck_distance or math.hypot(*force) < p.escape_below
+            if (
+                near
+                and wants
+                and not waiting
+                and self._escape_left[k] == 0
+                and (moved[k] < p.stuck_distance or math.hypot(*force) < p.escape_below)
             ):
                 self._escape_left[k] = p.escape_steps
             if self._escape_left[k] > 0:
