@@ -323,6 +323,9 @@ class ApoorvaParams:
         escape_ghost_distance: The leader counts as wanting to move (and so as stuck when it does not)
             while its ghost is farther than this (m).
         lookahead: Followers aim this far ahead of themselves along their predecessor's trail (m).
+        trail_window: A follower's place on its predecessor's trail is searched only this far (m) ahead of
+            its last place, so it never jumps to a later stretch of the trail that runs past it on the far
+            side of a wall (the trail through a door and back along the corridor).
         leader_wait: Relative gain of the follower's pull on the leader (Alg. 4b).
     """
 
@@ -345,10 +348,11 @@ class ApoorvaParams:
     escape_steps: int = 30
     escape_ghost_distance: float = 0.25
     lookahead: float = 0.45
+    trail_window: float = 1.0
     leader_wait: float = 0.5
 
     def __post_init__(self) -> None:
-        for name in ("epsilon", "d_star", "q_star", "d_s", "delta", "kp_v", "kp_w"):
+        for name in ("epsilon", "d_star", "q_star", "d_s", "delta", "kp_v", "kp_w", "trail_window"):
             if not getattr(self, name) > 0:
                 raise ValueError(f"ApoorvaParams: {name} must be > 0, got {getattr(self, name)}")
         if self.delta <= self.d_s:
@@ -417,6 +421,8 @@ class ApoorvaChainPolicy:
         self.params = params or default_params(raw.config)
         self.use_strip = use_strip
         self.trails: dict[str, list[np.ndarray]] = {}
+        self._trail_s: dict[str, list[float]] = {}
+        self._progress: dict[str, float] = {}
         self._history: np.ndarray | None = None
         self._steps = 0
         self._escape_left = np.zeros(0, dtype=np.int64)
@@ -424,6 +430,8 @@ class ApoorvaChainPolicy:
     def reset(self) -> None:
         """Forget the recorded trails and the escape state (a new episode)."""
         self.trails = {}
+        self._trail_s = {}
+        self._progress = {}
         self._history = None
         self._steps = 0
 
@@ -449,10 +457,14 @@ class ApoorvaChainPolicy:
         rel_pred = obs[:, spec["predecessor"]] * spec["rel_scale"]
         for k, a in enumerate(agents):
             trail = self.trails.setdefault(a, [])
-            if not trail or math.hypot(*(trail[-1] - xy[k])) > 0.02:
+            trail_s = self._trail_s.setdefault(a, [])
+            step = math.hypot(*(trail[-1] - xy[k])) if trail else 0.0
+            if not trail or step > 0.02:
+                trail_s.append(trail_s[-1] + step if trail_s else 0.0)
                 trail.append(xy[k].copy())
                 if len(trail) > 400:
                     del trail[:200]
+                    del trail_s[:200]
         moved = self._displacement(xy)
         strip = strip_forces(xy, p.strip_gain, p.strip_max) if self.use_strip and n >= 3 else np.zeros((n, 2))
         angles = spec["sonar_angles"]
@@ -474,7 +486,7 @@ class ApoorvaChainPolicy:
                 wants = math.hypot(rx, ry) > p.escape_ghost_distance
             else:
                 # Alg. 5 (attraction to q_{i-1}, the printed q_2 is a slip), along q_{i-1}'s own trail.
-                target = self._trail_target(agents[k - 1], xy[k - 1], xy[k])
+                target = self._trail_target(agents[k - 1], a, xy[k - 1], xy[k])
                 force = spacing_force(xy[k], xy[k - 1], p.d_s, 0.0, p.eta_rep) + rep
                 if target is not None:
                     pull = p.spacing_gain * attractive_force(xy[k], target, p.epsilon, p.d_star)
@@ -524,24 +536,34 @@ class ApoorvaChainPolicy:
         self._steps += 1
         return moved
 
-    def _trail_target(self, agent: str, position: np.ndarray, me: np.ndarray) -> np.ndarray | None:
+    def _trail_target(self, agent: str, follower: str, position: np.ndarray, me: np.ndarray) -> np.ndarray | None:
         """Where a follower aims on its predecessor's recorded trail (sec. 8: "fetching its previous position").
 
-        The follower's nearest trail point, moved ``lookahead`` metres on along the trail but never closer
-        than ``d_s`` (along the trail) to the predecessor; None when the follower is already that close.
+        The follower's place on the trail (its nearest point, searched from its last place up to
+        ``trail_window`` ahead), moved ``lookahead`` metres on along the trail but never closer than ``d_s``
+        (along the trail) to the predecessor; None when the follower is already that close.
+
+        Args:
+            agent: The predecessor, whose trail is followed.
+            follower: The follower (its place on the trail is remembered).
+            position: The predecessor's position now.
+            me: The follower's position.
         """
         p = self.params
         trail = self.trails.get(agent)
         if not trail:
             return None
         pts = np.vstack([np.array(trail), position[None, :]])
-        seg = np.hypot(*np.diff(pts, axis=0).T)
-        cum = np.concatenate([[0.0], np.cumsum(seg)])
-        near = int(np.argmin(np.hypot(pts[:, 0] - me[0], pts[:, 1] - me[1])))
-        s_target = min(cum[near] + p.lookahead, cum[-1] - p.d_s)
-        if s_target <= cum[near]:
+        s0 = self._trail_s[agent][0]
+        line = Polyline(pts)
+        last = self._progress.get(follower)
+        lo, hi = (0.0, line.length) if last is None else (max(0.0, last - s0), last - s0 + p.trail_window)
+        here = line.project(me, lo, min(hi, line.length)) if line.length > 0 else 0.0
+        self._progress[follower] = s0 + here
+        s_target = min(here + p.lookahead, line.length - p.d_s)
+        if s_target <= here:
             return None
-        return Polyline(pts).at(float(s_target)) if len(pts) > 1 else None
+        return line.at(float(s_target))
 
 
 def make_apoorva_chain(env: Any) -> ApoorvaChainPolicy:
