@@ -140,3 +140,21 @@ def test_previously_failing_office_seeds_now_succeed(seed):
     (info,) = _run("apoorva-chain", [seed], n_robots=4, scene="office", n_dynamic_obstacles=1)
     assert info["is_success"], {k: info[k] for k in ("leader_at_goal", "chain_intact", "collisions", "path_ratio")}
     assert info["max_gap"] <= 1.2
+
+
+def test_follower_keeps_its_place_on_the_trail_across_a_wall():
+    # The predecessor went up one side of a wall and came back down the other (through a door at the top).
+    # A follower nearer to the far leg must still aim along the near leg, not through the wall.
+    policy = ac.ApoorvaChainPolicy(robot_chain_v0.parallel_env(n_robots=2))
+    p = policy.params
+    trail = [np.array([0.0, y]) for y in np.arange(0.0, 3.0, 0.05)]
+    trail += [np.array([x, 3.0]) for x in np.arange(0.0, 1.0, 0.05)]
+    trail += [np.array([1.0, y]) for y in np.arange(3.0, 0.5, -0.05)]
+    policy.trails["robot_0"] = trail
+    policy._trail_s["robot_0"] = list(np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(trail, axis=0).T))]))
+    now = np.array([1.0, 0.5])
+    first = policy._trail_target("robot_0", "robot_1", now, np.array([0.05, 0.2]))
+    np.testing.assert_allclose(first, [0.0, 0.2 + p.lookahead], atol=1e-6)
+    target = policy._trail_target("robot_0", "robot_1", now, np.array([0.6, 0.5]))
+    assert target is not None
+    np.testing.assert_allclose(target, [0.0, 0.5 + p.lookahead], atol=1e-6)
