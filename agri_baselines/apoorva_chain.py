@@ -6,8 +6,8 @@ The pure parts (no Gymnasium, no PettingZoo):
   (sec. 4.4: pseudo speed ``v_F``, back speed ``v_B``, leash ``eta``, patience ``T``);
 * :func:`attractive_force` (eq. 2) and :func:`sonar_repulsion` (eq. 4 with the sonar form of Alg. 3);
 * :func:`leader_force` (Alg. 4), :func:`follower_force` (Alg. 5), :func:`strip_forces` (Alg. 6);
-* :func:`force_to_command`: the proportional controller of Alg. 2, with the equipotential escape of
-  sec. 6.1 (a small tangential push when the forces cancel).
+* :func:`force_to_command`: the proportional controller of Alg. 2; the policy adds the equipotential
+  escape of sec. 6.1 (a small push along the robot's x axis once a robot stays put short of its target).
 
 :class:`ApoorvaChainPolicy` puts them together as one multi-agent policy whose ``predict`` takes and
 returns per-agent dicts (the central system of sec. 6.2 computes every robot's command).
