@@ -6,8 +6,8 @@ The pure parts (no Gymnasium, no PettingZoo):
   (sec. 4.4: pseudo speed ``v_F``, back speed ``v_B``, leash ``eta``, patience ``T``);
 * :func:`attractive_force` (eq. 2) and :func:`sonar_repulsion` (eq. 4 with the sonar form of Alg. 3);
 * :func:`leader_force` (Alg. 4), :func:`follower_force` (Alg. 5), :func:`strip_forces` (Alg. 6);
-* :func:`force_to_command`: the proportional controller of Alg. 2, with the equipotential escape of
-  sec. 6.1 (a small tangential push when the forces cancel).
+* :func:`force_to_command`: the proportional controller of Alg. 2; the policy adds the equipotential
+  escape of sec. 6.1 (a small push along the robot's x axis once a robot stays put short of its target).
 
 :class:`ApoorvaChainPolicy` puts them together as one multi-agent policy whose ``predict`` takes and
 returns per-agent dicts (the central system of sec. 6.2 computes every robot's command).
@@ -312,9 +312,20 @@ class ApoorvaParams:
         strip_max: Cap on the strip force.
         kp_v: ``k_p^1`` of Alg. 2 (1/s): speed per metre of ``d(q, q')``.
         kp_w: ``k_p^2`` of Alg. 2 (1/s): turn rate per radian of heading error.
-        escape: Size of the tangential push that leaves an equipotential point (sec. 6.1).
+        escape: Size of the push along the robot's x axis (its heading) that leaves an equipotential region
+            (sec. 6.1).
         escape_below: Net force size under which the robot counts as stuck in an equipotential region.
+        stuck_window: Control steps over which a robot that wants to move but moves less than
+            ``stuck_distance`` counts as caught in an equipotential region (the forces cancel on average
+            while the sonar cones swing with the heading, so the net force alone rarely drops to zero).
+        stuck_distance: See ``stuck_window`` (m).
+        escape_steps: Control steps the push lasts once triggered.
+        escape_ghost_distance: The leader counts as wanting to move (and so as stuck when it does not)
+            while its ghost is farther than this (m).
         lookahead: Followers aim this far ahead of themselves along their predecessor's trail (m).
+        trail_window: A follower's place on its predecessor's trail is searched only this far (m) ahead of
+            its last place, so it never jumps to a later stretch of the trail that runs past it on the far
+            side of a wall (the trail through a door and back along the corridor).
         leader_wait: Relative gain of the follower's pull on the leader (Alg. 4b).
     """
 
@@ -332,8 +343,42 @@ class ApoorvaParams:
     kp_w: float = 2.5
     escape: float = 0.15
     escape_below: float = 0.05
+    stuck_window: int = 20
+    stuck_distance: float = 0.05
+    escape_steps: int = 30
+    escape_ghost_distance: float = 0.25
     lookahead: float = 0.45
+    trail_window: float = 1.0
     leader_wait: float = 0.5
+
+    def __post_init__(self) -> None:
+        for name in ("epsilon", "d_star", "q_star", "d_s", "delta", "kp_v", "kp_w", "trail_window"):
+            if not getattr(self, name) > 0:
+                raise ValueError(f"ApoorvaParams: {name} must be > 0, got {getattr(self, name)}")
+        if self.delta <= self.d_s:
+            raise ValueError(f"ApoorvaParams: delta ({self.delta}) must exceed d_s ({self.d_s})")
+        if self.stuck_window < 1 or self.escape_steps < 0:
+            raise ValueError(
+                f"ApoorvaParams: stuck_window must be >= 1 and escape_steps >= 0, got {self.stuck_window} "
+                f"and {self.escape_steps}"
+            )
+        for name in ("eta_rep", "d_apf", "strip_gain", "strip_max", "escape", "escape_below", "stuck_distance"):
+            if getattr(self, name) < 0:
+                raise ValueError(f"ApoorvaParams: {name} must be >= 0, got {getattr(self, name)}")
+
+
+def default_params(config: Any) -> ApoorvaParams:
+    """:class:`ApoorvaParams` for a ``robot_chain_v0`` config: ``d_s`` its spacing, ``Delta`` its max gap.
+
+    The robots brake within their acceleration limit, so a robot that stops only once its follower is
+    beyond the env's ``max_gap`` overshoots it (up to 1.24 m for 1.2 m seen, chain broken at the leader's
+    arrival). The stop threshold is the env's ``max_gap`` less the braking distance ``v^2 / (2 a)`` and
+    one control period of travel, so a gap never grows past ``max_gap`` after the stop.
+    """
+    v = config.max_speed
+    margin = v * v / (2.0 * config.max_accel) + v * config.control_period
+    delta = max(config.max_gap - margin, 0.5 * (config.spacing + config.max_gap))
+    return ApoorvaParams(d_s=config.spacing, delta=delta)
 
 
 def force_to_command(
@@ -373,13 +418,22 @@ class ApoorvaChainPolicy:
         raw = env.unwrapped if hasattr(env, "unwrapped") else env
         self.env = raw
         self.spec = raw.observation_layout()
-        self.params = params or ApoorvaParams(d_s=raw.config.spacing, delta=raw.config.max_gap)
+        self.params = params or default_params(raw.config)
         self.use_strip = use_strip
         self.trails: dict[str, list[np.ndarray]] = {}
+        self._trail_s: dict[str, list[float]] = {}
+        self._progress: dict[str, float] = {}
+        self._history: np.ndarray | None = None
+        self._steps = 0
+        self._escape_left = np.zeros(0, dtype=np.int64)
 
     def reset(self) -> None:
-        """Forget the recorded trails (a new episode)."""
+        """Forget the recorded trails and the escape state (a new episode)."""
         self.trails = {}
+        self._trail_s = {}
+        self._progress = {}
+        self._history = None
+        self._steps = 0
 
     def predict(
         self,
@@ -403,10 +457,15 @@ class ApoorvaChainPolicy:
         rel_pred = obs[:, spec["predecessor"]] * spec["rel_scale"]
         for k, a in enumerate(agents):
             trail = self.trails.setdefault(a, [])
-            if not trail or math.hypot(*(trail[-1] - xy[k])) > 0.02:
+            trail_s = self._trail_s.setdefault(a, [])
+            step = math.hypot(*(trail[-1] - xy[k])) if trail else 0.0
+            if not trail or step > 0.02:
+                trail_s.append(trail_s[-1] + step if trail_s else 0.0)
                 trail.append(xy[k].copy())
                 if len(trail) > 400:
                     del trail[:200]
+                    del trail_s[:200]
+        moved = self._displacement(xy)
         strip = strip_forces(xy, p.strip_gain, p.strip_max) if self.use_strip and n >= 3 else np.zeros((n, 2))
         angles = spec["sonar_angles"]
         offset = spec["sonar_offset"]
@@ -415,48 +474,96 @@ class ApoorvaChainPolicy:
             c, s = math.cos(heading[k]), math.sin(heading[k])
             near = bool(np.any(ranges[k] < p.d_apf))
             rep = sonar_repulsion(ranges[k], angles, heading[k], p.eta_rep, p.q_star, offset) if near else np.zeros(2)
+            waiting = k + 1 < n and math.hypot(*(xy[k + 1] - xy[k])) > p.delta
             if k == 0:
                 # Alg. 4: the ghost (predecessor slot) attracts; the follower pulls or pushes.
                 rx, ry = rel_pred[k]
                 ghost = xy[k] + np.array([c * rx - s * ry, s * rx + c * ry])
-                force = attractive_force(xy[k], ghost, p.epsilon, p.d_star) + rep
+                pull = attractive_force(xy[k], ghost, p.epsilon, p.d_star)
+                force = pull + rep
                 if n > 1:
                     force += spacing_force(xy[k], xy[k + 1], p.d_s, p.leader_wait * p.epsilon, p.eta_rep, p.d_star)
+                wants = math.hypot(rx, ry) > p.escape_ghost_distance
             else:
                 # Alg. 5 (attraction to q_{i-1}, the printed q_2 is a slip), along q_{i-1}'s own trail.
-                target = self._trail_target(agents[k - 1], xy[k - 1], xy[k])
+                target = self._trail_target(agents[k - 1], a, xy[k - 1], xy[k])
                 force = spacing_force(xy[k], xy[k - 1], p.d_s, 0.0, p.eta_rep) + rep
                 if target is not None:
-                    force += p.spacing_gain * attractive_force(xy[k], target, p.epsilon, p.d_star)
+                    pull = p.spacing_gain * attractive_force(xy[k], target, p.epsilon, p.d_star)
+                else:
+                    # Off the trail (its nearest point already within d_s of q_{i-1} along the trail): Alg. 5's
+                    # own F_att(q_{i-1}), scaled to vanish at d_s.
+                    pull = p.spacing_gain * spacing_force(xy[k], xy[k - 1], p.d_s, p.epsilon, 0.0, p.d_star)
+                force += pull
+                wants = math.hypot(*pull) > 1e-3
             force = force + strip[k]
-            # Sec. 6.1: equipotential point (forces cancel, target not reached): a small tangential push.
-            if near and math.hypot(*force) < p.escape_below:
-                force = force + p.escape * np.array([-s, c])
+            # Sec. 6.1: in an equipotential region (the forces cancel, so the robot stays put although its
+            # target is not reached) "a small tangential force is applied in the positive x axis direction
+            # of the robot", here for ``escape_steps`` steps once triggered. The robot x axis is its heading
+            # (the paper's own reading, kept): the controller then drives on and turns with the residual
+            # force, sliding round the obstacle. A push along the robot's y axis instead turns with the
+            # robot and only spins it in place (11/20 on seeds 100000-100019 against 20/20).
+            if (
+                near
+                and wants
+                and not waiting
+                and self._escape_left[k] == 0
+                and (moved[k] < p.stuck_distance or math.hypot(*force) < p.escape_below)
+            ):
+                self._escape_left[k] = p.escape_steps
+            if self._escape_left[k] > 0:
+                self._escape_left[k] -= 1
+                force = force + p.escape * np.array([c, s])
             v, w = force_to_command(force, float(heading[k]), p.kp_v, p.kp_w, spec["max_speed"], spec["max_turn_rate"])
             # Stop while the follower is farther than Delta (Algs. 4-5).
-            if k + 1 < n and math.hypot(*(xy[k + 1] - xy[k])) > p.delta:
+            if waiting:
                 v, w = 0.0, 0.0
             actions[a] = np.array([v / spec["max_speed"], w / spec["max_turn_rate"]], dtype=np.float32)
         return actions, state
 
-    def _trail_target(self, agent: str, position: np.ndarray, me: np.ndarray) -> np.ndarray | None:
+    def _displacement(self, xy: np.ndarray) -> np.ndarray:
+        """How far (m) every robot moved over the last ``stuck_window`` steps (inf until that many were seen)."""
+        p = self.params
+        n = len(xy)
+        if self._history is None or self._history.shape[1] != n:
+            self._history = np.repeat(xy[None], p.stuck_window, axis=0)
+            self._steps = 0
+            self._escape_left = np.zeros(n, dtype=np.int64)
+        slot = self._steps % p.stuck_window
+        old = self._history[slot]
+        moved = np.hypot(*(xy - old).T) if self._steps >= p.stuck_window else np.full(n, np.inf)
+        self._history[slot] = xy
+        self._steps += 1
+        return moved
+
+    def _trail_target(self, agent: str, follower: str, position: np.ndarray, me: np.ndarray) -> np.ndarray | None:
         """Where a follower aims on its predecessor's recorded trail (sec. 8: "fetching its previous position").
 
-        The follower's nearest trail point, moved ``lookahead`` metres on along the trail but never closer
-        than ``d_s`` (along the trail) to the predecessor; None when the follower is already that close.
+        The follower's place on the trail (its nearest point, searched from its last place up to
+        ``trail_window`` ahead), moved ``lookahead`` metres on along the trail but never closer than ``d_s``
+        (along the trail) to the predecessor; None when the follower is already that close.
+
+        Args:
+            agent: The predecessor, whose trail is followed.
+            follower: The follower (its place on the trail is remembered).
+            position: The predecessor's position now.
+            me: The follower's position.
         """
         p = self.params
         trail = self.trails.get(agent)
         if not trail:
             return None
         pts = np.vstack([np.array(trail), position[None, :]])
-        seg = np.hypot(*np.diff(pts, axis=0).T)
-        cum = np.concatenate([[0.0], np.cumsum(seg)])
-        near = int(np.argmin(np.hypot(pts[:, 0] - me[0], pts[:, 1] - me[1])))
-        s_target = min(cum[near] + p.lookahead, cum[-1] - p.d_s)
-        if s_target <= cum[near]:
+        s0 = self._trail_s[agent][0]
+        line = Polyline(pts)
+        last = self._progress.get(follower)
+        lo, hi = (0.0, line.length) if last is None else (max(0.0, last - s0), last - s0 + p.trail_window)
+        here = line.project(me, lo, min(hi, line.length)) if line.length > 0 else 0.0
+        self._progress[follower] = s0 + here
+        s_target = min(here + p.lookahead, line.length - p.d_s)
+        if s_target <= here:
             return None
-        return Polyline(pts).at(float(s_target)) if len(pts) > 1 else None
+        return line.at(float(s_target))
 
 
 def make_apoorva_chain(env: Any) -> ApoorvaChainPolicy:

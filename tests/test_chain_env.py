@@ -123,3 +123,28 @@ def test_bad_arguments_and_actions():
         env.step({"robot_0": np.zeros(3), "robot_1": ok})
     _, rewards, *_ = env.step({"robot_0": np.array([5.0, -5.0]), "robot_1": ok})  # clipped, not an error
     assert set(rewards) == {"robot_0", "robot_1"}
+
+
+def _to_goal(env):
+    """Every robot's free-floor (A*) distance to the goal, leader first."""
+    from agri_baselines.grid_astar import distance_field
+
+    raw = env.unwrapped
+    cmap = raw.chain_map
+    field = distance_field(cmap.blocked, cmap.cell(raw.goal)) * cmap.grid.resolution
+    return np.array([field[cmap.cell(p)] for p in raw._poses[:, :2]])
+
+
+def test_followers_start_behind_the_leader():
+    # Starting State: the followers stand behind the leader, away from the goal. A start in a room's far
+    # corner used to put eight robots' followers between the leader and the goal (7 of seeds 0-9).
+    env = robot_chain_v0.parallel_env(n_robots=8)
+    for seed in range(10):
+        env.reset(seed=seed)
+        d = _to_goal(env)
+        assert np.all(d[1:] >= d[0]), (seed, d)
+    # A given start is kept even when the chain cannot stand behind it.
+    start = tuple(float(v) for v in env.unwrapped._poses[0, :2])
+    env = robot_chain_v0.parallel_env(n_robots=8, start=start, layout_seed=5)
+    env.reset(seed=0)
+    np.testing.assert_allclose(env.unwrapped._poses[0, :2], start, atol=0.05)

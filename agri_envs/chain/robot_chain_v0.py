@@ -37,6 +37,7 @@ from agri_envs.sim2d.world import World2D
 #: Amigobot sonar directions (deg): six in front, two at the back.
 SONAR_ANGLES_DEG = (90.0, 41.0, 15.0, -15.0, -41.0, -90.0, -145.0, 145.0)
 OBS_SIZE = 23
+_START_TRIES = 10  # sampled starts tried for one with room for the chain behind the leader
 _PARK = 1.0e6  # where dynamic obstacles wait before they are dropped (far outside any map)
 
 
@@ -178,8 +179,10 @@ class RobotChainEnv(ParallelEnv):  # type: ignore[misc]
     are sampled on free floor at least 0.35 m from obstacles and ``min_goal_distance`` apart along the A*
     path (or given). The followers stand behind the leader along a free path away from the goal, ``spacing``
     apart and facing their predecessor; when no such path is long enough they fill the free floor nearest
-    to the leader. Obstacles drop when the leader has covered random fractions (0.15-0.7) of the path, onto
-    the path 1.2-3 m ahead of it, only where at least a robot's width stays free beside them.
+    to the leader. A sampled start that leaves followers nearer to the goal than the leader (a room's far
+    corner with the door toward the goal) is drawn again, up to 10 times. Obstacles drop when the leader
+    has covered random fractions (0.15-0.7) of the path, onto the path 1.2-3 m ahead of it, only where at
+    least a robot's width stays free beside them.
 
     ## Episode End
 
@@ -208,7 +211,8 @@ class RobotChainEnv(ParallelEnv):  # type: ignore[misc]
 
     ## Version History
 
-    * v0: initial release.
+    * v0: initial release. Fixed since: the followers' start no longer lies between the leader and the
+      goal when another sampled start avoids it (the documented starting state; spaces and reward unchanged).
 
     ## References
 
@@ -343,13 +347,24 @@ class RobotChainEnv(ParallelEnv):  # type: ignore[misc]
         xmin, ymin, xmax, ymax = cmap.geometry.bounds
         self._bounds = np.array([xmin, ymin, xmax, ymax])
         self.diagonal = math.hypot(xmax - xmin, ymax - ymin)
-        start_cell, goal_cell, path_cells = self._plan(cmap, rng)
+        # A sampled start with no room behind it for the chain (a room's far corner) would put followers
+        # between the leader and the goal: such a start is drawn again, up to _START_TRIES times, keeping the
+        # draw with the fewest followers ahead (a given start is kept).
+        best: tuple | None = None
+        for _ in range(_START_TRIES):
+            start_cell, goal_cell, path_cells = self._plan(cmap, rng)
+            positions, ahead = self._place_chain(cmap, start_cell, goal_cell)
+            if best is None or ahead < best[0]:
+                best = (ahead, start_cell, goal_cell, path_cells, positions)
+            if ahead == 0 or cfg.start:
+                break
+        assert best is not None
+        _, start_cell, goal_cell, path_cells, positions = best
         path_xy = cmap.centres(np.array(path_cells))
         self.astar_cells = np.array(path_cells)
         self.astar_length = float(np.hypot(*np.diff(path_xy, axis=0).T).sum()) if len(path_xy) > 1 else 0.0
         self.goal = path_xy[-1].copy()
         self.path = Polyline(path_xy)
-        positions = self._place_chain(cmap, start_cell, goal_cell, path_xy)
         n = cfg.n_robots
         self.world = World2D(cmap.geometry, n_movers=cfg.n_dynamic_obstacles)
         for k in range(cfg.n_dynamic_obstacles):
@@ -452,20 +467,30 @@ class RobotChainEnv(ParallelEnv):  # type: ignore[misc]
                 break
         raise ValueError("robot_chain_v0: no A* path between start and goal on the inflated map")
 
-    def _place_chain(
-        self, cmap: ChainMap, start: tuple[int, int], goal: tuple[int, int], path_xy: np.ndarray
-    ) -> np.ndarray:
-        """Leader at the start; followers ``spacing`` apart along a free path behind it (or packed nearby)."""
+    def _place_chain(self, cmap: ChainMap, start: tuple[int, int], goal: tuple[int, int]) -> tuple[np.ndarray, int]:
+        """Leader at the start; followers ``spacing`` apart along a free path behind it (or packed nearby).
+
+        Returns:
+            The ``(n, 2)`` positions, and how many followers stand ahead of the leader (nearer to the goal
+            along the free floor than the leader).
+        """
         cfg = self.config
         n = cfg.n_robots
         res = cmap.grid.resolution
         positions = np.zeros((n, 2))
         positions[0] = cmap.centres(np.array([start]))[0]
         if n == 1:
-            return positions
+            return positions, 0
         need = (n - 1) * cfg.spacing
         from_start = distance_field(cmap.blocked, start) * res
         to_goal = distance_field(cmap.blocked, goal) * res
+
+        def ahead() -> int:
+            cells = cmap.grid.world_to_cell(positions[1:])
+            rows = np.clip(cells[:, 0], 0, cmap.grid.height - 1)
+            cols = np.clip(cells[:, 1], 0, cmap.grid.width - 1)
+            return int(np.sum(to_goal[rows, cols] < to_goal[start]))
+
         reach = np.isfinite(from_start) & (from_start <= need + 1.0) & (from_start >= need)
         if reach.any():
             # The cell at the right distance that lies farthest from the goal: "behind" the leader.
@@ -477,7 +502,7 @@ class RobotChainEnv(ParallelEnv):  # type: ignore[misc]
                 if line.length >= need - 1e-6:
                     for k in range(1, n):
                         positions[k] = line.at(k * cfg.spacing)
-                    return positions
+                    return positions, ahead()
         # Packed start: free cells by distance from the leader, at least `spacing` from every robot placed.
         order = np.argwhere(np.isfinite(from_start))
         order = order[np.argsort(from_start[order[:, 0], order[:, 1]], kind="stable")]
@@ -490,7 +515,7 @@ class RobotChainEnv(ParallelEnv):  # type: ignore[misc]
                 positions[placed] = p
                 placed += 1
                 if placed == n:
-                    return positions
+                    return positions, ahead()
         raise ValueError(
             f"robot_chain_v0: {n} robots do not fit on the free floor around the start; "
             "use fewer robots or a larger map"
