@@ -79,6 +79,12 @@ def _agent_vec_env_class() -> type:
             observations, self.reset_infos = self.venv.reset(seed=seed, options=options)
             return observations  # type: ignore[no-any-return]
 
+        def get_attr(self, attr_name: str, indices: Any = None) -> list[Any]:
+            """``render_mode`` per slot (SB3 asks for it when a wrapper is added); other attributes: SuperSuit's."""
+            if attr_name == "render_mode":
+                return [self.render_mode] * self.num_envs
+            return super().get_attr(attr_name, indices)  # type: ignore[no-any-return]
+
         def step_wait(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, list[dict[str, Any]]]:
             """Step every slot; a slot whose episode was truncated (not terminated) says so like SB3's envs."""
             observations, rewards, terminations, truncations, infos = self.venv.step_wait()
