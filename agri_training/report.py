@@ -360,6 +360,13 @@ def find_runs(runs_dir: Path) -> list[dict[str, Any]]:
     return runs
 
 
+def zoo_runs() -> list[dict[str, Any]]:
+    """The learning curves of the shipped trained policies (``agri_training/zoo/NAME``), named ``zoo/NAME``."""
+    from agri_training.learned import ZOO_DIR
+
+    return [{**run, "name": f"zoo/{run['name']}"} for run in find_runs(ZOO_DIR)]
+
+
 _X_KEYS = ("time/total_timesteps", "total_timesteps", "timesteps", "timestep", "step")
 _Y_KEYS = (
     ("eval/success_rate", "success rate (evaluation)"),
@@ -520,7 +527,7 @@ def build_report(
         raise ValueError(f"no suite in {suites_dir}" + (f" for {only_env}" if only_env else ""))
     rows = collect_rows(suites, lb.load_entries(entries_dir), out_dir, workers, progress, episodes, ray)
     results = level_results(rows, progress)
-    runs = find_runs(runs_dir)
+    runs = find_runs(runs_dir) + zoo_runs()
     env_ids = list(dict.fromkeys(s.env_id for s in suites))
 
     parts = ["# agri_envs evaluation report", "", INTRO, "Envs in this report:", ""]

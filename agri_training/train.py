@@ -393,6 +393,8 @@ def _make_callback(config: Mapping[str, Any], run_dir: Path, progress: bool) -> 
                 row["collision_rate"] = float(np.mean([bool(r["collision"]) for r in records]))
             if records[0].get("min_clearance") is not None:
                 row["mean_min_clearance"] = float(np.mean([r["min_clearance"] for r in records]))
+            if records[0].get("coverage") is not None:  # the coverage mission's progress, even without success
+                row["mean_coverage"] = float(np.mean([r["coverage"] for r in records]))
             self.rows.append(row)
             for key, value in row.items():
                 if key != "timesteps":
