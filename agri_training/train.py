@@ -431,8 +431,30 @@ def package_versions() -> dict[str, str]:
     return out
 
 
+def _stop_on_sigterm() -> Callable[[], None]:
+    """Turn SIGTERM into ``KeyboardInterrupt`` while training (main thread only); return the undo."""
+    import signal
+    import threading
+
+    if threading.current_thread() is not threading.main_thread():
+        return lambda: None
+
+    def stop(signum: int, frame: Any) -> None:
+        raise KeyboardInterrupt
+
+    previous = signal.signal(signal.SIGTERM, stop)
+
+    def restore() -> None:
+        signal.signal(signal.SIGTERM, previous)
+
+    return restore
+
+
 def train(request: TrainRequest, command: str | None = None) -> Path:
     """Train and write the run directory; return it.
+
+    Ctrl-C or SIGTERM stops training early: the run directory is still written, with the weights reached
+    and ``stopped_early`` in ``meta.json`` (the learning curve holds the periodic evaluations done so far).
 
     Raises:
         ValueError: For a bad request or hyperparameters, or an ``out`` folder that already holds a run.
@@ -480,9 +502,15 @@ def train(request: TrainRequest, command: str | None = None) -> Path:
     load_before = os.getloadavg()
     t0 = time.perf_counter()
     started = time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())
+    stopped_early = False
+    restore = _stop_on_sigterm()
     try:
         model.learn(total_timesteps=config["timesteps"], callback=callback, tb_log_name="run")
+    except KeyboardInterrupt:  # Ctrl-C or SIGTERM: keep what was learned, write a complete run directory
+        stopped_early = True
+        print(f"agri train: stopped at {model.num_timesteps} steps; writing the run directory", file=sys.stderr)
     finally:
+        restore()
         wall = time.perf_counter() - t0
         save_weights(model, run_dir)
         venv.close()
@@ -491,6 +519,7 @@ def train(request: TrainRequest, command: str | None = None) -> Path:
             "started_utc": started,
             "wall_time_s": round(wall, 1),
             "timesteps_done": int(model.num_timesteps),
+            "stopped_early": stopped_early,
             "git_commit": git_commit(),
             "packages": package_versions(),
             "cpu_count": os.cpu_count(),
