@@ -236,6 +236,9 @@ def build_inference_model(
     kwargs = dict(config.get("algo_kwargs", {}))
     if config["algo"] != "ppo":
         kwargs.update(buffer_size=1, learning_starts=0)
+    else:  # the rollout sizes are the training's (n_envs copies); acting needs none of them
+        kwargs.pop("n_steps", None)
+        kwargs.pop("batch_size", None)
     venv = DummyVecEnv([lambda: _SpacesOnly(observation_space, action_space)])
     return cls(
         config["policy"],
