@@ -113,7 +113,10 @@ def collect_rows(
             suite = dataclasses.replace(suite, episodes=episodes)
         have = {e["policy"]["name"]: e for e in entries if e["suite"]["name"] == suite.name}
         refs = [ref for _, ref in lb.all_baseline_pairs([suite])]  # the policies that can run this suite
-        refs += [e["policy"] for e in have.values() if e["policy"]["kind"] == "learned"]
+        named = {ref["name"] for ref in refs}  # registered learned policies are among them already
+        refs += [
+            e["policy"] for e in have.values() if e["policy"]["kind"] == "learned" and e["policy"]["name"] not in named
+        ]
         for ref in refs:
             entry = have.get(ref["name"])
             if episodes is None and entry is not None and _entry_is_current(entry, suite):
