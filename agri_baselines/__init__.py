@@ -231,3 +231,29 @@ register_policy(
         description="González 2009, Fig. 2: first run pseudo-reactive, later runs deliberative on its sensory map",
     )
 )
+register_policy(
+    PolicySpec(
+        name="ppo-chain-office",
+        env_id="robot_chain_v0",
+        entry_point="agri_training.learned:load_zoo_policy",
+        description="Learned (one PPO policy shared by every robot, agri_training/zoo/ppo-chain-office): the "
+        "office-chain scenario",
+        learned=True,
+        algo="ppo",
+        train_command="agri train --env robot_chain_v0 --scenario office-chain --algo ppo --seed 0 "
+        "--out runs/chain-ppo",
+    )
+)
+register_policy(
+    PolicySpec(
+        name="ppo-coverage-almeria",
+        env_id="agri_envs/GreenhouseCoverage-v0",
+        entry_point="agri_training.learned:load_zoo_policy",
+        description="Learned (PPO on sonar, compass and odometry, agri_training/zoo/ppo-coverage-almeria): the "
+        "almeria scenario",
+        learned=True,
+        algo="ppo",
+        train_command="agri train --env agri_envs/GreenhouseCoverage-v0 --scenario almeria --algo ppo --seed 0 "
+        "--out runs/cover-ppo",
+    )
+)

@@ -284,6 +284,9 @@ def build_inference_model(
     kwargs = dict(config.get("algo_kwargs", {}))
     if config["algo"] != "ppo":
         kwargs.update(buffer_size=1, learning_starts=0)
+    else:  # the rollout sizes are the training's (n_envs copies); acting needs none of them
+        kwargs.pop("n_steps", None)
+        kwargs.pop("batch_size", None)
     venv = DummyVecEnv([lambda: _SpacesOnly(observation_space, action_space)])
     return cls(
         config["policy"],
@@ -333,25 +336,38 @@ class LearnedPolicy:
 
     Args:
         path: A run directory, its ``best/`` folder or one of its ``checkpoints/step_N`` folders.
-        env: The env the policy will drive (made with the run's env arguments); used for its spaces.
+        env: The env the policy will drive (made with the run's env arguments); used for its spaces. A
+            PettingZoo parallel env (the robot chain) gets the parameter-shared policy of the run.
 
     Raises:
         ValueError: When the folder or the config is not a run's, or the env's spaces do not match.
         UnsafeCheckpointError: When the weights need unpickling.
     """
 
-    def __init__(self, path: str | Path, env: gym.Env[Any, Any]) -> None:
+    def __init__(self, path: str | Path, env: Any) -> None:
+        from agri_training.multiagent import is_parallel_env
+
         folder = Path(path)
         self.config = read_config(folder)
         self.folder = folder
-        # The training wrappers, rebuilt around the env only to transform its observations the same way.
-        wrapped, self._wrappers = observation_chain(env, self.config.get("wrappers", []))
+        #: True on a PettingZoo parallel env: one shared network acts for every agent (per-agent dicts).
+        self.multiagent = is_parallel_env(env)
+        if self.multiagent:
+            if self.config.get("wrappers"):
+                raise ValueError(f"{folder}: a multi-agent run has no observation wrappers")
+            agent = env.possible_agents[0]
+            self._wrappers: list[gym.ObservationWrapper[Any, Any, Any]] = []
+            observation_space, action_space = env.observation_space(agent), env.action_space(agent)
+        else:
+            # The training wrappers, rebuilt around the env only to transform its observations the same way.
+            wrapped, self._wrappers = observation_chain(env, self.config.get("wrappers", []))
+            observation_space, action_space = wrapped.observation_space, env.action_space
         import torch
 
         # One observation at a time through a small MLP: extra threads only contend (35 ms instead of 0.5 ms
         # per action measured on a loaded 2-core machine).
         torch.set_num_threads(1)
-        self.model = build_inference_model(self.config, wrapped.observation_space, env.action_space)
+        self.model = build_inference_model(self.config, observation_space, action_space)
         weights = folder / WEIGHTS_FILE
         if not weights.is_file():
             raise ValueError(f"{folder} holds no {WEIGHTS_FILE}")
@@ -375,11 +391,16 @@ class LearnedPolicy:
         state: Any = None,
         episode_start: np.ndarray | None = None,
         deterministic: bool = True,
-    ) -> tuple[np.ndarray, Any]:
+    ) -> tuple[Any, Any]:
         """SB3's ``predict`` on the env's raw (unwrapped, unnormalised) observation.
 
-        A run trained with ``action_repeat`` k holds each action for k calls, as in training.
+        On a multi-agent env the observation is the per-agent dict of one step, and so are the actions. A
+        run trained with ``action_repeat`` k holds each action for k calls, as in training.
         """
+        if self.multiagent:
+            from agri_training.parameter_sharing import predict_shared
+
+            return predict_shared(self.model, observation, self.transform, deterministic), state
         return self._hold(
             lambda: self.model.predict(self.transform(observation), state, episode_start, deterministic),
             episode_start,
@@ -391,6 +412,6 @@ def zoo_path(name: str) -> Path:
     return ZOO_DIR / name
 
 
-def load_zoo_policy(env: gym.Env[Any, Any], name: str) -> LearnedPolicy:
+def load_zoo_policy(env: Any, name: str) -> LearnedPolicy:
     """Entry point of the registered trained policies: the committed run folder ``zoo/NAME``."""
     return LearnedPolicy(zoo_path(name), env)

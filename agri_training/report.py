@@ -113,7 +113,10 @@ def collect_rows(
             suite = dataclasses.replace(suite, episodes=episodes)
         have = {e["policy"]["name"]: e for e in entries if e["suite"]["name"] == suite.name}
         refs = [ref for _, ref in lb.all_baseline_pairs([suite])]  # the policies that can run this suite
-        refs += [e["policy"] for e in have.values() if e["policy"]["kind"] == "learned"]
+        named = {ref["name"] for ref in refs}  # registered learned policies are among them already
+        refs += [
+            e["policy"] for e in have.values() if e["policy"]["kind"] == "learned" and e["policy"]["name"] not in named
+        ]
         for ref in refs:
             entry = have.get(ref["name"])
             if episodes is None and entry is not None and _entry_is_current(entry, suite):
@@ -360,6 +363,13 @@ def find_runs(runs_dir: Path) -> list[dict[str, Any]]:
     return runs
 
 
+def zoo_runs() -> list[dict[str, Any]]:
+    """The learning curves of the shipped trained policies (``agri_training/zoo/NAME``), named ``zoo/NAME``."""
+    from agri_training.learned import ZOO_DIR
+
+    return [{**run, "name": f"zoo/{run['name']}"} for run in find_runs(ZOO_DIR)]
+
+
 _X_KEYS = ("time/total_timesteps", "total_timesteps", "timesteps", "timestep", "step")
 _Y_KEYS = (
     ("eval/success_rate", "success rate (evaluation)"),
@@ -520,7 +530,7 @@ def build_report(
         raise ValueError(f"no suite in {suites_dir}" + (f" for {only_env}" if only_env else ""))
     rows = collect_rows(suites, lb.load_entries(entries_dir), out_dir, workers, progress, episodes, ray)
     results = level_results(rows, progress)
-    runs = find_runs(runs_dir)
+    runs = find_runs(runs_dir) + zoo_runs()
     env_ids = list(dict.fromkeys(s.env_id for s in suites))
 
     parts = ["# agri_envs evaluation report", "", INTRO, "Envs in this report:", ""]

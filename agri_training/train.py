@@ -66,6 +66,8 @@ from agri_training.learned import (
     observation_chain,
     resolve_policy_kwargs,
 )
+from agri_training.multiagent import is_multiagent, is_parallel_env
+from agri_training.multiagent import make_env as make_multiagent_env
 
 HYPERPARAMS_DIR = Path(__file__).parent / "hyperparams"
 #: Seeds from here on are reserved for held-out evaluation suites; training never uses them.
@@ -216,6 +218,11 @@ def resolve_config(request: TrainRequest) -> dict[str, Any]:
         raise ValueError(f"vec_env must be 'dummy' or 'subproc', got {vec_env!r}")
     algo_kwargs = dict(hp.get("algo_kwargs", {}) or {})
     her = dict(hp.get("her", {}) or {}) if request.her else None
+    if is_multiagent(request.env_id):  # one parameter-shared policy for every agent (see parameter_sharing)
+        if request.algo != "ppo" or request.her:
+            raise ValueError(f"{request.env_id} trains a parameter-shared PPO: --algo ppo, without --her")
+        if hp.get("wrappers"):
+            raise ValueError(f"{request.env_id}: wrappers apply to Gymnasium envs only; leave 'wrappers' empty")
     return {
         "env_id": request.env_id,
         "scenario": request.scenario,
@@ -260,11 +267,24 @@ def _env_factory(config: Mapping[str, Any], rank: int) -> Callable[[], gym.Env[A
 
 
 def make_vec_env(config: Mapping[str, Any]) -> Any:
-    """The training VecEnv: ``n_envs`` copies (Dummy or Subproc), then ``VecNormalize`` if declared."""
-    from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv, VecNormalize
+    """The training VecEnv: ``n_envs`` copies (Dummy or Subproc), then ``VecNormalize`` if declared.
 
-    fns = [_env_factory(config, i) for i in range(config["n_envs"])]
-    venv: Any = SubprocVecEnv(fns, start_method="forkserver") if config["vec_env"] == "subproc" else DummyVecEnv(fns)
+    A multi-agent env (the robot chain) becomes one slot per agent of ``n_envs`` copies, all in this
+    process (:func:`agri_training.parameter_sharing.make_shared_vec_env`), with ``VecMonitor`` for the
+    episode statistics.
+    """
+    from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv, VecMonitor, VecNormalize
+
+    venv: Any
+    if is_multiagent(config["env_id"]):
+        from agri_training.parameter_sharing import make_shared_vec_env
+
+        env_id, env_kwargs = config["env_id"], dict(config["env_kwargs"])
+        venv = make_shared_vec_env(lambda: make_multiagent_env(env_id, env_kwargs), config["n_envs"])
+        venv = VecMonitor(venv, info_keywords=("is_success",))
+    else:
+        fns = [_env_factory(config, i) for i in range(config["n_envs"])]
+        venv = SubprocVecEnv(fns, start_method="forkserver") if config["vec_env"] == "subproc" else DummyVecEnv(fns)
     venv.seed(config["seed"])
     if config["normalize"]:
         norm = dict(config["normalize"])
@@ -277,15 +297,23 @@ def make_vec_env(config: Mapping[str, Any]) -> Any:
 class _LivePolicy:
     """The policy being trained, driving a raw env through the training wrappers and current statistics."""
 
-    def __init__(self, model: Any, env: gym.Env[Any, Any], wrappers: list[Any], action_repeat: int = 1) -> None:
+    def __init__(self, model: Any, env: Any, wrappers: list[Any], action_repeat: int = 1) -> None:
         self.model = model
-        _, self._chain = observation_chain(env, wrappers)
+        self.multiagent = is_parallel_env(env)
+        self._chain = [] if self.multiagent else observation_chain(env, wrappers)[1]
         self.normalization: ObsNormalization | None = None
         self._hold = HeldActions(action_repeat)
 
+    def _normalize(self, observation: Any) -> Any:
+        return observation if self.normalization is None else self.normalization.normalize(observation)
+
     def predict(
         self, observation: Any, state: Any = None, episode_start: Any = None, deterministic: bool = True
-    ) -> tuple[np.ndarray, Any]:
+    ) -> tuple[Any, Any]:
+        if self.multiagent:  # per-agent dicts in and out, one batched pass of the shared network
+            from agri_training.parameter_sharing import predict_shared
+
+            return predict_shared(self.model, observation, self._normalize, deterministic), state
         for w in self._chain:
             observation = w.observation(observation)
         if self.normalization is not None:
@@ -322,11 +350,15 @@ def _make_callback(config: Mapping[str, Any], run_dir: Path, progress: bool) -> 
             self.best: tuple[float, float] | None = None
             self.rows: list[dict[str, Any]] = []
             self.bar: Any = None
-            self.eval_env: gym.Env[Any, Any] | None = None
+            self.eval_env: Any = None
             self.live: _LivePolicy | None = None
 
         def _on_training_start(self) -> None:
-            self.eval_env = gym.make(config["env_id"], **config["env_kwargs"])
+            self.eval_env = (
+                make_multiagent_env(config["env_id"], config["env_kwargs"])
+                if is_multiagent(config["env_id"])
+                else gym.make(config["env_id"], **config["env_kwargs"])
+            )
             self.live = _LivePolicy(self.model, self.eval_env, config["wrappers"], config["action_repeat"])
             if progress:
                 from tqdm import tqdm
@@ -374,6 +406,8 @@ def _make_callback(config: Mapping[str, Any], run_dir: Path, progress: bool) -> 
                 row["collision_rate"] = float(np.mean([bool(r["collision"]) for r in records]))
             if records[0].get("min_clearance") is not None:
                 row["mean_min_clearance"] = float(np.mean([r["min_clearance"] for r in records]))
+            if records[0].get("coverage") is not None:  # the coverage mission's progress, even without success
+                row["mean_coverage"] = float(np.mean([r["coverage"] for r in records]))
             self.rows.append(row)
             for key, value in row.items():
                 if key != "timesteps":
@@ -410,8 +444,30 @@ def package_versions() -> dict[str, str]:
     return out
 
 
+def _stop_on_sigterm() -> Callable[[], None]:
+    """Turn SIGTERM into ``KeyboardInterrupt`` while training (main thread only); return the undo."""
+    import signal
+    import threading
+
+    if threading.current_thread() is not threading.main_thread():
+        return lambda: None
+
+    def stop(signum: int, frame: Any) -> None:
+        raise KeyboardInterrupt
+
+    previous = signal.signal(signal.SIGTERM, stop)
+
+    def restore() -> None:
+        signal.signal(signal.SIGTERM, previous)
+
+    return restore
+
+
 def train(request: TrainRequest, command: str | None = None) -> Path:
     """Train and write the run directory; return it.
+
+    Ctrl-C or SIGTERM stops training early: the run directory is still written, with the weights reached
+    and ``stopped_early`` in ``meta.json`` (the learning curve holds the periodic evaluations done so far).
 
     Raises:
         ValueError: For a bad request or hyperparameters, or an ``out`` folder that already holds a run.
@@ -459,9 +515,15 @@ def train(request: TrainRequest, command: str | None = None) -> Path:
     load_before = os.getloadavg()
     t0 = time.perf_counter()
     started = time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())
+    stopped_early = False
+    restore = _stop_on_sigterm()
     try:
         model.learn(total_timesteps=config["timesteps"], callback=callback, tb_log_name="run")
+    except KeyboardInterrupt:  # Ctrl-C or SIGTERM: keep what was learned, write a complete run directory
+        stopped_early = True
+        print(f"agri train: stopped at {model.num_timesteps} steps; writing the run directory", file=sys.stderr)
     finally:
+        restore()
         wall = time.perf_counter() - t0
         save_weights(model, run_dir)
         venv.close()
@@ -470,6 +532,7 @@ def train(request: TrainRequest, command: str | None = None) -> Path:
             "started_utc": started,
             "wall_time_s": round(wall, 1),
             "timesteps_done": int(model.num_timesteps),
+            "stopped_early": stopped_early,
             "git_commit": git_commit(),
             "packages": package_versions(),
             "cpu_count": os.cpu_count(),

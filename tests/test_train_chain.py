@@ -1,0 +1,129 @@
+"""Parameter-shared PPO for the robot chain: the SuperSuit vector env, a tiny run, weights-only reloading."""
+
+import json
+
+import numpy as np
+import pytest
+import torch
+import yaml
+
+from agri_training.cli import main
+from agri_training.evaluate import load_policy
+from agri_training.learned import LearnedPolicy
+from agri_training.multiagent import make_env
+from agri_training.parameter_sharing import make_shared_vec_env, predict_shared
+from agri_training.train import TrainRequest, resolve_config, train
+
+ENV_ID = "robot_chain_v0"
+# A short chain on a small office floor: the run and its evaluation take seconds.
+TINY_ENV = {"n_robots": 3, "office_width": 8.0, "office_height": 6.0, "min_goal_distance": 3.0, "max_cycles": 40}
+TINY_HP = {
+    "n_envs": 2,
+    "env_kwargs": TINY_ENV,
+    "algo_kwargs": {"n_steps": 32, "batch_size": 64, "n_epochs": 1},
+    "policy_kwargs": {"net_arch": {"pi": [16], "vf": [16]}},
+    "eval_freq": 10_000,
+    "eval_episodes": 1,
+    "checkpoint_freq": 0,
+}
+
+
+@pytest.fixture(scope="module")
+def chain_run(tmp_path_factory):
+    out = tmp_path_factory.mktemp("runs") / "chain"
+    request = TrainRequest(ENV_ID, "ppo", out, seed=2, timesteps=300, overrides=TINY_HP, progress=False)
+    train(request, "test")
+    return out
+
+
+def _tiny_vec_env(n_envs=2):
+    return make_shared_vec_env(lambda: make_env(ENV_ID, TINY_ENV), n_envs)
+
+
+def test_one_slot_per_robot_seeded_like_sb3():
+    venv = _tiny_vec_env()
+    assert venv.num_envs == 2 * TINY_ENV["n_robots"]
+    venv.seed(7)
+    first = venv.reset()
+    venv.seed(7)
+    again = venv.reset()
+    np.testing.assert_array_equal(first, again)
+    # copy i resets from seed + i, like SB3's own vector envs
+    env = make_env(ENV_ID, TINY_ENV)
+    obs, _ = env.reset(seed=8)
+    np.testing.assert_array_equal(first[3:6], np.stack([obs[a] for a in env.possible_agents]))
+    venv.seed(9)
+    assert not np.array_equal(venv.reset(), first)
+
+
+def test_max_cycles_is_a_truncation_and_the_chain_resets_whole():
+    venv = _tiny_vec_env(n_envs=1)
+    venv.seed(0)
+    venv.reset()
+    stay = np.zeros((venv.num_envs, 2), np.float32)  # standing still: no contact, no arrival
+    for _ in range(TINY_ENV["max_cycles"] - 1):
+        _, _, dones, _ = venv.step(stay)
+        assert not dones.any()
+    obs, rewards, dones, infos = venv.step(stay)
+    assert dones.all() and rewards.shape == (venv.num_envs,)
+    assert all(i["TimeLimit.truncated"] for i in infos)
+    assert all(i["terminal_observation"].shape == (23,) for i in infos)
+    assert not np.array_equal(obs[0], infos[0]["terminal_observation"])  # a fresh episode began
+
+
+def test_a_tiny_run_writes_a_weights_only_run_directory(chain_run):
+    for name in ("policy.pt", "normalize.json", "config.yaml", "meta.json", "curve.csv", "command.txt"):
+        assert (chain_run / name).is_file(), name
+    config = yaml.safe_load((chain_run / "config.yaml").read_text())
+    assert config["env_id"] == ENV_ID and config["wrappers"] == [] and config["normalize"]["norm_obs"]
+    assert json.loads((chain_run / "meta.json").read_text())["timesteps_done"] >= 300
+    curve = (chain_run / "curve.csv").read_text().splitlines()
+    assert curve[0].startswith("timesteps,wall_time_s,success_rate") and len(curve) >= 3
+
+
+def test_agri_evaluate_drives_every_robot_with_the_run(chain_run, tmp_path, capsys):
+    out = tmp_path / "r.json"
+    argv = ["evaluate", "--env", ENV_ID, "--policy", str(chain_run), "--episodes", "1", "--seed", "100000"]
+    assert main([*argv, "--workers", "1", "--quiet", "--out", str(out)]) == 0
+    result = json.loads(out.read_text())
+    (record,) = result["levels"][0]["episodes"] if "levels" in result else result["episodes"]
+    assert record["seed"] == 100_000 and record["steps"] >= 1
+    assert result["env_kwargs"]["max_cycles"] == TINY_ENV["max_cycles"]  # the run's env arguments
+
+
+def test_the_reloaded_shared_policy_acts_like_the_model_in_memory(tmp_path):
+    from stable_baselines3 import PPO
+    from stable_baselines3.common.vec_env import VecNormalize
+
+    from agri_training.train import save_weights
+
+    config = resolve_config(TrainRequest(ENV_ID, "ppo", tmp_path / "run", overrides=TINY_HP))
+    venv = VecNormalize(_tiny_vec_env(), norm_obs=True, norm_reward=True, clip_obs=10.0)
+    venv.seed(0)
+    model = PPO("MlpPolicy", venv, seed=0, device="cpu", n_steps=32, batch_size=64, n_epochs=1)
+    model.learn(64)  # moves both the weights and the normalisation statistics off their initial values
+    run = tmp_path / "run"
+    save_weights(model, run)
+    (run / "config.yaml").write_text(yaml.safe_dump({**config, "algo_kwargs": {}, "policy_kwargs": {}}))
+    env = make_env(ENV_ID, TINY_ENV)
+    policy = load_policy(str(run), env)
+    assert isinstance(policy, LearnedPolicy) and policy.multiagent
+    for key, value in policy.model.policy.state_dict().items():
+        assert torch.equal(value, model.policy.state_dict()[key]), key
+    obs, _ = env.reset(seed=4)
+    for _ in range(5):
+        ours, _ = policy.predict(obs, deterministic=True)
+        theirs = predict_shared(model, obs, venv.normalize_obs, deterministic=True)
+        assert set(ours) == set(env.agents)
+        for agent in env.agents:
+            np.testing.assert_allclose(ours[agent], theirs[agent], rtol=1e-5, atol=1e-6)
+        obs, *_ = env.step(ours)
+        if not env.agents:
+            break
+
+
+def test_the_chain_trains_only_a_shared_ppo(tmp_path):
+    with pytest.raises(ValueError, match="parameter-shared PPO"):
+        resolve_config(TrainRequest(ENV_ID, "sac", tmp_path))
+    with pytest.raises(ValueError, match="wrappers"):
+        resolve_config(TrainRequest(ENV_ID, "ppo", tmp_path, overrides={"wrappers": ["FlattenObservation"]}))
