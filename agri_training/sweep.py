@@ -1,7 +1,8 @@
-"""Training sweeps: one ``agri train`` per (grid point, seed), each run one task of one CPU, on local worker
-processes or as Ray tasks, with a summary table across seeds.
+r"""Training sweeps: one ``agri train`` per (grid point, seed), each on one CPU, with a summary across seeds.
 
-    agri train --env agri_envs/GreenhouseNav-v1 --algo ppo --timesteps 50000 --seeds 0 1 2 3 \\
+Runs go to local worker processes or Ray tasks::
+
+    agri train --env agri_envs/GreenhouseNav-v1 --algo ppo --timesteps 50000 --seeds 0 1 2 3 \
         --grid algo_kwargs.learning_rate=1e-4,3e-4 --out runs/nav-sweep [--workers 2 | --ray local]
 
 A grid axis is ``KEY=V1,V2,...``: ``KEY`` is a hyperparameter of the YAML (``n_envs``) or a dotted path into
@@ -77,7 +78,9 @@ def parse_value(text: str) -> Any:
 
 def _split_top_level(text: str) -> list[str]:
     """Split on commas outside brackets and braces: ``1,[64,64]`` -> ``["1", "[64,64]"]``."""
-    parts, depth, current = [], 0, []
+    parts: list[str] = []
+    current: list[str] = []
+    depth = 0
     for ch in text:
         if ch in "[{":
             depth += 1
@@ -381,9 +384,9 @@ def _run_pool(runs: Sequence[SweepRun], n: int, on_done: DoneCallback) -> None:
                                   "running beside it crashed the process", "traceback": ""}  # fmt: skip
                     on_done(i, runs[i], result)
             if broken:  # the pool is gone: the runs still in it died with it; start a fresh pool for the rest
-                for fut, i in pending.items():
-                    on_done(i, runs[i], {"ok": False, "error": "worker pool broke while this run was in flight",
-                                         "traceback": ""})  # fmt: skip
+                for i in pending.values():
+                    lost = {"ok": False, "error": "worker pool broke while this run was in flight", "traceback": ""}
+                    on_done(i, runs[i], lost)
 
 
 def _run_ray(runs: Sequence[SweepRun], address: str, workers: int | None, on_done: DoneCallback) -> None:
@@ -457,8 +460,8 @@ def summarize(runs: Sequence[SweepRun], results: Sequence[Mapping[str, Any]]) ->
                 "runs": len(mine),
                 "ok": len(ok),
                 "failed_seeds": [r["seed"] for r in mine if r["status"] != "ok"],
-                "final_success_rate": _interval([r["final_success_rate"] for r in ok]),
-                "final_mean_return": _interval([r["final_mean_return"] for r in ok]),
+                "final_success_rate": _interval([float(r["final_success_rate"]) for r in ok]),
+                "final_mean_return": _interval([float(r["final_mean_return"]) for r in ok]),
             }
         )
     interval = "95 % percentile bootstrap of the mean across seeds (agri_training.stats.bootstrap_ci, 2000 resamples)"
@@ -497,7 +500,11 @@ def format_markdown(doc: Mapping[str, Any]) -> str:
             f"| {label} | {p['ok']}/{p['runs']} | {_mean_ci(p['final_success_rate'], '{:.2f}')} | "
             f"{_mean_ci(p['final_mean_return'], '{:.1f}')} |"
         )
-    lines += ["", "| run | seed | status | timesteps | final success | final mean return | wall [s] |", "|---|---|---|---|---|---|---|"]  # fmt: skip
+    lines += [
+        "",
+        "| run | seed | status | timesteps | final success | final mean return | wall [s] |",
+        "|---|---|---|---|---|---|---|",
+    ]
     for r in doc["summary"]["runs"]:
         lines.append(
             f"| {r['run']} | {r['seed']} | {r['status']} | {_cell(r['timesteps'], '{}')} | "
@@ -526,7 +533,8 @@ def write_summary(out: Path, doc: Mapping[str, Any]) -> None:
         writer = csv.DictWriter(fh, fieldnames=keys)
         writer.writeheader()
         for r in doc["summary"]["runs"]:
-            writer.writerow({**{k: v for k, v in r.items() if k != "point"}, **{k: _format(v) for k, v in r["point"].items()}})  # fmt: skip
+            grid_cells = {k: _format(v) for k, v in r["point"].items()}
+            writer.writerow({**{k: v for k, v in r.items() if k != "point"}, **grid_cells})
 
 
 def run_sweep(
