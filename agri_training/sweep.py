@@ -433,7 +433,7 @@ def summarize(runs: Sequence[SweepRun], results: Sequence[Mapping[str, Any]]) ->
     Returns:
         ``{"interval": ..., "runs": [...], "points": [...]}``.
     """
-    rows = []
+    rows: list[dict[str, Any]] = []
     for run, res in zip(runs, results, strict=True):
         curve = res.get("curve") or []
         rows.append(
