@@ -95,7 +95,10 @@ def _cmd_sweep(args: argparse.Namespace) -> int:
     failed = [r for r in doc["summary"]["runs"] if r["status"] != "ok"]
     print(f"wrote {len(doc['summary']['runs'])} run folders, {SUMMARY_MD}, summary.csv and sweep.json under {args.out}")
     if failed:
-        print(f"agri: error: {len(failed)} of {len(doc['summary']['runs'])} runs failed (see above)", file=sys.stderr)
+        for r in failed:
+            where = "".join(f", {k}={v!r}" for k, v in r["point"].items())
+            print(f"run {r['run']} (seed {r['seed']}{where}) failed: {r['error']}", file=sys.stderr)
+        print(f"agri: error: {len(failed)} of {len(doc['summary']['runs'])} runs failed", file=sys.stderr)
         return 1
     return 0
 

@@ -15,8 +15,10 @@ the single ``agri train`` command that reproduces it. The sweep writes ``OUT/swe
 
 Resources are explicit: a run gets one CPU (one worker process, or a Ray task with ``num_cpus=1``) and
 trains with ``torch_threads: 1`` (``torch.set_num_threads(1)``) in one process (``vec_env: subproc`` is
-refused). Local workers are forked fresh for every run (``max_tasks_per_child=1``) from a server that has
-imported torch, stable-baselines3 and the envs once. Every run's configuration is resolved before the first
+refused). Local workers fork from a server that has imported torch (with ``torch._dynamo``, which the
+optimizers load on their first step), stable-baselines3 and the envs once, and each keeps its imports and
+loaded numba kernels for its next runs (every run seeds everything afresh: ``tests/test_sweep.py`` checks that
+a run's learning curve does not depend on where it ran). Every run's configuration is resolved before the first
 run starts, so a bad grid value fails at once with a ``ValueError`` that names it. A run that raises is
 recorded with its seed, grid point and exception (and ``OUT/<run>/error.txt`` with the traceback); the other
 runs go on.
@@ -351,8 +353,9 @@ def _pool_context() -> Any:
     if "forkserver" not in multiprocessing.get_all_start_methods():
         return multiprocessing.get_context("spawn")
     ctx = multiprocessing.get_context("forkserver")
-    # Runs fork from a server that imported torch, SB3 and the envs once: a fresh process per run is cheap.
-    ctx.set_forkserver_preload(["torch", "stable_baselines3", "agri_envs", "agri_training.sweep"])
+    # Workers fork from a server that imported torch, SB3 and the envs once (torch._dynamo alone is ~4 s of
+    # imports, done lazily by the optimizer's first step otherwise).
+    ctx.set_forkserver_preload(["torch", "torch._dynamo", "stable_baselines3", "agri_envs", "agri_training.sweep"])
     return ctx
 
 
@@ -362,10 +365,8 @@ DoneCallback = Callable[[int, SweepRun, dict[str, Any]], None]
 
 def _run_pool(runs: Sequence[SweepRun], n: int, on_done: DoneCallback) -> None:
     todo = list(range(len(runs)))
-    extra: dict[str, Any] = {"max_tasks_per_child": 1} if sys.version_info >= (3, 11) else {}
     while todo:
-        ctx = _pool_context()
-        with ProcessPoolExecutor(max_workers=n, mp_context=ctx, initializer=_worker_init, **extra) as pool:
+        with ProcessPoolExecutor(max_workers=n, mp_context=_pool_context(), initializer=_worker_init) as pool:
             # At most n runs in flight: if a worker dies (a crash, not an exception), only those are lost.
             pending: dict[Future[dict[str, Any]], int] = {}
             broken = False
@@ -395,8 +396,8 @@ def _run_ray(runs: Sequence[SweepRun], address: str, workers: int | None, on_don
     ray = _import_ray()
     started = init_ray(address, workers)
     try:
-        # One CPU per run; a fresh worker process per run (max_calls=1) releases its memory at the end.
-        task = ray.remote(num_cpus=1, max_retries=0, max_calls=1)(run_training)
+        # One CPU per run; Ray reuses its worker processes (and their imports) across runs, like the pool.
+        task = ray.remote(num_cpus=1, max_retries=0)(run_training)
         refs = [task.remote(run) for run in runs]
         index = {ref: i for i, ref in enumerate(refs)}
         remaining = list(refs)
