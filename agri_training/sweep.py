@@ -395,6 +395,7 @@ def _run_ray(runs: Sequence[SweepRun], address: str, workers: int | None, on_don
 
     ray = _import_ray()
     started = init_ray(address, workers)
+    remaining: list[Any] = []
     try:
         # One CPU per run; Ray reuses its worker processes (and their imports) across runs, like the pool.
         task = ray.remote(num_cpus=1, max_retries=0)(run_training)
@@ -402,7 +403,8 @@ def _run_ray(runs: Sequence[SweepRun], address: str, workers: int | None, on_don
         index = {ref: i for i, ref in enumerate(refs)}
         remaining = list(refs)
         while remaining:
-            done, remaining = ray.wait(remaining, num_returns=1)
+            # A timeout, so that Ctrl-C reaches Python between waits (a blocking wait would swallow it).
+            done, remaining = ray.wait(remaining, num_returns=1, timeout=1.0)
             for ref in done:
                 i = index[ref]
                 try:
@@ -410,6 +412,10 @@ def _run_ray(runs: Sequence[SweepRun], address: str, workers: int | None, on_don
                 except Exception as exc:  # the worker died or Ray failed the task
                     result = {"ok": False, "error": f"{type(exc).__name__}: {exc}", "traceback": ""}
                 on_done(i, runs[i], result)
+    except BaseException:
+        for ref in remaining:
+            ray.cancel(ref, force=True)
+        raise
     finally:
         if started:
             ray.shutdown()
