@@ -9,7 +9,7 @@ printed apart). The issue asks: sweep wall <= 1.15 x the 2 sequential runs' wall
 The script also checks that the sweep's seeds 0 and 1 reproduce the sequential runs' learning curves
 (every number but wall time): where a run executes must not change what it learns.
 
-    python benchmarks/bench_sweep.py                       # PPO on GreenhouseNav-v1, 24576 steps per run
+    python benchmarks/bench_sweep.py                       # PPO on GreenhouseNav-v1, 49152 steps per run
     python benchmarks/bench_sweep.py --ray                 # also the sweep as Ray tasks (--ray local)
     python benchmarks/bench_sweep.py --timesteps 8192 --env agri_envs/GreenhouseCoverage-v0
 """
@@ -40,7 +40,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--env", default="agri_envs/GreenhouseNav-v1")
     parser.add_argument("--algo", default="ppo")
-    parser.add_argument("--timesteps", type=int, default=24576)
+    parser.add_argument("--timesteps", type=int, default=49152)
     parser.add_argument("--ray", action="store_true", help="also run the sweep as Ray tasks (--ray local, 2 CPUs)")
     parser.add_argument("--out", default=None, help="keep the runs here (default: a temporary folder)")
     args = parser.parse_args()
