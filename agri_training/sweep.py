@@ -321,13 +321,14 @@ def run_training(run: SweepRun) -> dict[str, Any]:
     """Train one run in this process with one torch thread; never raises.
 
     Returns:
-        ``{"ok": True, "wall_s": ..., "curve": [rows of curve.csv]}``, or ``{"ok": False, "error": "Type:
+        ``{"ok": True, "wall_s": ..., "cpu_s": ..., "curve": [rows of curve.csv]}`` (``cpu_s``: this process's
+        CPU time for the run), or ``{"ok": False, "error": "Type:
         message", "traceback": ...}`` (the traceback also goes to the run's ``error.txt``).
     """
     import torch
 
     torch.set_num_threads(1)
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), time.process_time()
     try:
         run_dir = train(run.request, train_command(run.request))
         curve = read_curve(run_dir / "curve.csv")
@@ -339,8 +340,8 @@ def run_training(run: SweepRun) -> dict[str, Any]:
         except OSError:
             pass
         return {"ok": False, "error": f"{type(exc).__name__}: {exc}", "traceback": tb,
-                "wall_s": time.perf_counter() - t0}  # fmt: skip
-    return {"ok": True, "wall_s": time.perf_counter() - t0, "curve": curve}
+                "wall_s": time.perf_counter() - t0, "cpu_s": time.process_time() - c0}  # fmt: skip
+    return {"ok": True, "wall_s": time.perf_counter() - t0, "cpu_s": time.process_time() - c0, "curve": curve}
 
 
 def _worker_init() -> None:
@@ -454,6 +455,7 @@ def summarize(runs: Sequence[SweepRun], results: Sequence[Mapping[str, Any]]) ->
                 "final_mean_return": _final(curve, "mean_return"),
                 "best_success_rate": max((r["success_rate"] for r in curve), default=None),
                 "wall_time_s": round(float(res.get("wall_s", float("nan"))), 1),
+                "cpu_time_s": round(float(res.get("cpu_s", float("nan"))), 1),
                 "error": res.get("error"),
             }
         )
@@ -535,7 +537,7 @@ def write_summary(out: Path, doc: Mapping[str, Any]) -> None:
     (out / SWEEP_JSON).write_text(json.dumps(doc, indent=1, default=str))
     (out / SUMMARY_MD).write_text(format_markdown(doc))
     keys = ["run", "seed", *doc["grid"], "status", "timesteps", "final_success_rate", "final_mean_return",
-            "best_success_rate", "wall_time_s", "error"]  # fmt: skip
+            "best_success_rate", "wall_time_s", "cpu_time_s", "error"]  # fmt: skip
     with (out / SUMMARY_CSV).open("w", newline="") as fh:
         writer = csv.DictWriter(fh, fieldnames=keys)
         writer.writeheader()

@@ -9,7 +9,7 @@ printed apart). The issue asks: sweep wall <= 1.15 x the 2 sequential runs' wall
 The script also checks that the sweep's seeds 0 and 1 reproduce the sequential runs' learning curves
 (every number but wall time): where a run executes must not change what it learns.
 
-    python benchmarks/bench_sweep.py                       # PPO on GreenhouseNav-v1, 49152 steps per run
+    python benchmarks/bench_sweep.py                       # PPO on GreenhouseNav-v1, 32768 steps per run
     python benchmarks/bench_sweep.py --ray                 # also the sweep as Ray tasks (--ray local)
     python benchmarks/bench_sweep.py --timesteps 8192 --env agri_envs/GreenhouseCoverage-v0
 """
@@ -40,7 +40,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--env", default="agri_envs/GreenhouseNav-v1")
     parser.add_argument("--algo", default="ppo")
-    parser.add_argument("--timesteps", type=int, default=49152)
+    parser.add_argument("--timesteps", type=int, default=32768)
     parser.add_argument("--ray", action="store_true", help="also run the sweep as Ray tasks (--ray local, 2 CPUs)")
     parser.add_argument("--out", default=None, help="keep the runs here (default: a temporary folder)")
     args = parser.parse_args()
@@ -48,16 +48,17 @@ def main() -> None:
     common = {"env_id": args.env, "algo": args.algo, "timesteps": args.timesteps}
     print(f"{args.algo} on {args.env}, {args.timesteps} steps per run, {os.cpu_count()} cores; {load()}")
 
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), time.process_time()
     single = []
     for seed in (0, 1):
-        t = time.perf_counter()
+        t, c = time.perf_counter(), time.process_time()
         request = TrainRequest(out=root / f"sequential/seed{seed}", seed=seed, progress=False,
                                overrides={"torch_threads": 1}, **common)  # fmt: skip
         single.append(train(request, "bench_sweep.py sequential"))
-        print(f"  sequential run seed {seed}: {time.perf_counter() - t:.1f} s; {load()}", flush=True)
-    sequential = time.perf_counter() - t0
-    print(f"2 sequential runs: {sequential:.1f} s", flush=True)
+        wall, cpu = time.perf_counter() - t, time.process_time() - c
+        print(f"  sequential run seed {seed}: {wall:.1f} s wall, {cpu:.1f} s CPU; {load()}", flush=True)
+    sequential, sequential_cpu = time.perf_counter() - t0, time.process_time() - c0
+    print(f"2 sequential runs: {sequential:.1f} s wall, {sequential_cpu:.1f} s CPU", flush=True)
 
     rows = [("2 sequential runs (the peer)", sequential)]
     backends: list[tuple[str, str | None]] = [("sweep, 4 seeds, --workers 2", None)]
@@ -66,9 +67,18 @@ def main() -> None:
     for label, ray in backends:
         out = root / ("sweep-ray" if ray else "sweep-workers")
         t = time.perf_counter()
+        if ray:  # start Ray apart, to print its start-up; the sweep then joins this instance
+            import ray as ray_module
+
+            from agri_training.parallel import init_ray
+
+            init_ray("local", 2)
+            print(f"  Ray start-up (ray.init, 2 CPUs): {time.perf_counter() - t:.1f} s", flush=True)
         doc = run_sweep(SweepRequest(out=out, seeds=(0, 1, 2, 3), **common), workers=2, ray=ray, progress=False,
                         command=f"bench_sweep.py {label}")  # fmt: skip
         wall = time.perf_counter() - t
+        if ray:
+            ray_module.shutdown()
         rows.append((label, wall))
         runs = doc["summary"]["runs"]
         failed = [r["run"] for r in runs if r["status"] != "ok"]
@@ -76,7 +86,10 @@ def main() -> None:
         print(
             f"{label}: {wall:.1f} s = {wall / sequential:.3f} x the sequential wall; per run "
             + ", ".join(f"{r['wall_time_s']:.1f}" for r in runs)
-            + f" s; failed {failed or 'none'}; seeds 0-1 curves equal the sequential runs': {same}; {load()}",
+            + " s wall, "
+            + ", ".join(f"{r['cpu_time_s']:.1f}" for r in runs)
+            + f" s CPU (sum {sum(r['cpu_time_s'] for r in runs):.1f} s); failed {failed or 'none'}; "
+            + f"seeds 0-1 curves equal the sequential runs': {same}; {load()}",
             flush=True,
         )
 
