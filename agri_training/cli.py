@@ -50,11 +50,15 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
 def _cmd_train(args: argparse.Namespace) -> int:
     from agri_training.train import TrainRequest, train
 
+    if args.seeds is not None or args.grid is not None:
+        return _cmd_sweep(args)
+    if args.workers is not None or args.ray is not None:
+        raise ValueError("--workers and --ray spread the runs of a sweep: add --seeds S1 S2 ... and/or --grid")
     request = TrainRequest(
         env_id=args.env,
         algo=args.algo,
         out=Path(args.out),
-        seed=args.seed,
+        seed=args.seed if args.seed is not None else 0,
         timesteps=args.timesteps,
         scenario=args.scenario,
         her=args.her,
@@ -64,6 +68,63 @@ def _cmd_train(args: argparse.Namespace) -> int:
     )
     run_dir = train(request)
     print(f"wrote {run_dir}; evaluate it with: agri evaluate --env {args.env} --policy {run_dir} --out RESULT.json")
+    return 0
+
+
+def _cmd_sweep(args: argparse.Namespace) -> int:
+    from agri_training.sweep import SweepRequest, parse_grid, run_sweep
+
+    if args.seed is not None:
+        raise ValueError("give either --seed (one run) or --seeds (a sweep), not both")
+    request = SweepRequest(
+        env_id=args.env,
+        algo=args.algo,
+        out=Path(args.out),
+        seeds=tuple(args.seeds if args.seeds is not None else [0]),
+        grid=parse_grid(args.grid or []),
+        timesteps=args.timesteps,
+        scenario=args.scenario,
+        her=args.her,
+        overrides=parse_env_kwargs(args.hp or []),
+        hyperparams_file=Path(args.hyperparams) if args.hyperparams else None,
+    )
+    doc = run_sweep(request, workers=args.workers, ray=args.ray, progress=not args.quiet)
+    from agri_training.sweep import SUMMARY_MD
+
+    print((Path(args.out) / SUMMARY_MD).read_text())
+    failed = [r for r in doc["summary"]["runs"] if r["status"] != "ok"]
+    print(f"wrote {len(doc['summary']['runs'])} run folders, {SUMMARY_MD}, summary.csv and sweep.json under {args.out}")
+    if failed:
+        for r in failed:
+            where = "".join(f", {k}={v!r}" for k, v in r["point"].items())
+            print(f"run {r['run']} (seed {r['seed']}{where}) failed: {r['error']}", file=sys.stderr)
+        print(f"agri: error: {len(failed)} of {len(doc['summary']['runs'])} runs failed", file=sys.stderr)
+        return 1
+    return 0
+
+
+def _cmd_tune(args: argparse.Namespace) -> int:
+    from agri_training.tune import TuneRequest, format_best, parse_space, run_tune
+
+    request = TuneRequest(
+        env_id=args.env,
+        algo=args.algo,
+        out=Path(args.out),
+        space=parse_space(args.param or [], args.space),
+        samples=args.samples,
+        search=args.search,
+        metric=args.metric,
+        seed=args.seed,
+        search_seed=args.search_seed,
+        timesteps=args.timesteps,
+        scenario=args.scenario,
+        her=args.her,
+        overrides=parse_env_kwargs(args.hp or []),
+        hyperparams_file=Path(args.hyperparams) if args.hyperparams else None,
+    )
+    best = run_tune(request, ray=args.ray, workers=args.workers, progress=not args.quiet)
+    print(format_best(best))
+    print(f"wrote {Path(args.out) / 'best.yaml'} and {Path(args.out) / 'trials.csv'}")
     return 0
 
 
@@ -224,12 +285,56 @@ def build_parser() -> argparse.ArgumentParser:
     tr.add_argument("--algo", required=True, choices=("ppo", "sac", "td3", "tqc"))
     tr.add_argument("--her", action="store_true", help="HerReplayBuffer (goal-conditioned Dict envs; sac/td3/tqc)")
     tr.add_argument("--timesteps", type=int, default=None, help="training steps (default: the YAML's n_timesteps)")
-    tr.add_argument("--seed", type=int, default=0, help="training seed, below 100000")
+    tr.add_argument("--seed", type=int, default=None, help="training seed, below 100000 (default 0)")
     tr.add_argument("--out", required=True, help="run directory to create")
     tr.add_argument("--hyperparams", default=None, help="YAML to use instead of agri_training/hyperparams/ALGO.yml")
     tr.add_argument("--hp", nargs="*", metavar="KEY=VALUE", help="override hyperparameters (YAML values)")
     tr.add_argument("--quiet", action="store_true", help="no progress bar")
+    sw = tr.add_argument_group("sweep", "many runs, each one CPU: OUT/<run>/ per run, OUT/summary.md|csv, sweep.json")
+    sw.add_argument("--seeds", type=int, nargs="+", default=None, metavar="S", help="train once per seed")
+    sw.add_argument(
+        "--grid",
+        nargs="+",
+        default=None,
+        metavar="KEY=V1,V2",
+        help="hyperparameter grid axes (dotted keys, YAML values), e.g. algo_kwargs.learning_rate=1e-4,3e-4",
+    )
+    sw.add_argument("--workers", type=_workers, default=None, help="runs at a time (default: one per core)")
+    sw.add_argument("--ray", default=None, metavar="ADDRESS", help="runs as Ray tasks: 'local', 'auto' or HOST:PORT")
     tr.set_defaults(func=_cmd_train)
+    tu = sub.add_parser("tune", help="hyperparameter search with Ray Tune (Optuna or random), one CPU per trial")
+    tu.add_argument("--env", required=True, help="env id, e.g. agri_envs/GreenhouseNav-v1")
+    tu.add_argument("--scenario", default=None, help="named preset of env arguments (agri list)")
+    tu.add_argument("--algo", required=True, choices=("ppo", "sac", "td3", "tqc"))
+    tu.add_argument("--her", action="store_true", help="HerReplayBuffer (goal-conditioned Dict envs; sac/td3/tqc)")
+    tu.add_argument("--timesteps", type=int, default=None, help="training steps per trial (default: the YAML's)")
+    tu.add_argument("--seed", type=int, default=0, help="training seed of every trial, below 100000")
+    tu.add_argument(
+        "--param",
+        nargs="+",
+        metavar="KEY=KIND:ARGS",
+        help="a search dimension: KEY=uniform|loguniform|randint:LOW:HIGH or KEY=choice:V1,V2 "
+        "(e.g. algo_kwargs.learning_rate=loguniform:1e-5:1e-3)",
+    )
+    tu.add_argument("--space", default=None, help="YAML search space: KEY: {loguniform: [LOW, HIGH]}, KEY: [choices]")
+    tu.add_argument("--samples", type=int, default=8, help="trials (default 8)")
+    tu.add_argument("--search", default="optuna", choices=("optuna", "random"), help="Optuna TPE or random search")
+    tu.add_argument(
+        "--metric",
+        default="mean_return",
+        choices=("success_rate", "mean_return"),
+        help="what the search maximises: the final periodic evaluation's (default mean_return)",
+    )
+    tu.add_argument("--search-seed", type=int, default=0, help="seed of the search algorithm")
+    tu.add_argument("--hp", nargs="*", metavar="KEY=VALUE", help="hyperparameters every trial shares (YAML values)")
+    tu.add_argument("--hyperparams", default=None, help="YAML to use instead of agri_training/hyperparams/ALGO.yml")
+    tu.add_argument("--out", required=True, help="search folder: trials/<id>/ run folders, best.yaml, trials.csv")
+    tu.add_argument("--workers", type=_workers, default=None, help="CPUs of a --ray local instance (default: all)")
+    tu.add_argument(
+        "--ray", default="local", metavar="ADDRESS", help="'local' (default: a private Ray instance), 'auto', HOST:PORT"
+    )
+    tu.add_argument("--quiet", action="store_true", help="no Ray Tune progress table")
+    tu.set_defaults(func=_cmd_tune)
     rp = sub.add_parser(
         "report",
         help="one Markdown + HTML page over the leaderboard entries (fresh runs where stale) and training runs",

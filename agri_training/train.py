@@ -334,7 +334,9 @@ def save_weights(model: Any, folder: Path) -> None:
         (folder / NORMALIZE_FILE).write_text(json.dumps(stats.to_json()))
 
 
-def _make_callback(config: Mapping[str, Any], run_dir: Path, progress: bool) -> Any:
+def _make_callback(
+    config: Mapping[str, Any], run_dir: Path, progress: bool, on_eval: Callable[[dict[str, Any]], None] | None = None
+) -> Any:
     from stable_baselines3.common.callbacks import BaseCallback
 
     from agri_training.evaluate import run_episode
@@ -418,6 +420,8 @@ def _make_callback(config: Mapping[str, Any], run_dir: Path, progress: bool) -> 
                 save_weights(self.model, run_dir / "best")
                 (run_dir / "best" / "eval.json").write_text(json.dumps(row, indent=1))
             self.write_curve()
+            if on_eval is not None:
+                on_eval(dict(row))
             if self.bar is not None:
                 self.bar.set_postfix(success=f"{success:.0%}", ret=f"{row['mean_return']:.1f}")
             else:
@@ -463,11 +467,18 @@ def _stop_on_sigterm() -> Callable[[], None]:
     return restore
 
 
-def train(request: TrainRequest, command: str | None = None) -> Path:
+def train(
+    request: TrainRequest, command: str | None = None, on_eval: Callable[[dict[str, Any]], None] | None = None
+) -> Path:
     """Train and write the run directory; return it.
 
     Ctrl-C or SIGTERM stops training early: the run directory is still written, with the weights reached
     and ``stopped_early`` in ``meta.json`` (the learning curve holds the periodic evaluations done so far).
+
+    Args:
+        request: What to train.
+        command: The command recorded in ``meta.json`` (default: this process's ``agri`` command line).
+        on_eval: Called with each periodic evaluation's curve row (a sweep or a Ray Tune trial reports it).
 
     Raises:
         ValueError: For a bad request or hyperparameters, or an ``out`` folder that already holds a run.
@@ -511,7 +522,7 @@ def train(request: TrainRequest, command: str | None = None) -> Path:
         verbose=0,
         **algo_kwargs,
     )
-    callback = _make_callback(config, run_dir, request.progress)
+    callback = _make_callback(config, run_dir, request.progress, on_eval)
     load_before = os.getloadavg()
     t0 = time.perf_counter()
     started = time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())
