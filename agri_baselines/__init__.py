@@ -233,6 +233,20 @@ register_policy(
 )
 register_policy(
     PolicySpec(
+        name="ppo-greenhouse-nav",
+        env_id="agri_envs/GreenhouseNav-v2",
+        entry_point="agri_training.learned:load_zoo_policy",
+        env_kwargs={"localization": "ground_truth"},
+        description="Learned (PPO, agri_training/zoo/ppo-greenhouse-nav): LIDAR, sonar and the next two waypoints "
+        "from the ground-truth pose; acts every 4th step",
+        privileged=True,
+        learned=True,
+        algo="ppo",
+        train_command="agri train --env agri_envs/GreenhouseNav-v2 --algo ppo --seed 0 --out runs/nav-ppo",
+    )
+)
+register_policy(
+    PolicySpec(
         name="ppo-chain-office",
         env_id="robot_chain_v0",
         entry_point="agri_training.learned:load_zoo_policy",
