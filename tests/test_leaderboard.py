@@ -44,7 +44,7 @@ def test_committed_suites_are_valid_and_held_out():
 
 def test_suite_loader(tmp_path):
     suite = lb.load_suite(write_suite(tmp_path, SUITE))
-    assert suite.seeds == [100000, 100001] and suite.env_version == "v1"
+    assert suite.seeds == [100000, 100001] and suite.env_version == "v2"
     assert suite.levels() == [("tiny-rover", SUITE["env_kwargs"])]
     swept = lb.parse_suite({**SUITE, "sweep": {"parameter": "growth", "values": [0.0, 1.0]}})
     assert [label for label, _ in swept.levels()] == ["tiny-rover growth=0.0", "tiny-rover growth=1.0"]
