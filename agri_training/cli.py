@@ -303,7 +303,7 @@ def build_parser() -> argparse.ArgumentParser:
     sw.add_argument("--ray", default=None, metavar="ADDRESS", help="runs as Ray tasks: 'local', 'auto' or HOST:PORT")
     tr.set_defaults(func=_cmd_train)
     tu = sub.add_parser("tune", help="hyperparameter search with Ray Tune (Optuna or random), one CPU per trial")
-    tu.add_argument("--env", required=True, help="env id, e.g. agri_envs/GreenhouseNav-v1")
+    tu.add_argument("--env", required=True, help="env id, e.g. agri_envs/GreenhouseNav-v2")
     tu.add_argument("--scenario", default=None, help="named preset of env arguments (agri list)")
     tu.add_argument("--algo", required=True, choices=("ppo", "sac", "td3", "tqc"))
     tu.add_argument("--her", action="store_true", help="HerReplayBuffer (goal-conditioned Dict envs; sac/td3/tqc)")

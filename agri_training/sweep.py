@@ -2,7 +2,7 @@ r"""Training sweeps: one ``agri train`` per (grid point, seed), each on one CPU,
 
 Runs go to local worker processes or Ray tasks::
 
-    agri train --env agri_envs/GreenhouseNav-v1 --algo ppo --timesteps 50000 --seeds 0 1 2 3 \
+    agri train --env agri_envs/GreenhouseNav-v2 --algo ppo --timesteps 50000 --seeds 0 1 2 3 \
         --grid algo_kwargs.learning_rate=1e-4,3e-4 --out runs/nav-sweep [--workers 2 | --ray local]
 
 A grid axis is ``KEY=V1,V2,...``: ``KEY`` is a hyperparameter of the YAML (``n_envs``) or a dotted path into

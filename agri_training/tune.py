@@ -2,7 +2,7 @@ r"""``agri tune``: a hyperparameter search with Ray Tune, each trial one ``agri 
 
 For example::
 
-    agri tune --env agri_envs/GreenhouseNav-v1 --algo ppo --timesteps 100000 --samples 16 \
+    agri tune --env agri_envs/GreenhouseNav-v2 --algo ppo --timesteps 100000 --samples 16 \
         --param algo_kwargs.learning_rate=loguniform:1e-5:1e-3 algo_kwargs.n_epochs=choice:5,10,20 \
         --out runs/nav-tune --ray local            # or --space space.yaml, --ray auto, --ray HOST:PORT
 

@@ -9,7 +9,7 @@ printed apart). The issue asks: sweep wall <= 1.15 x the 2 sequential runs' wall
 The script also checks that the sweep's seeds 0 and 1 reproduce the sequential runs' learning curves
 (every number but wall time): where a run executes must not change what it learns.
 
-    python benchmarks/bench_sweep.py                       # PPO on GreenhouseNav-v1, 32768 steps per run
+    python benchmarks/bench_sweep.py                       # PPO on GreenhouseNav-v2, 32768 steps per run
     python benchmarks/bench_sweep.py --ray                 # also the sweep as Ray tasks (--ray local)
     python benchmarks/bench_sweep.py --timesteps 8192 --env agri_envs/GreenhouseCoverage-v0
 """
@@ -38,7 +38,7 @@ def same_curve(a: Path, b: Path) -> bool:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--env", default="agri_envs/GreenhouseNav-v1")
+    parser.add_argument("--env", default="agri_envs/GreenhouseNav-v2")
     parser.add_argument("--algo", default="ppo")
     parser.add_argument("--timesteps", type=int, default=32768)
     parser.add_argument("--ray", action="store_true", help="also run the sweep as Ray tasks (--ray local, 2 CPUs)")

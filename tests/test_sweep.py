@@ -11,7 +11,7 @@ from agri_training.cli import main
 from agri_training.sweep import SweepRequest, parse_grid, plan_sweep, read_curve, run_sweep
 from agri_training.tune import Param, TuneRequest, load_space, parse_param, run_tune
 
-ENV_ID = "agri_envs/GreenhouseNav-v1"
+ENV_ID = "agri_envs/GreenhouseNav-v2"
 TINY_HP = {
     "n_envs": 2,
     "env_kwargs": {"n_rows": 1, "row_length": 3.0, "n_people": 0, "max_episode_steps": 40},

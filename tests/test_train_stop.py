@@ -11,7 +11,7 @@ from agri_training.evaluate import load_policy
 from agri_training.learned import LearnedPolicy
 from agri_training.train import TrainRequest, train
 
-ENV_ID = "agri_envs/GreenhouseNav-v1"
+ENV_ID = "agri_envs/GreenhouseNav-v2"
 TINY_ENV = {"n_rows": 1, "row_length": 3.0, "n_people": 0, "max_episode_steps": 40}
 TINY_HP = {
     "n_envs": 1,
