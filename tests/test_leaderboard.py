@@ -105,7 +105,7 @@ def test_entry_records_what_it_needs(board):
     (entry,) = lb.load_entries(board / "entries")
     assert entry["suite"]["name"] == "tiny-rover" and len(entry["suite"]["sha256"]) == 64
     assert entry["policy"] == {"kind": "baseline", "name": "harik-apf-gt", "privileged": True}
-    assert entry["env_version"] == "v1" and entry["package_version"] and entry["git_commit"]
+    assert entry["env_version"] == "v2" and entry["package_version"] and entry["git_commit"]
     assert [e["seed"] for e in entry["levels"][0]["episodes"]] == [100000, 100001]
     lo, hi = entry["summary"]["success_rate_ci"]
     assert 0.0 < lo < hi <= 1.0  # Wilson: never a point interval at 2/2 or 0/2

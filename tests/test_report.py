@@ -65,10 +65,12 @@ def test_report_from_entries_and_fresh_runs(tmp_path, capsys):
     md = (out / "report.md").read_text()
     assert "## Who wins where" in md and "`harik-apf-gt` **P**" in md
     assert "1.00 [0.34, 1.00]" in md  # 2 of 2 successes: a Wilson interval, not a point
-    assert "Evaluated for this report (no current leaderboard entry): `harik-apf`, `harik-apf-hector-plain`" in md
+    fresh = "Evaluated for this report (no current leaderboard entry): `harik-apf`, `harik-apf-hector-plain`"
+    assert fresh in md
     assert sorted(p.name for p in (out / "results" / "tiny-rover").glob("*.json")) == [
         "harik-apf-hector-plain.json",
         "harik-apf.json",
+        "ppo-greenhouse-nav.json",
     ]
     assert "GreenhouseNav-v2_learning_success.png" in md and "_d_alpha.png" in md and "_trajectory.png" in md
     for line in md.splitlines():

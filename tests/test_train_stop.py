@@ -27,8 +27,8 @@ TINY_HP = {
 def test_sigterm_stops_training_and_keeps_the_run(tmp_path, monkeypatch):
     make = train_module._make_callback
 
-    def terminating_callback(config, run_dir, progress):
-        callback = make(config, run_dir, progress)
+    def terminating_callback(config, run_dir, progress, on_eval=None):
+        callback = make(config, run_dir, progress, on_eval)
         on_step = callback._on_step
 
         def step():

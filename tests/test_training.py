@@ -103,7 +103,7 @@ def test_pickled_code_in_a_checkpoint_never_runs(tiny_run, tmp_path):
 
 def test_hyperparameters_resolve_and_stay_strict(tmp_path):
     hp = load_hyperparams(ENV_ID, "ppo")
-    assert hp["wrappers"] == ["FlattenObservation"] and hp["algo_kwargs"]["n_steps"] == 1024
+    assert hp["wrappers"] == ["FlattenObservation"] and hp["algo_kwargs"]["n_steps"] == 2048
     assert load_hyperparams(ENV_ID, "ppo", overrides={"n_envs": 2})["n_envs"] == 2
     assert load_hyperparams("agri_envs/GrapeHarvest-v1", "sac")["policy"] == "MultiInputPolicy"
     with pytest.raises(ValueError, match="unknown hyperparameter keys"):
