@@ -67,7 +67,9 @@ How to read the numbers:
   with a true rate as low as 84 %. Means use a percentile bootstrap over episodes.
 - A policy *beats* another only where the paired comparison's interval of the difference excludes zero; it
   *matches* only where that interval lies within a small margin (0.10 for rates, 5 % of the other's mean
-  for times and lengths). Everything else is *not distinguishable* with these episodes.
+  for times and lengths). Everything else is *not distinguishable* with these episodes. A policy that is
+  worse on a suite's first ranking metric (success) is never said to beat another on the others: its
+  failed episodes end early, which makes it look faster without being so.
 - **P** marks *privileged* policies: they use what a real robot would not have (such as the true pose),
   so they show what the controller could do with perfect localization, not what the robot does.
 """
@@ -269,7 +271,8 @@ def comparison_table(group: Sequence[Row]) -> tuple[list[str], list[str]]:
         wins: list[str] = []
         losses: list[str] = []
         same: list[str] = []
-        for rk in suite.rank_by:
+        primary_lost = False
+        for i, rk in enumerate(suite.rank_by):
             c = compare(a.entry, b.entry, rk.metric, rk.higher_is_better)
             if c is None:
                 cells.append("n/a")
@@ -283,6 +286,10 @@ def comparison_table(group: Sequence[Row]) -> tuple[list[str], list[str]]:
             text = (
                 f"{_metric_name(rk.metric)} ({fmt.format(c.difference)} [{fmt.format(c.ci[0])}, {fmt.format(c.ci[1])}])"
             )
+            if i == 0 and c.verdict == "worse":
+                primary_lost = True
+            if primary_lost and i > 0 and c.verdict == "better":
+                continue  # e.g. "faster" only because its failed episodes ended early: not a win
             {"better": wins, "worse": losses, "matches": same}.get(c.verdict, []).append(text)
         lines.append("| " + " | ".join(cells) + " |")
         parts = []
