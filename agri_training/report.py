@@ -452,7 +452,7 @@ def learning_curves(env_id: str, runs: list[dict[str, Any]], rows: Sequence[Row]
             ax.plot(xs, ys, color=colours(i), lw=1.6, label=f"{run['name']} ({label})")
         if kind == "success":
             ax.set_ylim(-0.03, 1.03)
-        ax.set_xlabel("environment steps")
+        ax.set_xlabel("training steps (policy decisions, as --timesteps counts them)")
         ax.set_ylabel("success rate" if kind == "success" else "episode return")
         ax.set_title(f"{env_id}: learning curves, baselines as bands ({first_suite.name if first_suite else ''})")
         ax.grid(alpha=0.3)
