@@ -14,6 +14,8 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
+from agri_training.learned import wrap_by_name
+
 
 class RandomStartWaypoint(gym.Wrapper[Any, Any, Any, Any]):
     """Start a share of GreenhouseNav's training episodes at a random waypoint of the mission.
@@ -97,16 +99,4 @@ def apply_train_wrappers(env: gym.Env[Any, Any], wrappers: Sequence[str | Mappin
     Raises:
         ValueError: For a wrapper that is not in :data:`TRAIN_WRAPPERS`, or a malformed entry.
     """
-    for item in wrappers:
-        kwargs: dict[str, Any] = {}
-        if isinstance(item, str):
-            name = item
-        elif isinstance(item, Mapping) and len(item) == 1:
-            name, given = next(iter(item.items()))
-            kwargs = dict(given or {})
-        else:
-            raise ValueError(f"a training wrapper is a name or a one-key mapping {{name: kwargs}}, got {item!r}")
-        if name not in TRAIN_WRAPPERS:
-            raise ValueError(f"training wrapper {name!r} is not allowed; allowed: {', '.join(TRAIN_WRAPPERS)}")
-        env = TRAIN_WRAPPERS[name](env, **kwargs)
-    return env
+    return wrap_by_name(env, wrappers, TRAIN_WRAPPERS, kind="training wrapper")

@@ -117,15 +117,22 @@ def algorithm_class(name: str) -> Any:
         raise ValueError(f"algo {name!r} needs {module}: pip install -e '.[train]'") from exc
 
 
-def apply_wrappers(env: gym.Env[Any, Any], wrappers: Sequence[str | Mapping[str, Any]]) -> gym.Env[Any, Any]:
-    """Wrap ``env`` in the declared observation wrappers, innermost first.
+def wrap_by_name(
+    env: gym.Env[Any, Any],
+    wrappers: Sequence[str | Mapping[str, Any]],
+    allowed: Mapping[str, type[gym.Wrapper[Any, Any, Any, Any]]],
+    kind: str = "wrapper",
+) -> gym.Env[Any, Any]:
+    """Wrap ``env`` in wrappers declared by name, innermost first; only names in ``allowed`` are built.
 
     Args:
-        env: The env as made by ``gym.make``.
-        wrappers: Names from :data:`WRAPPERS`, or one-key mappings ``{name: {kwarg: value}}``.
+        env: The env to wrap.
+        wrappers: Names from ``allowed``, or one-key mappings ``{name: {kwarg: value}}``.
+        allowed: The allow-list, name -> class (nothing is imported from a string).
+        kind: What the list holds, for error messages.
 
     Raises:
-        ValueError: For a wrapper that is not in :data:`WRAPPERS`.
+        ValueError: For a name that is not allowed, or an entry that is neither a name nor a one-key mapping.
     """
     for item in wrappers:
         kwargs: dict[str, Any] = {}
@@ -135,11 +142,20 @@ def apply_wrappers(env: gym.Env[Any, Any], wrappers: Sequence[str | Mapping[str,
             name, given = next(iter(item.items()))
             kwargs = dict(given or {})
         else:
-            raise ValueError(f"a wrapper is a name or a one-key mapping {{name: kwargs}}, got {item!r}")
-        if name not in WRAPPERS:
-            raise ValueError(f"wrapper {name!r} is not allowed; allowed: {', '.join(WRAPPERS)}")
-        env = WRAPPERS[name](env, **kwargs)
+            raise ValueError(f"a {kind} is a name or a one-key mapping {{name: kwargs}}, got {item!r}")
+        if name not in allowed:
+            raise ValueError(f"{kind} {name!r} is not allowed; allowed: {', '.join(allowed)}")
+        env = allowed[name](env, **kwargs)
     return env
+
+
+def apply_wrappers(env: gym.Env[Any, Any], wrappers: Sequence[str | Mapping[str, Any]]) -> gym.Env[Any, Any]:
+    """Wrap ``env`` in the declared observation wrappers (names from :data:`WRAPPERS`), innermost first.
+
+    Raises:
+        ValueError: For a wrapper that is not in :data:`WRAPPERS`, or a malformed entry.
+    """
+    return wrap_by_name(env, wrappers, WRAPPERS)
 
 
 def observation_chain(
