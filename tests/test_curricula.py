@@ -30,7 +30,7 @@ def test_start_waypoint_places_the_robot_on_the_previous_waypoint():
 
 def test_a_late_start_can_finish_the_mission():
     env = gym.make(ENV_ID, n_people=0)
-    n = len(env.unwrapped.layout.targets) if env.unwrapped.layout is not None else 8
+    n = env.reset(seed=0)[1]["n_waypoints"]
     _, info = env.reset(seed=0, options={"start_waypoint": n - 1})
     task = env.unwrapped.task
     assert not task.done
@@ -44,10 +44,18 @@ def test_a_late_start_can_finish_the_mission():
 
 
 @pytest.mark.parametrize("bad", [-1, 8, 2.5, "1", True])
-def test_bad_start_waypoint(bad):
-    env = gym.make(ENV_ID)
+def test_bad_start_waypoint_leaves_the_episode_intact(bad):
+    env = gym.make(ENV_ID, n_people=0)
+    env.reset(seed=0)
+    base = env.unwrapped
+    scene = (base.layout, base.world, base.robot, base.task)
+    before = base.robot.pose.copy()
     with pytest.raises(ValueError, match="start_waypoint"):
-        env.reset(seed=0, options={"start_waypoint": bad})
+        env.reset(seed=1, options={"start_waypoint": bad})
+    # the episode that was running goes on, in its own scene
+    assert (base.layout, base.world, base.robot, base.task) == scene
+    _, _, _, _, info = env.step(np.array([0.5, 0.0], np.float32))
+    assert not info["collision"] and np.hypot(info["x"] - before[0], info["y"] - before[1]) > 0
 
 
 def test_random_start_waypoint_is_seeded_and_respects_prob():

@@ -446,6 +446,8 @@ class GreenhouseNavEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
         cfg = self.config
         overrides = dict(options or {})
         start_waypoint = overrides.pop("start_waypoint", 0)
+        if isinstance(start_waypoint, bool) or not isinstance(start_waypoint, (int, np.integer)):
+            raise ValueError(f"reset option start_waypoint must be an int, got {start_waypoint!r}")
         allowed = {"growth", "n_trees", "layout_seed", "start_waypoint"}
         if set(overrides) - allowed:
             raise ValueError(f"reset options {sorted(set(overrides) - allowed)} unknown; allowed: {sorted(allowed)}")
@@ -453,17 +455,16 @@ class GreenhouseNavEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
             cfg = cfg.replace(**overrides)
         layout_rng = self.np_random if cfg.layout_seed < 0 else np.random.default_rng(cfg.layout_seed)
         if cfg.scene == "greenhouse":
-            self.layout = generate_layout(cfg.layout_params(), layout_rng)
+            layout = generate_layout(cfg.layout_params(), layout_rng)
         elif cfg.scene == "corridor":
-            self.layout = generate_office_corridor(cfg.office_params(), layout_rng)
+            layout = generate_office_corridor(cfg.office_params(), layout_rng)
         else:
-            self.layout = layout_from_map(self._map_geometry, np.asarray(cfg.waypoints))
-        self.world = World2D(self.layout.geometry, n_movers=cfg.n_people)
-        targets = np.tile(self.layout.targets, (cfg.mission_cycles, 1))
-        if isinstance(start_waypoint, bool) or not isinstance(start_waypoint, (int, np.integer)):
-            raise ValueError(f"reset option start_waypoint must be an int, got {start_waypoint!r}")
-        if not 0 <= start_waypoint < len(targets):
+            layout = layout_from_map(self._map_geometry, np.asarray(cfg.waypoints))
+        targets = np.tile(layout.targets, (cfg.mission_cycles, 1))
+        if not 0 <= start_waypoint < len(targets):  # checked before the env's scene is replaced
             raise ValueError(f"reset option start_waypoint must be in [0, {len(targets) - 1}], got {start_waypoint}")
+        self.layout = layout
+        self.world = World2D(layout.geometry, n_movers=cfg.n_people)
         start_pose = self._arrival_pose(targets, int(start_waypoint))
         start = start_pose + self.np_random.uniform([-0.05, -0.05, -0.1], [0.05, 0.05, 0.1])
         self.robot = self.world.add_robot(self.robot_spec, start)
