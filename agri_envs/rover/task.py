@@ -118,13 +118,13 @@ class WaypointTask:
         self.max_steps = max_steps
         self.steps = 0
         self.index = 0
-        self._last_distance = 0.0
+        self._last_to_go = 0.0
 
     def reset(self, pose: np.ndarray, index: int = 0) -> None:
         """Start the mission with the robot at ``pose``, driving to target ``index`` (earlier ones count as reached)."""
         self.index = index
         self.steps = 0
-        self._last_distance = self.to_go(pose)
+        self._last_to_go = self.to_go(pose)
 
     @property
     def done(self) -> bool:
@@ -159,7 +159,10 @@ class WaypointTask:
         With ``turn_distance = max_speed / max_turn_rate`` this is the time a robot at its speed limits needs
         to turn toward the target and drive there, in metres of driving.
         """
-        return self.distance(pose) + self.turn_distance * abs(self.bearing(pose))
+        return self._to_go(self.distance(pose), self.bearing(pose))
+
+    def _to_go(self, d: float, alpha: float) -> float:
+        return d + self.turn_distance * abs(alpha)
 
     def evaluate(
         self, pose: np.ndarray, collided: bool, clearance: float, travelled: float = 0.0, step: bool = True
@@ -176,16 +179,14 @@ class WaypointTask:
         w = self.weights
         if step:
             self.steps += 1
-        d = self.distance(pose)
-        to_go = self.to_go(pose)
-        progress = self._last_distance - to_go
+        d, alpha = self.distance(pose), self.bearing(pose)
+        progress = self._last_to_go - self._to_go(d, alpha)
         reached = False
         if not self.done and d < self.radius:
             self.index += 1
             reached = True
-            d = self.distance(pose)
-            to_go = self.to_go(pose)
-        self._last_distance = to_go
+            d, alpha = self.distance(pose), self.bearing(pose)
+        self._last_to_go = self._to_go(d, alpha)
         success = self.done
         shortfall = max(0.0, self.safety_margin - clearance) / self.safety_margin if self.safety_margin > 0 else 0.0
         terms = {
@@ -204,5 +205,5 @@ class WaypointTask:
             "waypoint_reached": reached,
             "waypoint_index": self.index,
             "distance_to_waypoint": d,
-            "bearing_to_waypoint": self.bearing(pose),
+            "bearing_to_waypoint": alpha,
         }
