@@ -221,8 +221,11 @@ def resolve_config(request: TrainRequest) -> dict[str, Any]:
     if is_multiagent(request.env_id):  # one parameter-shared policy for every agent (see parameter_sharing)
         if request.algo != "ppo" or request.her:
             raise ValueError(f"{request.env_id} trains a parameter-shared PPO: --algo ppo, without --her")
-        if hp.get("wrappers"):
-            raise ValueError(f"{request.env_id}: wrappers apply to Gymnasium envs only; leave 'wrappers' empty")
+        for key in ("wrappers", "train_wrappers"):
+            if hp.get(key):
+                raise ValueError(f"{request.env_id}: {key} apply to Gymnasium envs only; leave '{key}' empty")
+        if int(hp.get("action_repeat", 1)) != 1:
+            raise ValueError(f"{request.env_id}: action_repeat applies to Gymnasium envs only; leave it at 1")
     return {
         "env_id": request.env_id,
         "scenario": request.scenario,

@@ -127,3 +127,13 @@ def test_the_chain_trains_only_a_shared_ppo(tmp_path):
         resolve_config(TrainRequest(ENV_ID, "sac", tmp_path))
     with pytest.raises(ValueError, match="wrappers"):
         resolve_config(TrainRequest(ENV_ID, "ppo", tmp_path, overrides={"wrappers": ["FlattenObservation"]}))
+
+
+@pytest.mark.parametrize(
+    "overrides",
+    [{"wrappers": ["FlattenObservation"]}, {"train_wrappers": ["RandomStartWaypoint"]}, {"action_repeat": 4}],
+)
+def test_gymnasium_only_training_keys_are_refused_for_the_chain(overrides, tmp_path):
+    request = TrainRequest("robot_chain_v0", "ppo", tmp_path / "run", overrides=overrides)
+    with pytest.raises(ValueError, match="Gymnasium envs only"):
+        resolve_config(request)
