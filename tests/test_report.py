@@ -102,6 +102,17 @@ def test_claims_only_where_the_interval_supports_them():
     assert claims == ["tiny-rover: `fast` matches `near` on time [s] (+0.0 [+0.0, +0.0])."]  # nothing on success
 
 
+def test_a_policy_that_fails_more_is_not_said_to_be_faster():
+    suite = lb.parse_suite(SUITE)
+    # crashes end episodes early: 10/20 successes, every episode 30 s shorter than the 20/20 policy's
+    crashing = _entry("crashing", [True, False] * 10, [50.0 + 0.1 * i for i in range(20)])
+    steady = _entry("steady", [True] * 20, [80.0 + 0.1 * i for i in range(20)])
+    table, claims = comparison_table([Row(suite, crashing, True), Row(suite, steady, True)])
+    assert len(claims) == 1 and claims[0].startswith("tiny-rover: `crashing` is worse than `steady` on success")
+    assert "beats" not in claims[0] and "time" not in claims[0]
+    assert "**X better**" in table[2]  # the table still shows the raw time difference
+
+
 def test_learned_policies_are_compared_with_every_baseline():
     suite = lb.parse_suite(SUITE)
     rows = [
