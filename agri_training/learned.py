@@ -17,6 +17,7 @@ replays the training wrappers and the normalisation on each observation, so that
 
 from __future__ import annotations
 
+import collections
 import dataclasses
 import importlib
 import json
@@ -35,11 +36,6 @@ ALGORITHMS: dict[str, tuple[str, str]] = {
     "sac": ("stable_baselines3", "SAC"),
     "td3": ("stable_baselines3", "TD3"),
     "tqc": ("sb3_contrib", "TQC"),
-}
-#: Observation wrappers a config may declare (by name; nothing is imported from a string).
-WRAPPERS: dict[str, type[gym.ObservationWrapper[Any, Any, Any]]] = {
-    "FlattenObservation": gym.wrappers.FlattenObservation,
-    "FilterObservation": gym.wrappers.FilterObservation,
 }
 #: Activation functions a config may name in ``policy_kwargs.activation_fn``.
 ACTIVATIONS = ("ReLU", "Tanh", "ELU", "LeakyReLU", "SiLU", "GELU")
@@ -96,6 +92,55 @@ class HeldActions:
         self._count += 1
         assert self._held is not None
         return self._held
+
+
+class ObservationHistory(gym.ObservationWrapper[np.ndarray, Any, np.ndarray]):
+    """The last ``frames`` (flat) observations side by side, oldest first: motion the network can see.
+
+    One scan cannot tell a person who stands in the robot's way from one who walks off; two scans a
+    decision apart can. Put it after ``FlattenObservation`` (and after ``ActionRepeat`` in training, so the
+    frames are one decision apart). A new episode fills every slot with its first observation.
+    :class:`LearnedPolicy` replays it once per decision and clears it when an episode starts.
+    """
+
+    def __init__(self, env: gym.Env[Any, Any], frames: int = 2) -> None:
+        space = env.observation_space
+        if not isinstance(space, gym.spaces.Box) or len(space.shape) != 1:
+            raise ValueError(f"ObservationHistory needs a flat Box observation (FlattenObservation first), got {space}")
+        if int(frames) < 1:
+            raise ValueError(f"ObservationHistory frames must be >= 1, got {frames}")
+        super().__init__(env)
+        self.frames = int(frames)
+        self.observation_space = gym.spaces.Box(
+            np.tile(space.low, self.frames), np.tile(space.high, self.frames), dtype=space.dtype
+        )
+        self._history: collections.deque[np.ndarray] = collections.deque(maxlen=self.frames)
+
+    def clear(self) -> None:
+        """Forget the history (the next observation starts a new episode)."""
+        self._history.clear()
+
+    def reset(self, **kwargs: Any) -> tuple[np.ndarray, dict[str, Any]]:
+        """Reset the env and fill the history with its first observation."""
+        self.clear()
+        return super().reset(**kwargs)
+
+    def observation(self, observation: np.ndarray) -> np.ndarray:
+        """Push ``observation`` and return the stacked history."""
+        obs = np.asarray(observation)
+        if not self._history:
+            self._history.extend([obs] * self.frames)
+        else:
+            self._history.append(obs)
+        return np.concatenate(self._history).astype(self.observation_space.dtype, copy=False)
+
+
+#: Observation wrappers a config may declare (by name; nothing is imported from a string).
+WRAPPERS: dict[str, type[gym.ObservationWrapper[Any, Any, Any]]] = {
+    "FlattenObservation": gym.wrappers.FlattenObservation,
+    "FilterObservation": gym.wrappers.FilterObservation,
+    "ObservationHistory": ObservationHistory,
+}
 
 
 class UnsafeCheckpointError(ValueError):
@@ -272,6 +317,34 @@ class ObsNormalization:
         )
 
 
+class ObservationReplay:
+    """The training's observation path replayed on raw env observations: the wrappers, then normalisation.
+
+    Call it once per decision (as the network saw observations in training). Wrappers with a memory
+    (:class:`ObservationHistory`) are cleared when ``new_episode`` is true.
+
+    Args:
+        chain: Observation wrappers, innermost first (:func:`observation_chain`).
+        normalization: ``VecNormalize``'s observation statistics, or None.
+    """
+
+    def __init__(
+        self, chain: Sequence[gym.ObservationWrapper[Any, Any, Any]], normalization: ObsNormalization | None = None
+    ) -> None:
+        self.chain = list(chain)
+        self.normalization = normalization
+
+    def __call__(self, observation: Any, new_episode: bool = False) -> Any:
+        """``observation`` as the network saw it in training."""
+        for w in self.chain:
+            if new_episode and isinstance(w, ObservationHistory):
+                w.clear()
+            observation = w.observation(observation)
+        if self.normalization is not None:
+            observation = self.normalization.normalize(observation)
+        return observation
+
+
 class _SpacesOnly(gym.Env[Any, Any]):
     """An env that only carries spaces: lets an algorithm build its policy without the real env."""
 
@@ -368,15 +441,15 @@ class LearnedPolicy:
         self.folder = folder
         #: True on a PettingZoo parallel env: one shared network acts for every agent (per-agent dicts).
         self.multiagent = is_parallel_env(env)
+        chain: list[gym.ObservationWrapper[Any, Any, Any]] = []
         if self.multiagent:
             if self.config.get("wrappers"):
                 raise ValueError(f"{folder}: a multi-agent run has no observation wrappers")
             agent = env.possible_agents[0]
-            self._wrappers: list[gym.ObservationWrapper[Any, Any, Any]] = []
             observation_space, action_space = env.observation_space(agent), env.action_space(agent)
         else:
             # The training wrappers, rebuilt around the env only to transform its observations the same way.
-            wrapped, self._wrappers = observation_chain(env, self.config.get("wrappers", []))
+            wrapped, chain = observation_chain(env, self.config.get("wrappers", []))
             observation_space, action_space = wrapped.observation_space, env.action_space
         import torch
 
@@ -391,15 +464,12 @@ class LearnedPolicy:
         self.model.policy.set_training_mode(False)
         norm = folder / NORMALIZE_FILE
         self.normalization = ObsNormalization.from_json(json.loads(norm.read_text())) if norm.is_file() else None
+        self._replay = ObservationReplay(chain, self.normalization)
         self._hold = HeldActions(int(self.config.get("action_repeat", 1)))
 
-    def transform(self, observation: Any) -> Any:
+    def transform(self, observation: Any, new_episode: bool = False) -> Any:
         """The raw env observation as the network saw it in training (wrappers, then normalisation)."""
-        for w in self._wrappers:
-            observation = w.observation(observation)
-        if self.normalization is not None:
-            observation = self.normalization.normalize(observation)
-        return observation
+        return self._replay(observation, new_episode)
 
     def predict(
         self,
@@ -417,10 +487,28 @@ class LearnedPolicy:
             from agri_training.parameter_sharing import predict_shared
 
             return predict_shared(self.model, observation, self.transform, deterministic), state
-        return self._hold(
-            lambda: self.model.predict(self.transform(observation), state, episode_start, deterministic),
-            episode_start,
-        )
+        return decide_held(self._hold, self._replay, self.model, observation, state, episode_start, deterministic)
+
+
+def decide_held(
+    hold: HeldActions,
+    replay: ObservationReplay,
+    model: Any,
+    observation: Any,
+    state: Any,
+    episode_start: Any,
+    deterministic: bool,
+) -> tuple[Any, Any]:
+    """One step of a single-agent learned policy: the held action, or the network's on a decision step.
+
+    The observation goes through ``replay`` only on decision steps, as it did once per decision in training.
+    """
+    new_episode = episode_start is not None and bool(np.asarray(episode_start).any())
+
+    def decide() -> tuple[Any, Any]:
+        return model.predict(replay(observation, new_episode), state, episode_start, deterministic)
+
+    return hold(decide, episode_start)
 
 
 def zoo_path(name: str) -> Path:

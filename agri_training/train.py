@@ -60,9 +60,11 @@ from agri_training.learned import (
     WEIGHTS_FILE,
     ActionRepeat,
     HeldActions,
+    ObservationReplay,
     ObsNormalization,
     algorithm_class,
     apply_wrappers,
+    decide_held,
     observation_chain,
     resolve_policy_kwargs,
 )
@@ -303,12 +305,12 @@ class _LivePolicy:
     def __init__(self, model: Any, env: Any, wrappers: list[Any], action_repeat: int = 1) -> None:
         self.model = model
         self.multiagent = is_parallel_env(env)
-        self._chain = [] if self.multiagent else observation_chain(env, wrappers)[1]
-        self.normalization: ObsNormalization | None = None
+        self.replay = ObservationReplay([] if self.multiagent else observation_chain(env, wrappers)[1])
         self._hold = HeldActions(action_repeat)
 
-    def _normalize(self, observation: Any) -> Any:
-        return observation if self.normalization is None else self.normalization.normalize(observation)
+    def set_normalization(self, normalization: ObsNormalization | None) -> None:
+        """Use the training's current observation statistics."""
+        self.replay.normalization = normalization
 
     def predict(
         self, observation: Any, state: Any = None, episode_start: Any = None, deterministic: bool = True
@@ -316,12 +318,8 @@ class _LivePolicy:
         if self.multiagent:  # per-agent dicts in and out, one batched pass of the shared network
             from agri_training.parameter_sharing import predict_shared
 
-            return predict_shared(self.model, observation, self._normalize, deterministic), state
-        for w in self._chain:
-            observation = w.observation(observation)
-        if self.normalization is not None:
-            observation = self.normalization.normalize(observation)
-        return self._hold(lambda: self.model.predict(observation, state, episode_start, deterministic), episode_start)
+            return predict_shared(self.model, observation, self.replay, deterministic), state
+        return decide_held(self._hold, self.replay, self.model, observation, state, episode_start, deterministic)
 
 
 def save_weights(model: Any, folder: Path) -> None:
@@ -394,7 +392,7 @@ def _make_callback(
             if self.rows and self.rows[-1]["timesteps"] == self.num_timesteps:
                 return
             venv = self.model.get_vec_normalize_env()
-            self.live.normalization = ObsNormalization.from_vec_normalize(venv) if venv is not None else None
+            self.live.set_normalization(ObsNormalization.from_vec_normalize(venv) if venv is not None else None)
             records = [
                 run_episode(self.eval_env, self.live, config["eval_seed"] + i, None)["record"]
                 for i in range(config["eval_episodes"])
