@@ -60,10 +60,11 @@ class CrashCostRamp(gym.Wrapper[Any, Any, Any, Any]):
     Args:
         env: The training env.
         start: Share of the crash penalty charged at first, in [0, 1].
-        ramp_steps: Env steps (of this env copy) over which the share reaches 1, >= 1.
+        ramp_steps: Steps of this env copy over which the share reaches 1, >= 1 (with ``action_repeat`` a
+            step is one action, held for that many control periods).
     """
 
-    def __init__(self, env: gym.Env[Any, Any], start: float = 0.1, ramp_steps: int = 400_000) -> None:
+    def __init__(self, env: gym.Env[Any, Any], start: float = 0.1, ramp_steps: int = 100_000) -> None:
         if not 0.0 <= start <= 1.0:
             raise ValueError(f"CrashCostRamp: start must be in [0, 1], got {start}")
         if ramp_steps < 1:

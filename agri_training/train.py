@@ -264,11 +264,31 @@ def _env_factory(config: Mapping[str, Any], rank: int) -> Callable[[], gym.Env[A
     def make() -> gym.Env[Any, Any]:
         from stable_baselines3.common.monitor import Monitor
 
-        env = apply_train_wrappers(gym.make(env_id, **env_kwargs), curricula)
-        env = apply_wrappers(ActionRepeat(env, repeat) if repeat > 1 else env, wrappers)
-        return Monitor(env, info_keywords=("is_success",))
+        env = apply_train_wrappers(make_repeating(env_id, env_kwargs, repeat), curricula)
+        return Monitor(apply_wrappers(env, wrappers), info_keywords=("is_success",))
 
     return make
+
+
+def make_repeating(env_id: str, env_kwargs: Mapping[str, Any], repeat: int) -> gym.Env[Any, Any]:
+    """The env stepping ``repeat`` periods per action: its own ``frame_skip`` if it has one, else :class:`ActionRepeat`.
+
+    An env with ``frame_skip`` (GreenhouseNav) skips the observations of the held periods, which nobody
+    reads; :class:`ActionRepeat` would have the env make each one. Either way a step sums the periods'
+    rewards and ends at the period that ends the episode.
+
+    Raises:
+        ValueError: When ``env_kwargs`` sets ``frame_skip`` itself (``action_repeat`` is the one setting).
+    """
+    if repeat <= 1:
+        return gym.make(env_id, **env_kwargs)
+    if "frame_skip" in env_kwargs:
+        raise ValueError("set action_repeat, not env_kwargs.frame_skip: evaluation holds actions by action_repeat")
+    env = gym.make(env_id, **env_kwargs)
+    if "frame_skip" in getattr(getattr(env.unwrapped, "config", None), "__dataclass_fields__", {}):
+        env.close()
+        return gym.make(env_id, **env_kwargs, frame_skip=repeat)
+    return ActionRepeat(env, repeat)
 
 
 def make_vec_env(config: Mapping[str, Any]) -> Any:

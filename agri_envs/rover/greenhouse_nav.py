@@ -77,6 +77,7 @@ class GreenhouseNavConfig(StrictConfig):
     max_accel: float = param(1.0, "linear acceleration limit", unit="m/s^2", low=0.1, high=10.0)
     max_angular_accel: float = param(3.0, "angular acceleration limit", unit="rad/s^2", low=0.1, high=20.0)
     control_period: float = param(1 / 15, "time between actions (the LIDAR's 15 Hz)", unit="s", low=0.01, high=0.5)
+    frame_skip: int = param(1, "control periods per step (action held, observed once at the end)", low=1, high=16)
     # Sensors
     lidar_beams: int = param(90, "LIDAR beams in the observation (min-pooled from the full scan)", low=1, high=811)
     full_scan: bool = param(False, "add the full-resolution 811-beam scan as observation key 'scan'")
@@ -268,6 +269,12 @@ class GreenhouseNavEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
     always gives the limit in force; the truncating step sets ``info["truncated"]`` and explains it in
     ``info["truncation_reason"]``.
 
+    With ``frame_skip`` k > 1 (ALE's frameskip) each step holds the action for k control periods and
+    observes once, at the end; its reward and the ``reward_*`` terms in ``info`` are sums over the periods,
+    and it stops early at the period that ends the episode. Time limits and ``info["max_episode_steps"]``
+    count control periods; an explicit ``max_episode_steps=N`` means N steps, that is N * k periods. Training
+    with a held action uses it to skip the observations nobody reads (``agri train``'s ``action_repeat``).
+
     ## Info
 
     ``is_success``, ``collision``, ``clearance`` (m), ``min_clearance`` (m, over the episode),
@@ -308,6 +315,7 @@ class GreenhouseNavEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
     | ``max_accel`` | 1 | m/s^2 | in [0.1, 10.0] | linear acceleration limit |
     | ``max_angular_accel`` | 3 | rad/s^2 | in [0.1, 20.0] | angular acceleration limit |
     | ``control_period`` | 0.06667 | s | in [0.01, 0.5] | time between actions (the LIDAR's 15 Hz) |
+    | ``frame_skip`` | 1 |  | in [1, 16] | control periods per step (action held, observed once at the end) |
     | ``lidar_beams`` | 90 |  | in [1, 811] | LIDAR beams in the observation (min-pooled from the full scan) |
     | ``full_scan`` | False |  | True or False | add the full-resolution 811-beam scan as observation key 'scan' |
     | ``lidar_noise_std`` | 0.02 | m | in [0.0, 0.5] | LIDAR Gaussian range noise (TiM561 statistical error) |
@@ -354,7 +362,8 @@ class GreenhouseNavEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
       time; the time penalty rose from 0.002 to 0.01 per step; progress counts the heading error toward
       the waypoint as distance to go; new observation
       ``next_waypoint`` (the route is known, so a driver can line up for the next leg). With v1's
-      penalties PPO learned to stand still.
+      penalties PPO learned to stand still. Later, without a version change (the default is unchanged):
+      the ``frame_skip`` argument.
 
     ## References
 
@@ -497,16 +506,44 @@ class GreenhouseNavEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
 
     # -- stepping --------------------------------------------------------------------------------------
     def step(self, action: np.ndarray) -> tuple[dict[str, np.ndarray], float, bool, bool, dict[str, Any]]:
-        """Apply ``[u, r]`` for one control period and return the Gymnasium 5-tuple."""
+        """Apply ``[u, r]`` for ``frame_skip`` control periods and return the Gymnasium 5-tuple."""
         if self.world is None:
             raise RuntimeError("call reset() before step()")
         u, r = checked_action(action, 2).tolist()
         spec = self.robot_spec
         v_cmd = u * (spec.max_speed if u >= 0 else spec.max_reverse_speed)
         w_cmd = r * spec.max_turn_rate
+        terms: dict[str, float] = {}
+        reached = False
+        for _ in range(self.config.frame_skip):
+            outcome, clearance = self._advance(v_cmd, w_cmd)
+            for key, value in outcome.items():
+                if key.startswith("reward"):
+                    terms[key] = terms.get(key, 0.0) + float(value)
+            reached = reached or bool(outcome["waypoint_reached"])
+            terminated = bool(outcome["is_success"]) or (outcome["collision"] and self.config.terminate_on_collision)
+            truncated = not terminated and self._steps >= self.max_episode_steps
+            if terminated or truncated:
+                break
+        outcome.update(terms, waypoint_reached=reached)  # a skipped step reports the sums of its periods
+        obs = self._observe()
+        info = self._info(outcome, clearance)
+        info["truncated"] = truncated
+        if truncated:
+            info["truncation_reason"] = (
+                f"time limit: {self.max_episode_steps} steps ({self.max_episode_steps * self.config.control_period:.1f}"
+                f" s, {self.time_limit_source}) reached at waypoint {self.task.index}/{len(self.task.targets)}"
+            )
+        if self.render_mode == "human":
+            self.render()
+        return obs, terms["reward"], terminated, truncated, info
+
+    def _advance(self, v_cmd: float, w_cmd: float) -> tuple[dict[str, Any], float]:
+        """One control period: people plan, physics, odometry, and the task's outcome; no observation."""
+        assert self.world is not None
         dt = self.config.control_period
         robot = self.robot
-        reach = np.array([[robot.pose[0], robot.pose[1], spec.circumradius]])
+        reach = np.array([[robot.pose[0], robot.pose[1], self.robot_spec.circumradius]])
         self.crowd.plan(dt, reach, self.np_random)
         self.world.step(dt)
         self.crowd.sync_from_world()
@@ -519,20 +556,7 @@ class GreenhouseNavEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
         clearance = self.world.clearance(robot)
         self._min_clearance = min(self._min_clearance, clearance)
         self._trail.append((float(robot.pose[0]), float(robot.pose[1])))
-        outcome = self.task.evaluate(robot.pose, collided, clearance, travelled)
-        terminated = bool(outcome["is_success"]) or (collided and self.config.terminate_on_collision)
-        truncated = not terminated and self._steps >= self.max_episode_steps
-        obs = self._observe()
-        info = self._info(outcome, clearance)
-        info["truncated"] = truncated
-        if truncated:
-            info["truncation_reason"] = (
-                f"time limit: {self.max_episode_steps} steps ({self.max_episode_steps * self.config.control_period:.1f}"
-                f" s, {self.time_limit_source}) reached at waypoint {self.task.index}/{len(self.task.targets)}"
-            )
-        if self.render_mode == "human":
-            self.render()
-        return obs, float(outcome["reward"]), terminated, truncated, info
+        return self.task.evaluate(robot.pose, collided, clearance, travelled), clearance
 
     def _arrival_pose(self, targets: np.ndarray, k: int) -> np.ndarray:
         """Where the mission starts: the layout's start for ``k = 0``, else waypoint ``k - 1`` as reached.
@@ -549,9 +573,9 @@ class GreenhouseNavEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
 
     def _time_limit(self, start_pose: np.ndarray, targets: np.ndarray) -> tuple[int, str]:
         """The episode's step limit and where it comes from (see Episode End)."""
-        if self.explicit_max_episode_steps is not None:
-            return int(self.explicit_max_episode_steps), "explicit max_episode_steps"
         cfg = self.config
+        if self.explicit_max_episode_steps is not None:  # env steps of frame_skip control periods each
+            return int(self.explicit_max_episode_steps) * cfg.frame_skip, "explicit max_episode_steps"
         assert self.layout is not None
         steps = mission_time_limit(
             start_pose,
