@@ -490,7 +490,8 @@ class Progress:
                 from tqdm import tqdm
             except ImportError:
                 return
-            self._bar = tqdm(total=total_episodes, unit="ep", file=sys.stderr, dynamic_ncols=True)
+            # disable=None: no bar when stderr is not a terminal (CI logs would get one line per update).
+            self._bar = tqdm(total=total_episodes, unit="ep", file=sys.stderr, dynamic_ncols=True, disable=None)
 
     def start_block(self, desc: str) -> None:
         """Announce the next block."""

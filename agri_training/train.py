@@ -12,6 +12,7 @@ evaluated. The keys:
 | ``n_envs`` | parallel envs |
 | ``vec_env`` | ``dummy`` (one process) or ``subproc`` (one process per env) |
 | ``env_kwargs`` | ``gym.make`` arguments (after the scenario's) |
+| ``train_env_kwargs`` | ``gym.make`` arguments of the training envs only, over ``env_kwargs`` |
 | ``wrappers`` | observation wrappers by name, innermost first (see ``learned.WRAPPERS``) |
 | ``action_repeat`` | env steps per action (1: every step); evaluation holds actions the same way |
 | ``train_wrappers`` | training-only curricula by name, inside ``wrappers`` (see ``curricula.TRAIN_WRAPPERS``) |
@@ -80,6 +81,7 @@ HYPERPARAM_KEYS = (
     "n_envs",
     "vec_env",
     "env_kwargs",
+    "train_env_kwargs",
     "wrappers",
     "train_wrappers",
     "action_repeat",
@@ -223,7 +225,7 @@ def resolve_config(request: TrainRequest) -> dict[str, Any]:
     if is_multiagent(request.env_id):  # one parameter-shared policy for every agent (see parameter_sharing)
         if request.algo != "ppo" or request.her:
             raise ValueError(f"{request.env_id} trains a parameter-shared PPO: --algo ppo, without --her")
-        for key in ("wrappers", "train_wrappers"):
+        for key in ("wrappers", "train_wrappers", "train_env_kwargs"):
             if hp.get(key):
                 raise ValueError(f"{request.env_id}: {key} apply to Gymnasium envs only; leave '{key}' empty")
         if int(hp.get("action_repeat", 1)) != 1:
@@ -232,6 +234,7 @@ def resolve_config(request: TrainRequest) -> dict[str, Any]:
         "env_id": request.env_id,
         "scenario": request.scenario,
         "env_kwargs": env_kwargs,
+        "train_env_kwargs": dict(hp.get("train_env_kwargs", {}) or {}),
         "algo": request.algo,
         "her": her,
         "seed": request.seed,
@@ -257,7 +260,8 @@ def resolve_config(request: TrainRequest) -> dict[str, Any]:
 
 
 def _env_factory(config: Mapping[str, Any], rank: int) -> Callable[[], gym.Env[Any, Any]]:
-    env_id, env_kwargs, wrappers = config["env_id"], dict(config["env_kwargs"]), list(config["wrappers"])
+    env_id, wrappers = config["env_id"], list(config["wrappers"])
+    env_kwargs = {**config["env_kwargs"], **config.get("train_env_kwargs", {})}
     curricula = list(config.get("train_wrappers", []))
     repeat = int(config.get("action_repeat", 1))
 
@@ -268,6 +272,27 @@ def _env_factory(config: Mapping[str, Any], rank: int) -> Callable[[], gym.Env[A
         return Monitor(apply_wrappers(env, wrappers), info_keywords=("is_success",))
 
     return make
+
+
+def check_same_spaces(config: Mapping[str, Any]) -> None:
+    """Refuse ``train_env_kwargs`` that give the training env other spaces than the evaluation env.
+
+    Raises:
+        ValueError: When the observation or action spaces differ.
+    """
+    evaluation = gym.make(config["env_id"], **config["env_kwargs"])
+    training = gym.make(config["env_id"], **{**config["env_kwargs"], **config["train_env_kwargs"]})
+    same = (
+        evaluation.observation_space == training.observation_space
+        and evaluation.action_space == training.action_space
+    )
+    evaluation.close()
+    training.close()
+    if not same:
+        raise ValueError(
+            f"train_env_kwargs {config['train_env_kwargs']} change the env's spaces; the policy must act in the "
+            "evaluation env (env_kwargs) too"
+        )
 
 
 def make_repeating(env_id: str, env_kwargs: Mapping[str, Any], repeat: int) -> gym.Env[Any, Any]:
@@ -386,7 +411,9 @@ def _make_callback(
             if progress:
                 from tqdm import tqdm
 
-                self.bar = tqdm(total=config["timesteps"], unit="step", desc="agri train", file=sys.stderr)
+                self.bar = tqdm(  # disable=None: no bar when stderr is not a terminal (logs)
+                    total=config["timesteps"], unit="step", desc="agri train", file=sys.stderr, disable=None
+                )
 
         def _on_step(self) -> bool:
             n = self.num_timesteps
@@ -512,6 +539,8 @@ def train(
     run_dir = Path(request.out)
     if (run_dir / CONFIG_FILE).exists():
         raise ValueError(f"{run_dir} already holds a run; pass another --out")
+    if config["train_env_kwargs"]:
+        check_same_spaces(config)
     run_dir.mkdir(parents=True, exist_ok=True)
     command = command or " ".join(shlex.quote(a) for a in ["agri", *sys.argv[1:]])
     (run_dir / CONFIG_FILE).write_text(yaml.safe_dump(config, sort_keys=False))

@@ -142,3 +142,17 @@ def test_a_registered_trained_policy_loads_by_name(tiny_run, monkeypatch, capsys
     assert isinstance(load_policy(spec.name, env), LearnedPolicy)
     assert main(["list"]) == 0
     assert f"{spec.name} [{ENV_ID}] (privileged) (learned, ppo)" in capsys.readouterr().out
+
+
+def test_train_env_kwargs_reach_the_training_envs_only(tmp_path):
+    from agri_training.train import _env_factory
+
+    hp = {**TINY_HP, "train_env_kwargs": {"n_people": 2, "people_tease_prob": 0.9}}
+    config = resolve_config(TrainRequest(ENV_ID, "ppo", tmp_path / "run", overrides=hp))
+    training = _env_factory(config, 0)().unwrapped.config
+    assert (training.n_people, training.people_tease_prob) == (2, 0.9)
+    assert config["env_kwargs"]["n_people"] == 0  # what evaluation and loading use
+    bad = {**TINY_HP, "train_env_kwargs": {"localization": "none"}}  # another observation space
+    with pytest.raises(ValueError, match="spaces"):
+        train(TrainRequest(ENV_ID, "ppo", tmp_path / "bad", timesteps=64, overrides=bad, progress=False), "test")
+    assert not (tmp_path / "bad" / "config.yaml").exists()
