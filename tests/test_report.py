@@ -138,7 +138,9 @@ def test_markdown_to_html_escapes_and_links():
     assert '<a href="#y">x</a>' in html and "<code>a&lt;b&gt;</code>" in html and "<li>one more</li>" in html
 
 
-def test_progress_names_the_block_and_prints_no_rows_per_episode(capsys):
+def test_progress_names_the_block_and_prints_no_rows_per_episode(capsys, monkeypatch):
+    import sys
+
     from agri_training.evaluate import EvalRequest, evaluate_many
 
     kwargs = {"n_rows": 1, "row_length": 3, "n_people": 0}
@@ -146,6 +148,9 @@ def test_progress_names_the_block_and_prints_no_rows_per_episode(capsys):
         EvalRequest("agri_envs/GreenhouseNav-v2", "harik-apf-gt", 2, 100000, env_kwargs=kwargs, label="a"),
         EvalRequest("agri_envs/GreenhouseNav-v2", "harik-apf-gt", 2, 100002, env_kwargs=kwargs, label="b"),
     ]
+    evaluate_many(requests[:1], progress=True, workers=1)
+    assert capsys.readouterr().err == ""  # not a terminal (a CI log): no bar at all
+    monkeypatch.setattr(sys.stderr, "isatty", lambda: True)
     docs = evaluate_many(requests, progress=True, workers=1)
     err = capsys.readouterr().err
     assert "[1/2] harik-apf-gt on GreenhouseNav-v2 [a]" in err and "[2/2] harik-apf-gt on GreenhouseNav-v2 [b]" in err

@@ -58,12 +58,14 @@ def test_loaded_policy_acts_like_the_trained_network(tiny_run):
         assert torch.equal(value, saved[key]), key
     obs, _ = env.reset(seed=5)
     stats = json.loads((tiny_run / "normalize.json").read_text())
-    flat = gym.spaces.flatten(env.observation_space, obs)
+    # The YAML's ObservationHistory: a new episode fills every frame with the first observation.
+    (frames,) = [w["ObservationHistory"]["frames"] for w in policy.config["wrappers"] if "ObservationHistory" in w]
+    flat = np.tile(gym.spaces.flatten(env.observation_space, obs), frames)
     z = np.clip((flat - np.array(stats["mean"][""])) / np.sqrt(np.array(stats["var"][""]) + stats["epsilon"]), -10, 10)
-    np.testing.assert_allclose(policy.transform(obs), z, rtol=1e-5, atol=1e-5)
+    np.testing.assert_allclose(policy.transform(obs, new_episode=True), z, rtol=1e-5, atol=1e-5)
     with torch.no_grad():
         mean = policy.model.policy.get_distribution(torch.as_tensor(z[None], dtype=torch.float32)).distribution.mean
-    action, _ = policy.predict(obs, deterministic=True)
+    action, _ = policy.predict(obs, episode_start=np.array([True]), deterministic=True)
     np.testing.assert_allclose(action, np.clip(mean.numpy()[0], -1, 1), rtol=1e-5, atol=1e-6)
 
 
@@ -103,7 +105,7 @@ def test_pickled_code_in_a_checkpoint_never_runs(tiny_run, tmp_path):
 
 def test_hyperparameters_resolve_and_stay_strict(tmp_path):
     hp = load_hyperparams(ENV_ID, "ppo")
-    assert hp["wrappers"] == ["FlattenObservation"] and hp["algo_kwargs"]["n_steps"] == 2048
+    assert hp["wrappers"][0] == "FlattenObservation" and hp["algo_kwargs"]["n_steps"] == 2048
     assert load_hyperparams(ENV_ID, "ppo", overrides={"n_envs": 2})["n_envs"] == 2
     assert load_hyperparams("agri_envs/GrapeHarvest-v1", "sac")["policy"] == "MultiInputPolicy"
     with pytest.raises(ValueError, match="unknown hyperparameter keys"):
