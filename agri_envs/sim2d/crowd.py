@@ -97,9 +97,9 @@ class Crowd:
         for i in range(self.n, len(self.world.movers)):  # unused slots far away
             self.world.place_mover(i, 1e6 + 10.0 * i, 1e6, self.spec.radius)
 
-    def _robot_ahead(self, i: int, hx: float, hy: float, robots: np.ndarray) -> bool:
+    def _robot_ahead(self, i: int, hx: float, hy: float, robots: list[list[float]]) -> bool:
         """Whether a robot is within ``notice_distance`` ahead of person ``i`` walking along ``(hx, hy)``."""
-        px, py = self.pos[i]
+        px, py = self.pos[i].tolist()
         for rx, ry, reach in robots:
             dx, dy = rx - px, ry - py
             centre = math.hypot(dx, dy)
@@ -116,6 +116,7 @@ class Crowd:
             rng: Generator for the random choices.
         """
         nodes = self.graph.nodes
+        robot_rows = np.asarray(robots, dtype=np.float64).tolist()  # plain floats: cheaper in the loop below
         for i in range(self.n):
             vx = vy = 0.0
             if self.mode[i] == STAND:
@@ -124,18 +125,19 @@ class Crowd:
                     self.mode[i] = WALK
                     self.prev_node[i], self.next_node[i] = self.next_node[i], self.prev_node[i]
             else:
-                delta = nodes[self.next_node[i]] - self.pos[i]
-                dist = math.hypot(delta[0], delta[1])
+                px, py = self.pos[i].tolist()
+                nx, ny = nodes[self.next_node[i]].tolist()
+                dist = math.hypot(nx - px, ny - py)
                 if dist < 1e-6:  # arrived: walk on to a random neighbour, not straight back if possible
                     options = [j for j in self._adj[self.next_node[i]] if j != self.prev_node[i]]
                     if not options:
                         options = [int(self.prev_node[i])]
                     self.prev_node[i] = self.next_node[i]
                     self.next_node[i] = options[int(rng.integers(len(options)))]
-                    delta = nodes[self.next_node[i]] - self.pos[i]
-                    dist = math.hypot(delta[0], delta[1])
-                hx, hy = delta[0] / dist, delta[1] / dist
-                if self._robot_ahead(i, hx, hy, robots):
+                    nx, ny = nodes[self.next_node[i]].tolist()
+                    dist = math.hypot(nx - px, ny - py)
+                hx, hy = (nx - px) / dist, (ny - py) / dist
+                if self._robot_ahead(i, hx, hy, robot_rows):
                     if not self.reacted[i] and rng.random() >= self.spec.tease_prob:
                         self.prev_node[i], self.next_node[i] = self.next_node[i], self.prev_node[i]
                     else:  # stand in the robot's way (or keep waiting for it to leave)
@@ -144,7 +146,7 @@ class Crowd:
                     self.reacted[i] = True
                 else:
                     self.reacted[i] = False
-                    speed = min(self.speed[i], dist / dt)  # stop exactly on the node
+                    speed = min(float(self.speed[i]), dist / dt)  # stop exactly on the node
                     vx, vy = hx * speed, hy * speed
             self.world.set_mover_velocity(i, vx, vy)
 
