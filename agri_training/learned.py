@@ -216,6 +216,23 @@ def observation_chain(
     return wrapped, chain[::-1]
 
 
+def schedule(value: Any) -> Any:
+    """``lin_X`` -> a linear decay from X to 0 (rl-zoo3's notation); numbers pass through."""
+    if isinstance(value, str) and value.startswith("lin_"):
+        start = float(value[4:])
+
+        def linear(progress_remaining: float) -> float:
+            return progress_remaining * start
+
+        return linear
+    return value
+
+
+def resolve_algo_kwargs(algo_kwargs: Mapping[str, Any]) -> dict[str, Any]:
+    """Config ``algo_kwargs`` with schedules given as ``lin_X`` turned into functions (see :func:`schedule`)."""
+    return {key: schedule(value) for key, value in algo_kwargs.items()}
+
+
 def resolve_policy_kwargs(policy_kwargs: Mapping[str, Any]) -> dict[str, Any]:
     """Config ``policy_kwargs`` with ``activation_fn`` given by name turned into the torch class.
 
@@ -370,7 +387,7 @@ def build_inference_model(
     from stable_baselines3.common.vec_env import DummyVecEnv
 
     cls = algorithm_class(config["algo"])
-    kwargs = dict(config.get("algo_kwargs", {}))
+    kwargs = resolve_algo_kwargs(config.get("algo_kwargs", {}))
     if config["algo"] != "ppo":
         kwargs.update(buffer_size=1, learning_starts=0)
     else:  # the rollout sizes are the training's (n_envs copies); acting needs none of them

@@ -67,6 +67,7 @@ from agri_training.learned import (
     apply_wrappers,
     decide_held,
     observation_chain,
+    resolve_algo_kwargs,
     resolve_policy_kwargs,
 )
 from agri_training.multiagent import is_multiagent, is_parallel_env
@@ -187,18 +188,6 @@ def load_hyperparams(
         f" <- scenarios[{scenario}]" if scenario is not None and scenario in scenarios else ""
     )
     return hp
-
-
-def _schedule(value: Any) -> Any:
-    """``lin_X`` -> a linear decay from X to 0 (rl-zoo3's notation); numbers pass through."""
-    if isinstance(value, str) and value.startswith("lin_"):
-        start = float(value[4:])
-
-        def linear(progress_remaining: float) -> float:
-            return progress_remaining * start
-
-        return linear
-    return value
 
 
 def resolve_config(request: TrainRequest) -> dict[str, Any]:
@@ -547,7 +536,7 @@ def train(
     torch.set_num_threads(config["torch_threads"])
     cls = algorithm_class(config["algo"])
     venv = make_vec_env(config)
-    algo_kwargs = {k: _schedule(v) for k, v in config["algo_kwargs"].items()}
+    algo_kwargs = resolve_algo_kwargs(config["algo_kwargs"])
     if config["her"] is not None:
         from stable_baselines3 import HerReplayBuffer
 

@@ -158,3 +158,12 @@ def test_train_env_kwargs_reach_the_training_envs_only(tmp_path):
     with pytest.raises(ValueError, match="spaces"):
         train(TrainRequest(ENV_ID, "ppo", tmp_path / "bad", timesteps=64, overrides=bad, progress=False), "test")
     assert not (tmp_path / "bad" / "config.yaml").exists()
+
+
+def test_a_run_with_a_decaying_learning_rate_loads(tmp_path):
+    """``lin_X`` schedules are functions in training and must not reach the inference model as strings."""
+    hp = {**TINY_HP, "algo_kwargs": {**TINY_HP["algo_kwargs"], "learning_rate": "lin_1e-3", "clip_range": "lin_0.2"}}
+    out = tmp_path / "lin"
+    train(TrainRequest(ENV_ID, "ppo", out, seed=1, timesteps=64, overrides=hp, progress=False), "test")
+    result = evaluate(EvalRequest(ENV_ID, str(out), episodes=1, seed=100_000), progress=False)
+    assert result["summary"]["episodes"] == 1
