@@ -238,7 +238,7 @@ register_policy(
         entry_point="agri_training.learned:load_zoo_policy",
         env_kwargs={"localization": "ground_truth"},
         description="Learned (PPO, agri_training/zoo/ppo-greenhouse-nav): LIDAR, sonar and the next two waypoints "
-        "from the ground-truth pose; acts every 4th step",
+        "from the ground-truth pose, its last 3 observations; acts every 4th step",
         privileged=True,
         learned=True,
         algo="ppo",
