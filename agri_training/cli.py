@@ -10,6 +10,8 @@ from typing import Any
 
 import yaml
 
+from agri_training.yaml_values import load_yaml
+
 
 def parse_env_kwargs(items: list[str]) -> dict[str, Any]:
     """``key=value`` strings to a dict, values parsed as YAML scalars (``3``, ``0.5``, ``true``, ``odometry``).
@@ -22,7 +24,7 @@ def parse_env_kwargs(items: list[str]) -> dict[str, Any]:
         if "=" not in item:
             raise ValueError(f"--env-kwargs expects key=value, got {item!r}")
         key, value = item.split("=", 1)
-        out[key.strip()] = yaml.safe_load(value)
+        out[key.strip()] = load_yaml(value)
     return out
 
 

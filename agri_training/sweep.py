@@ -54,6 +54,7 @@ import yaml
 
 from agri_training.learned import CONFIG_FILE
 from agri_training.train import HELD_OUT_SEED, HYPERPARAM_KEYS, TrainRequest, resolve_config, train
+from agri_training.yaml_values import load_yaml
 
 #: Hyperparameters a sweep or a search may vary (``torch_threads`` is pinned to 1, ``scenarios`` is structure).
 VARIABLE_KEYS = tuple(k for k in HYPERPARAM_KEYS if k not in ("torch_threads", "scenarios"))
@@ -67,15 +68,9 @@ def parse_value(text: str) -> Any:
         ValueError: For text that is not YAML.
     """
     try:
-        value = yaml.safe_load(text)
+        return load_yaml(text)
     except yaml.YAMLError as exc:
         raise ValueError(f"{text!r} is not a YAML value: {exc}") from None
-    if isinstance(value, str):
-        try:
-            return float(value) if re.fullmatch(r"[+-]?(\d+\.?\d*|\.\d+)[eE][+-]?\d+", value.strip()) else value
-        except ValueError:
-            return value
-    return value
 
 
 def _split_top_level(text: str) -> list[str]:

@@ -72,6 +72,7 @@ from agri_training.learned import (
 )
 from agri_training.multiagent import is_multiagent, is_parallel_env
 from agri_training.multiagent import make_env as make_multiagent_env
+from agri_training.yaml_values import load_yaml
 
 HYPERPARAMS_DIR = Path(__file__).parent / "hyperparams"
 #: Seeds from here on are reserved for held-out evaluation suites; training never uses them.
@@ -168,7 +169,7 @@ def load_hyperparams(
         ValueError: For unknown keys, or a file without a ``default`` block.
     """
     path = path or HYPERPARAMS_DIR / f"{algo}.yml"
-    data = yaml.safe_load(path.read_text()) or {}
+    data = load_yaml(path.read_text()) or {}
     if "default" not in data:
         raise ValueError(f"{path} needs a 'default' block")
     for key, block in data.items():

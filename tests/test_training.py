@@ -167,3 +167,12 @@ def test_a_run_with_a_decaying_learning_rate_loads(tmp_path):
     train(TrainRequest(ENV_ID, "ppo", out, seed=1, timesteps=64, overrides=hp, progress=False), "test")
     result = evaluate(EvalRequest(ENV_ID, str(out), episodes=1, seed=100_000), progress=False)
     assert result["summary"]["episodes"] == 1
+
+
+def test_exponent_numbers_in_overrides_are_floats():
+    """``1e-4`` is a float as users write it (PyYAML's YAML 1.1 rules alone read it as a string), nested too."""
+    from agri_training.cli import parse_env_kwargs
+
+    hp = parse_env_kwargs(["algo_kwargs={learning_rate: 1e-4, clip_range: lin_2e-1}", "eval_freq=5E3"])
+    assert hp == {"algo_kwargs": {"learning_rate": 1e-4, "clip_range": "lin_2e-1"}, "eval_freq": 5000.0}
+    assert isinstance(hp["algo_kwargs"]["learning_rate"], float)
