@@ -14,6 +14,7 @@ steps the env 4 times per decision and the env makes an observation every time.
 
     python benchmarks/profile_ppo_nav.py --timesteps 65536
     python benchmarks/profile_ppo_nav.py --timesteps 65536 --repeat-path wrapper
+    python benchmarks/profile_ppo_nav.py --timesteps 65536 --action-repeat 1   # one env step per decision
 """
 
 from __future__ import annotations
@@ -63,6 +64,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--timesteps", type=int, default=65536, help="decisions to train")
     parser.add_argument("--repeat-path", choices=("frame_skip", "wrapper"), default="frame_skip")
+    parser.add_argument("--action-repeat", type=int, default=None, help="override the YAML's action_repeat (4)")
     args = parser.parse_args()
 
     from stable_baselines3 import PPO
@@ -86,7 +88,8 @@ def main() -> None:
         "ppo",
         out,
         timesteps=args.timesteps,
-        overrides={"eval_freq": 10**9, "eval_episodes": 1, "checkpoint_freq": 0},
+        overrides={"eval_freq": 10**9, "eval_episodes": 1, "checkpoint_freq": 0}
+        | ({} if args.action_repeat is None else {"action_repeat": args.action_repeat}),
         progress=False,
     )
     t0 = time.perf_counter()
