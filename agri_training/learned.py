@@ -9,10 +9,11 @@ rebuild a policy without unpickling anything:
 | ``policy.pt`` | the policy's ``state_dict`` (tensors only), read with ``torch.load(weights_only=True)`` |
 | ``normalize.json`` | the ``VecNormalize`` observation statistics (mean, variance, clip), when used |
 
-:class:`LearnedPolicy` rebuilds the algorithm's policy network from the config, loads the weights, and
-replays the training wrappers and the normalisation on each observation, so that it implements SB3's
-``predict`` on the env's raw observations, like every baseline. Checkpoints that need unpickling (SB3
-``.zip`` files, tensors stored with code) are refused with a clear message.
+:class:`LearnedPolicy` exports the acting layers of the weights to :class:`~agri_training.inference.
+PolicyNetwork` (a forward pass that computes the same bits on every CPU, so that leaderboard entries
+reproduce anywhere), and replays the training wrappers and the normalisation on each observation, so that
+it implements SB3's ``predict`` on the env's raw observations, like every baseline. Checkpoints that need
+unpickling (SB3 ``.zip`` files, tensors stored with code) are refused with a clear message.
 """
 
 from __future__ import annotations
@@ -29,6 +30,8 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 import yaml
+
+from agri_training.inference import PolicyNetwork
 
 #: Algorithms ``agri train`` knows: name -> (module, class).
 ALGORITHMS: dict[str, tuple[str, str]] = {
@@ -362,48 +365,6 @@ class ObservationReplay:
         return observation
 
 
-class _SpacesOnly(gym.Env[Any, Any]):
-    """An env that only carries spaces: lets an algorithm build its policy without the real env."""
-
-    def __init__(self, observation_space: gym.Space[Any], action_space: gym.Space[Any]) -> None:
-        self.observation_space = observation_space
-        self.action_space = action_space
-
-    def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None) -> tuple[Any, dict[str, Any]]:
-        super().reset(seed=seed)
-        return self.observation_space.sample(), {}
-
-    def step(self, action: Any) -> tuple[Any, float, bool, bool, dict[str, Any]]:
-        return self.observation_space.sample(), 0.0, True, False, {}
-
-
-def build_inference_model(
-    config: Mapping[str, Any], observation_space: gym.Space[Any], action_space: gym.Space[Any]
-) -> Any:
-    """The algorithm with an untrained policy shaped like the run's, on CPU, for inference only.
-
-    The replay buffer is reduced to one transition and HER's is dropped: acting needs only the policy.
-    """
-    from stable_baselines3.common.vec_env import DummyVecEnv
-
-    cls = algorithm_class(config["algo"])
-    kwargs = resolve_algo_kwargs(config.get("algo_kwargs", {}))
-    if config["algo"] != "ppo":
-        kwargs.update(buffer_size=1, learning_starts=0)
-    else:  # the rollout sizes are the training's (n_envs copies); acting needs none of them
-        kwargs.pop("n_steps", None)
-        kwargs.pop("batch_size", None)
-    venv = DummyVecEnv([lambda: _SpacesOnly(observation_space, action_space)])
-    return cls(
-        config["policy"],
-        venv,
-        policy_kwargs=resolve_policy_kwargs(config.get("policy_kwargs", {})),
-        device="cpu",
-        seed=0,
-        **kwargs,
-    )
-
-
 def find_run_dir(path: Path) -> Path:
     """The run directory whose ``config.yaml`` applies to ``path`` (the folder itself or a parent)."""
     for folder in (path, *path.parents):
@@ -468,17 +429,17 @@ class LearnedPolicy:
             # The training wrappers, rebuilt around the env only to transform its observations the same way.
             wrapped, chain = observation_chain(env, self.config.get("wrappers", []))
             observation_space, action_space = wrapped.observation_space, env.action_space
-        import torch
-
-        # One observation at a time through a small MLP: extra threads only contend (35 ms instead of 0.5 ms
-        # per action measured on a loaded 2-core machine).
-        torch.set_num_threads(1)
-        self.model = build_inference_model(self.config, observation_space, action_space)
         weights = folder / WEIGHTS_FILE
         if not weights.is_file():
             raise ValueError(f"{folder} holds no {WEIGHTS_FILE}")
-        self.model.policy.load_state_dict(load_weights(weights))
-        self.model.policy.set_training_mode(False)
+        #: The acting network, evaluated the same way on every CPU (:mod:`agri_training.inference`).
+        self.network = PolicyNetwork.from_state_dict(
+            load_weights(weights),
+            self.config["algo"],
+            self.config.get("policy_kwargs", {}),
+            observation_space,
+            action_space,
+        )
         norm = folder / NORMALIZE_FILE
         self.normalization = ObsNormalization.from_json(json.loads(norm.read_text())) if norm.is_file() else None
         self._replay = ObservationReplay(chain, self.normalization)
@@ -503,8 +464,8 @@ class LearnedPolicy:
         if self.multiagent:
             from agri_training.parameter_sharing import predict_shared
 
-            return predict_shared(self.model, observation, self.transform, deterministic), state
-        return decide_held(self._hold, self._replay, self.model, observation, state, episode_start, deterministic)
+            return predict_shared(self.network, observation, self.transform, deterministic), state
+        return decide_held(self._hold, self._replay, self.network, observation, state, episode_start, deterministic)
 
 
 def decide_held(

@@ -107,7 +107,8 @@ def predict_shared(
     """Every agent's action from one batched pass of the shared network.
 
     Args:
-        model: An SB3 algorithm (its ``predict`` takes a batch of observations).
+        model: The shared network: SB3's ``predict`` on a batch of observations
+            (:class:`~agri_training.inference.PolicyNetwork`).
         observations: Per-agent observations of one step of a parallel env.
         transform: Maps the ``(n_agents, obs_dim)`` batch to what the network saw in training
             (observation normalisation).

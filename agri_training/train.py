@@ -54,6 +54,7 @@ import yaml
 import agri_envs  # noqa: F401  (registers the env ids)
 from agri_envs.scenarios import scenario as get_scenario
 from agri_training.curricula import apply_train_wrappers
+from agri_training.inference import PolicyNetwork
 from agri_training.learned import (
     ALGORITHMS,
     CONFIG_FILE,
@@ -335,16 +336,23 @@ def make_vec_env(config: Mapping[str, Any]) -> Any:
 
 
 class _LivePolicy:
-    """The policy being trained, driving a raw env through the training wrappers and current statistics."""
+    """The policy being trained, driving a raw env through the training wrappers and current statistics.
 
-    def __init__(self, model: Any, env: Any, wrappers: list[Any], action_repeat: int = 1) -> None:
+    It acts through the same CPU-independent forward pass as a loaded policy (:meth:`refresh` exports the
+    current weights), so a periodic evaluation scores what ``agri evaluate`` will score on the saved weights.
+    """
+
+    def __init__(self, model: Any, env: Any, config: Mapping[str, Any]) -> None:
         self.model = model
+        self.config = config
         self.multiagent = is_parallel_env(env)
-        self.replay = ObservationReplay([] if self.multiagent else observation_chain(env, wrappers)[1])
-        self._hold = HeldActions(action_repeat)
+        self.replay = ObservationReplay([] if self.multiagent else observation_chain(env, config["wrappers"])[1])
+        self._hold = HeldActions(config["action_repeat"])
+        self.network: PolicyNetwork | None = None
 
-    def set_normalization(self, normalization: ObsNormalization | None) -> None:
-        """Use the training's current observation statistics."""
+    def refresh(self, normalization: ObsNormalization | None) -> None:
+        """Act with the model's current weights and the training's current observation statistics."""
+        self.network = PolicyNetwork.from_model(self.model, self.config["algo"], self.config.get("policy_kwargs", {}))
         self.replay.normalization = normalization
 
     def predict(
@@ -353,8 +361,8 @@ class _LivePolicy:
         if self.multiagent:  # per-agent dicts in and out, one batched pass of the shared network
             from agri_training.parameter_sharing import predict_shared
 
-            return predict_shared(self.model, observation, self.replay, deterministic), state
-        return decide_held(self._hold, self.replay, self.model, observation, state, episode_start, deterministic)
+            return predict_shared(self.network, observation, self.replay, deterministic), state
+        return decide_held(self._hold, self.replay, self.network, observation, state, episode_start, deterministic)
 
 
 def save_weights(model: Any, folder: Path) -> None:
@@ -397,7 +405,7 @@ def _make_callback(
                 if is_multiagent(config["env_id"])
                 else gym.make(config["env_id"], **config["env_kwargs"])
             )
-            self.live = _LivePolicy(self.model, self.eval_env, config["wrappers"], config["action_repeat"])
+            self.live = _LivePolicy(self.model, self.eval_env, config)
             if progress:
                 from tqdm import tqdm
 
@@ -429,7 +437,7 @@ def _make_callback(
             if self.rows and self.rows[-1]["timesteps"] == self.num_timesteps:
                 return
             venv = self.model.get_vec_normalize_env()
-            self.live.set_normalization(ObsNormalization.from_vec_normalize(venv) if venv is not None else None)
+            self.live.refresh(ObsNormalization.from_vec_normalize(venv) if venv is not None else None)
             records = [
                 run_episode(self.eval_env, self.live, config["eval_seed"] + i, None)["record"]
                 for i in range(config["eval_episodes"])

@@ -11,7 +11,7 @@ from agri_training.cli import main
 from agri_training.evaluate import load_policy
 from agri_training.learned import LearnedPolicy
 from agri_training.multiagent import make_env
-from agri_training.parameter_sharing import make_shared_vec_env, predict_shared
+from agri_training.parameter_sharing import make_shared_vec_env
 from agri_training.train import TrainRequest, resolve_config, train
 
 ENV_ID = "robot_chain_v0"
@@ -108,12 +108,15 @@ def test_the_reloaded_shared_policy_acts_like_the_model_in_memory(tmp_path):
     env = make_env(ENV_ID, TINY_ENV)
     policy = load_policy(str(run), env)
     assert isinstance(policy, LearnedPolicy) and policy.multiagent
-    for key, value in policy.model.policy.state_dict().items():
-        assert torch.equal(value, model.policy.state_dict()[key]), key
+    state = model.policy.state_dict()
+    for (weight, _), key in zip(policy.network.hidden, ("0", "2"), strict=True):
+        saved = state[f"mlp_extractor.policy_net.{key}.weight"]
+        assert torch.equal(torch.as_tensor(weight, dtype=torch.float32), saved)
     obs, _ = env.reset(seed=4)
     for _ in range(5):
         ours, _ = policy.predict(obs, deterministic=True)
-        theirs = predict_shared(model, obs, venv.normalize_obs, deterministic=True)
+        theirs = {a: model.predict(venv.normalize_obs(np.asarray(obs[a], np.float32)), deterministic=True)[0]
+                  for a in obs}
         assert set(ours) == set(env.agents)
         for agent in env.agents:
             np.testing.assert_allclose(ours[agent], theirs[agent], rtol=1e-5, atol=1e-6)

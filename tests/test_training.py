@@ -8,10 +8,12 @@ import numpy as np
 import pytest
 import torch
 import yaml
+from stable_baselines3 import PPO
+from stable_baselines3.common.vec_env import DummyVecEnv
 
 import agri_envs  # noqa: F401
 from agri_training.evaluate import EvalRequest, evaluate, load_policy
-from agri_training.learned import LearnedPolicy, UnsafeCheckpointError, load_weights
+from agri_training.learned import LearnedPolicy, UnsafeCheckpointError, load_weights, resolve_policy_kwargs
 from agri_training.train import TrainRequest, load_hyperparams, resolve_config, train
 
 ENV_ID = "agri_envs/GreenhouseNav-v2"
@@ -54,8 +56,9 @@ def test_loaded_policy_acts_like_the_trained_network(tiny_run):
     policy = load_policy(str(tiny_run), env)
     assert isinstance(policy, LearnedPolicy)
     saved = torch.load(tiny_run / "policy.pt", weights_only=True)
-    for key, value in policy.model.policy.state_dict().items():
-        assert torch.equal(value, saved[key]), key
+    policy_kwargs = resolve_policy_kwargs(policy.config["policy_kwargs"])
+    model = PPO("MlpPolicy", DummyVecEnv([lambda: _Spaces(policy.network)]), device="cpu", policy_kwargs=policy_kwargs)
+    model.policy.load_state_dict(saved)
     obs, _ = env.reset(seed=5)
     stats = json.loads((tiny_run / "normalize.json").read_text())
     # The YAML's ObservationHistory: a new episode fills every frame with the first observation.
@@ -64,9 +67,20 @@ def test_loaded_policy_acts_like_the_trained_network(tiny_run):
     z = np.clip((flat - np.array(stats["mean"][""])) / np.sqrt(np.array(stats["var"][""]) + stats["epsilon"]), -10, 10)
     np.testing.assert_allclose(policy.transform(obs, new_episode=True), z, rtol=1e-5, atol=1e-5)
     with torch.no_grad():
-        mean = policy.model.policy.get_distribution(torch.as_tensor(z[None], dtype=torch.float32)).distribution.mean
+        mean = model.policy.get_distribution(torch.as_tensor(z[None], dtype=torch.float32)).distribution.mean
     action, _ = policy.predict(obs, episode_start=np.array([True]), deterministic=True)
     np.testing.assert_allclose(action, np.clip(mean.numpy()[0], -1, 1), rtol=1e-5, atol=1e-6)
+
+
+class _Spaces(gym.Env):
+    """An env with the spaces a network acts on (for rebuilding the torch policy beside the loaded one)."""
+
+    def __init__(self, network):
+        self.observation_space = gym.spaces.Box(-np.inf, np.inf, (network.hidden[0][0].shape[1],), np.float32)
+        self.action_space = gym.spaces.Box(network.low.astype(np.float32), network.high.astype(np.float32))
+
+    def reset(self, *, seed=None, options=None):
+        return self.observation_space.sample(), {}
 
 
 def test_evaluate_a_run_like_a_baseline(tiny_run):

@@ -1,0 +1,270 @@
+"""Acting with a trained network so that every x86-64 CPU computes the same bits.
+
+Torch's float32 CPU kernels (MKL, oneDNN, its own vectorised loops) pick their instruction set, blocking
+and summation order from the CPU they run on, so a policy evaluated on two machines drifts apart in the
+last bits of its actions, and over a long episode the trajectories part (one leaderboard episode ran 407
+steps on one machine and 408 on another). Training keeps torch; acting does not use it.
+
+:class:`PolicyNetwork` is the deterministic-action path of an SB3 policy (PPO's mean action, SAC's and
+TQC's squashed mean, TD3's actor), exported to float64 numpy arrays and evaluated with these rules, each
+of which makes the result a function of the inputs alone:
+
+- Only numpy's element-wise ``+``, ``-``, ``*``, ``/``, ``sqrt``, ``maximum``, ``minimum``, ``where``,
+  ``rint`` and ``ldexp``. IEEE 754 rounds each of them correctly, so a SIMD lane (SSE, AVX2, AVX-512)
+  computes the same bits as a scalar instruction; and no two of them can be fused into a multiply-add,
+  because each numpy call materialises its rounded result.
+- No BLAS: a matrix-vector product is the element-wise products followed by a fixed pairwise fold over
+  the inputs (:func:`fold_sum`), the same order on every machine whatever its threads or cache sizes.
+- No libm: ``exp`` (and with it ``tanh``, ``ELU``, ``SiLU``) is our own range reduction and polynomial
+  (:func:`exp`), because glibc's and numpy's ``exp`` and ``tanh`` dispatch on the CPU (FMA and AVX-512
+  variants that differ in the last bit).
+
+Float64 throughout leaves the result within float32 rounding of torch's forward pass (tested), so the
+network acts as trained. The observation is rounded to float32 first, as SB3 feeds it to torch.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import re
+from collections.abc import Mapping
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+
+#: Default activation of each algorithm's policy in SB3 (``policy_kwargs.activation_fn`` overrides it).
+DEFAULT_ACTIVATION = {"ppo": "Tanh", "sac": "ReLU", "td3": "ReLU", "tqc": "ReLU"}
+#: Where each algorithm keeps its acting layers in the ``state_dict``: (hidden layers, output layer); TD3's
+#: actor is one ``nn.Sequential`` whose last linear layer is the output.
+ACTOR_LAYERS = {
+    "ppo": ("mlp_extractor.policy_net", "action_net"),
+    "sac": ("actor.latent_pi", "actor.mu"),
+    "tqc": ("actor.latent_pi", "actor.mu"),
+    "td3": ("actor.mu", None),
+}
+
+_LN2_HI = 6.93147180369123816490e-01  # ln 2 split so that k * _LN2_HI is exact for |k| < 2**20 (fdlibm)
+_LN2_LO = 1.90821492927058770002e-10
+_INV_LN2 = 1.44269504088896338700e00
+#: 1/n! for n = 0..13: |r| <= ln2 / 2 leaves a Taylor remainder below 1e-17 relative.
+_EXP_TAYLOR = tuple(1.0 / float(np.prod(np.arange(1, n + 1, dtype=np.float64))) for n in range(14))
+
+
+def fold_sum(terms: np.ndarray) -> np.ndarray:
+    """Sum over the last axis in a fixed order: fold the halves onto each other until one term is left.
+
+    With ``n`` terms and ``h = n // 2``, term ``i < h`` becomes ``t[i] + t[h + i]``; an odd last term is
+    carried over unchanged. The order depends on ``n`` only.
+    """
+    t = np.asarray(terms, dtype=np.float64)
+    while t.shape[-1] > 1:
+        n = t.shape[-1]
+        h = n // 2
+        folded = t[..., :h] + t[..., h : 2 * h]
+        t = np.concatenate([folded, t[..., 2 * h :]], axis=-1) if n % 2 else folded
+    return t[..., 0]
+
+
+def linear(x: np.ndarray, weight: np.ndarray, bias: np.ndarray) -> np.ndarray:
+    """``x @ weight.T + bias`` for a ``(batch, n_in)`` input without BLAS (:func:`fold_sum` order)."""
+    products = x[:, None, :] * weight[None, :, :]
+    return fold_sum(products) + bias
+
+
+def exp(x: np.ndarray) -> np.ndarray:
+    """``e**x`` in float64 from correctly rounded operations only (same bits on every CPU).
+
+    ``x = k ln2 + r`` with ``|r| <= ln2 / 2`` (Cody and Waite's two-part ln 2, exact for the ``k`` that
+    occur), a degree-13 Taylor polynomial of ``e**r`` by Horner's rule, then ``ldexp`` (exact). Inputs are
+    clipped to ``[-700, 700]``; relative error about 1e-16 (tested against ``math.exp``).
+    """
+    x = np.clip(np.asarray(x, dtype=np.float64), -700.0, 700.0)
+    k = np.rint(x * _INV_LN2)
+    r = (x - k * _LN2_HI) - k * _LN2_LO
+    p = np.full_like(r, _EXP_TAYLOR[-1])
+    for c in _EXP_TAYLOR[-2::-1]:
+        p = p * r + c
+    return np.ldexp(p, k.astype(np.int64))
+
+
+def tanh(x: np.ndarray) -> np.ndarray:
+    """``tanh(x) = sign(x) (1 - 2 / (e**(2|x|) + 1))`` on :func:`exp`; absolute error about 1e-16."""
+    x = np.asarray(x, dtype=np.float64)
+    a = np.minimum(np.abs(x), 40.0)  # tanh(40) is 1 in float64
+    t = 1.0 - 2.0 / (exp(2.0 * a) + 1.0)
+    return np.where(x < 0, -t, t)
+
+
+def _relu(x: np.ndarray) -> np.ndarray:
+    return np.maximum(x, 0.0)
+
+
+def _leaky_relu(x: np.ndarray) -> np.ndarray:
+    return np.where(x >= 0, x, 0.01 * x)  # torch's default negative_slope
+
+
+def _elu(x: np.ndarray) -> np.ndarray:
+    return np.where(x > 0, x, exp(np.minimum(x, 0.0)) - 1.0)
+
+
+def _silu(x: np.ndarray) -> np.ndarray:
+    return x / (1.0 + exp(-x))
+
+
+#: Activations with a CPU-independent implementation, by torch class name.
+ACTIVATION_FUNCTIONS = {"ReLU": _relu, "Tanh": tanh, "LeakyReLU": _leaky_relu, "ELU": _elu, "SiLU": _silu}
+
+
+def _sequential_layers(state: Mapping[str, np.ndarray], prefix: str) -> list[tuple[np.ndarray, np.ndarray]]:
+    """The ``(weight, bias)`` pairs of an ``nn.Sequential`` stored under ``prefix``, in order."""
+    pattern = re.compile(rf"^{re.escape(prefix)}\.(\d+)\.weight$")
+    indices = sorted(int(m.group(1)) for key in state if (m := pattern.match(key)))
+    return [(state[f"{prefix}.{i}.weight"], state[f"{prefix}.{i}.bias"]) for i in indices]
+
+
+@dataclasses.dataclass(frozen=True)
+class PolicyNetwork:
+    """A trained policy's deterministic action, computed the same way on every CPU (module docstring).
+
+    Attributes:
+        hidden: ``(weight, bias)`` of each hidden layer, float64, each followed by ``activation``.
+        output: ``(weight, bias)`` of the action layer (no activation).
+        activation: Name in :data:`ACTIVATION_FUNCTIONS`.
+        squash: ``tanh`` the output and map ``[-1, 1]`` onto the action bounds (SAC, TQC, TD3); otherwise
+            clip the output to the bounds (PPO), as SB3's ``predict`` does.
+        low: Lower action bounds (float64).
+        high: Upper action bounds (float64).
+        discrete: Discrete action space: the argmax of the output layer (PPO).
+        obs_keys: Keys of a dict observation, concatenated in this order (SB3's ``CombinedExtractor``).
+    """
+
+    hidden: tuple[tuple[np.ndarray, np.ndarray], ...]
+    output: tuple[np.ndarray, np.ndarray]
+    activation: str
+    squash: bool
+    low: np.ndarray
+    high: np.ndarray
+    discrete: bool = False
+    obs_keys: tuple[str, ...] | None = None
+    obs_ndim: int = 1
+
+    @classmethod
+    def from_state_dict(
+        cls,
+        state: Mapping[str, Any],
+        algo: str,
+        policy_kwargs: Mapping[str, Any],
+        observation_space: gym.Space[Any],
+        action_space: gym.Space[Any],
+    ) -> PolicyNetwork:
+        """Export the acting layers of an SB3 policy ``state_dict`` (torch tensors or arrays).
+
+        Raises:
+            ValueError: For an algorithm, activation, policy option or space this path does not cover.
+        """
+        if algo not in ACTOR_LAYERS:
+            raise ValueError(f"algo must be one of {', '.join(ACTOR_LAYERS)}, got {algo!r}")
+        for option in ("use_sde", "squash_output", "features_extractor_class", "normalize_images"):
+            if policy_kwargs.get(option):
+                raise ValueError(f"policy_kwargs.{option} is not supported by the CPU-independent inference path")
+        activation = str(policy_kwargs.get("activation_fn", DEFAULT_ACTIVATION[algo]))
+        if activation not in ACTIVATION_FUNCTIONS:
+            raise ValueError(
+                f"activation {activation!r} has no CPU-independent implementation; "
+                f"use one of {', '.join(ACTIVATION_FUNCTIONS)}"
+            )
+        arrays = {key: _as_float64(value) for key, value in state.items()}
+        hidden_prefix, output_prefix = ACTOR_LAYERS[algo]
+        hidden = _sequential_layers(arrays, hidden_prefix)
+        if output_prefix is not None:
+            output = (arrays[f"{output_prefix}.weight"], arrays[f"{output_prefix}.bias"])
+        elif hidden:  # TD3: the actor's last linear layer is its output, followed by tanh
+            output = hidden.pop()
+        else:
+            raise ValueError(f"no layers under {hidden_prefix!r} in the state_dict")
+        obs_keys: tuple[str, ...] | None = None
+        if isinstance(observation_space, gym.spaces.Dict):
+            obs_keys = tuple(observation_space.spaces)
+            first = observation_space.spaces[obs_keys[0]]
+            if not all(isinstance(s, gym.spaces.Box) for s in observation_space.spaces.values()):
+                raise ValueError(f"observation space {observation_space} is not a Dict of Boxes")
+            obs_ndim = len(first.shape or ())
+        elif isinstance(observation_space, gym.spaces.Box):
+            obs_ndim = len(observation_space.shape)
+        else:
+            raise ValueError(f"observation space {observation_space} is not a Box or a Dict of Boxes")
+        if isinstance(action_space, gym.spaces.Discrete):
+            if algo != "ppo":
+                raise ValueError(f"{algo} needs a Box action space")
+            none = np.zeros(0)
+            return cls(tuple(hidden), output, activation, False, none, none, True, obs_keys, obs_ndim)
+        if not isinstance(action_space, gym.spaces.Box):
+            raise ValueError(f"action space {action_space} is not a Box or Discrete")
+        low = np.asarray(action_space.low, dtype=np.float64).ravel()
+        high = np.asarray(action_space.high, dtype=np.float64).ravel()
+        return cls(tuple(hidden), output, activation, algo != "ppo", low, high, False, obs_keys, obs_ndim)
+
+    @classmethod
+    def from_model(cls, model: Any, algo: str, policy_kwargs: Mapping[str, Any]) -> PolicyNetwork:
+        """Export a live SB3 algorithm's current policy (``policy_kwargs`` as the config names them)."""
+        return cls.from_state_dict(
+            model.policy.state_dict(), algo, policy_kwargs, model.observation_space, model.action_space
+        )
+
+    def is_batch(self, observation: Any) -> bool:
+        """True when ``observation`` holds a batch (one more axis than the observation space has)."""
+        first = observation[self.obs_keys[0]] if self.obs_keys is not None else observation
+        return bool(np.ndim(first) > self.obs_ndim)
+
+    def flatten(self, observation: Any) -> np.ndarray:
+        """A ``(batch, n_in)`` float64 input: dict keys concatenated, rounded to float32 as SB3 feeds torch."""
+        batch = self.is_batch(observation)
+        keys = self.obs_keys if self.obs_keys is not None else (None,)
+        parts = [np.asarray(observation if k is None else observation[k], dtype=np.float32) for k in keys]
+        rows = [p.reshape(len(p) if batch else 1, -1) for p in parts]
+        return np.concatenate(rows, axis=1).astype(np.float64)
+
+    def output_layer(self, observation: Any) -> np.ndarray:
+        """The float64 output layer for a batch of observations, before squashing or clipping."""
+        x = self.flatten(observation)
+        function = ACTIVATION_FUNCTIONS[self.activation]
+        for weight, bias in self.hidden:
+            if x.shape[1] != weight.shape[1]:
+                raise ValueError(f"observation has {x.shape[1]} values, the network expects {weight.shape[1]}")
+            x = function(linear(x, weight, bias))
+        return linear(x, *self.output)
+
+    def act(self, observation: Any) -> np.ndarray:
+        """Deterministic actions for a batch of observations (``(batch, ...)``, or a dict of such arrays).
+
+        Returns a ``(batch, action_dim)`` float32 array (``(batch,)`` int64 for a discrete action).
+        """
+        x = self.output_layer(observation)
+        if self.discrete:
+            return np.argmax(x, axis=1)
+        if self.squash:
+            action = self.low + (0.5 * (tanh(x) + 1.0)) * (self.high - self.low)
+        else:
+            action = np.minimum(np.maximum(x, self.low), self.high)
+        return action.astype(np.float32)
+
+    def predict(
+        self, observation: Any, state: Any = None, episode_start: Any = None, deterministic: bool = True
+    ) -> tuple[np.ndarray, Any]:
+        """SB3's ``predict`` on a normalised observation or batch: the deterministic action, always.
+
+        Raises:
+            ValueError: For ``deterministic=False`` (sampling would need a random stream of its own).
+        """
+        if not deterministic:
+            raise ValueError("learned policies act deterministically (the mean action); pass deterministic=True")
+        actions = self.act(observation)
+        return (actions if self.is_batch(observation) else actions[0]), state
+
+
+def _as_float64(value: Any) -> np.ndarray:
+    """A tensor or array as a float64 numpy array (exact: float32 -> float64 loses nothing)."""
+    if hasattr(value, "detach"):
+        value = value.detach().cpu().numpy()
+    return np.asarray(value, dtype=np.float64)

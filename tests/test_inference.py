@@ -1,0 +1,239 @@
+"""The CPU-independent forward pass: bit for bit against a plain-Python reference, close to torch's."""
+
+import json
+import math
+from pathlib import Path
+
+import gymnasium as gym
+import numpy as np
+import pytest
+import torch
+
+import agri_envs  # noqa: F401  (registers the env ids)
+from agri_training.inference import (
+    _EXP_TAYLOR,
+    _INV_LN2,
+    _LN2_HI,
+    _LN2_LO,
+    PolicyNetwork,
+    exp,
+    fold_sum,
+    tanh,
+)
+from agri_training.learned import ZOO_DIR, LearnedPolicy, load_weights, read_config
+
+GOLDEN = Path(__file__).parent / "data" / "inference_golden.json"
+
+
+# ---- an obviously written reference: Python floats, one operation at a time -----------------------------
+
+
+def ref_exp(x: float) -> float:
+    x = min(max(x, -700.0), 700.0)
+    k = round(x * _INV_LN2)  # Python rounds halves to even, like np.rint
+    r = (x - k * _LN2_HI) - k * _LN2_LO
+    p = _EXP_TAYLOR[-1]
+    for c in reversed(_EXP_TAYLOR[:-1]):
+        p = p * r + c
+    return math.ldexp(p, k)
+
+
+def ref_tanh(x: float) -> float:
+    a = min(abs(x), 40.0)
+    t = 1.0 - 2.0 / (ref_exp(2.0 * a) + 1.0)
+    return -t if x < 0 else t
+
+
+def ref_fold(terms: list[float]) -> float:
+    """Fold the halves onto each other; an odd last term is carried."""
+    while len(terms) > 1:
+        h = len(terms) // 2
+        terms = [terms[i] + terms[h + i] for i in range(h)] + terms[2 * h :]
+    return terms[0]
+
+
+def ref_output_layer(net: PolicyNetwork, x: list[float]) -> list[float]:
+    act = {"Tanh": ref_tanh, "ReLU": lambda v: max(v, 0.0)}[net.activation]
+
+    def layer(values, weight, bias):
+        return [
+            ref_fold([values[i] * float(w[i]) for i in range(len(values))]) + float(b)
+            for w, b in zip(weight, bias, strict=False)
+        ]
+
+    for weight, bias in net.hidden:
+        x = [act(v) for v in layer(x, weight, bias)]
+    return layer(x, *net.output)
+
+
+def ref_forward(net: PolicyNetwork, x: list[float]) -> list[float]:
+    out = ref_output_layer(net, x)
+    if net.squash:
+        return [
+            float(lo) + (0.5 * (ref_tanh(v) + 1.0)) * (float(hi) - float(lo))
+            for v, lo, hi in zip(out, net.low, net.high, strict=False)
+        ]
+    return [min(max(v, float(lo)), float(hi)) for v, lo, hi in zip(out, net.low, net.high, strict=False)]
+
+
+# ---- tests --------------------------------------------------------------------------------------------------
+
+
+def test_exp_and_tanh_are_accurate_and_match_the_reference_bit_for_bit():
+    xs = np.concatenate([np.linspace(-50, 50, 20001), np.random.default_rng(0).normal(0, 3, 5000), [0.0, -0.0]])
+    ours_exp, ours_tanh = exp(xs), tanh(xs)
+    for x, e, t in zip(xs, ours_exp, ours_tanh, strict=False):
+        assert e == ref_exp(float(x)) and t == ref_tanh(float(x)), x
+    rel = np.abs(ours_exp - np.exp(xs)) / np.exp(xs)
+    assert rel.max() < 5e-16
+    assert np.abs(ours_tanh - np.tanh(xs)).max() < 5e-16
+    assert exp(np.array([800.0]))[0] == ref_exp(800.0) and np.isfinite(exp(np.array([800.0]))[0])
+
+
+def test_fold_sum_order_is_the_reference_and_ignores_the_batch():
+    rng = np.random.default_rng(1)
+    for n in (1, 2, 3, 7, 64, 65, 129, 300):
+        terms = rng.normal(size=(5, n)) * 10.0 ** rng.integers(-8, 8, size=(5, n))
+        folded = fold_sum(terms)
+        for row, value in zip(terms, folded, strict=False):
+            assert value == ref_fold(row.tolist())
+            assert fold_sum(row[None])[0] == value  # alone or in a batch: the same bits
+    # Not the sequential sum: the order is a stated one, not whatever a BLAS picks.
+    terms = np.array([1e16, 1.0, -1e16, 1.0])
+    assert fold_sum(terms[None])[0] == (1e16 + -1e16) + (1.0 + 1.0) == 2.0
+
+
+def _sb3_model(algo, obs_space, act_space, seed, **policy_kwargs):
+    """An SB3 algorithm on an env that only carries the spaces (its policy is what is compared)."""
+    import stable_baselines3
+    from stable_baselines3.common.vec_env import DummyVecEnv
+
+    class Spaces(gym.Env):
+        observation_space, action_space = obs_space, act_space
+
+        def reset(self, *, seed=None, options=None):
+            return obs_space.sample(), {}
+
+        def step(self, action):
+            return obs_space.sample(), 0.0, True, False, {}
+
+    torch.manual_seed(seed)
+    kwargs = {"buffer_size": 1, "learning_starts": 0} if algo != "ppo" else {}
+    policy = "MultiInputPolicy" if isinstance(obs_space, gym.spaces.Dict) else "MlpPolicy"
+    cls = getattr(stable_baselines3, algo.upper())
+    return cls(policy, DummyVecEnv([Spaces]), seed=seed, device="cpu", policy_kwargs=policy_kwargs, **kwargs)
+
+
+def _toy_network(algo, activation, obs_space, act_space, seed):
+    model = _sb3_model(algo, obs_space, act_space, seed, net_arch=[24, 17], activation_fn=getattr(torch.nn, activation))
+    with torch.no_grad():  # larger weights than the initialisation, so that the activations saturate too
+        for p in model.policy.parameters():
+            p.mul_(3.0)
+    net = PolicyNetwork.from_model(model, algo, {"activation_fn": activation})
+    return model, net
+
+
+BOX = gym.spaces.Box(-5, 5, (11,), np.float32)
+DICT = gym.spaces.Dict(
+    {
+        "observation": gym.spaces.Box(-5, 5, (7,), np.float32),
+        "desired_goal": gym.spaces.Box(-5, 5, (3,), np.float32),
+        "achieved_goal": gym.spaces.Box(-5, 5, (3,), np.float32),
+    }
+)
+ACT = gym.spaces.Box(np.array([-1, -2, 0.5], np.float32), np.array([1, 3, 2.5], np.float32))
+
+
+@pytest.mark.parametrize(
+    ("algo", "activation", "obs_space"),
+    [("ppo", "Tanh", BOX), ("ppo", "ReLU", BOX), ("sac", "ReLU", DICT), ("td3", "ReLU", BOX), ("sac", "Tanh", BOX)],
+)
+def test_actions_match_torch_within_float32_and_the_reference_exactly(algo, activation, obs_space):
+    model, net = _toy_network(algo, activation, obs_space, ACT, seed=7)
+    obs_space.seed(3)
+    batch = [obs_space.sample() for _ in range(20)]
+    for obs in batch:
+        ours, _ = net.predict(obs)
+        theirs, _ = model.predict(obs, deterministic=True)
+        assert ours.dtype == np.float32 and ours.shape == ACT.shape
+        np.testing.assert_allclose(ours, theirs, rtol=2e-5, atol=2e-5)
+        x = net.flatten(obs)[0].tolist()
+        assert net.output_layer(obs)[0].tolist() == ref_output_layer(net, x)  # float64, bit for bit
+        np.testing.assert_array_equal(ours, np.float32(ref_forward(net, x)))
+    stacked = (
+        {k: np.stack([o[k] for o in batch]) for k in batch[0]}
+        if isinstance(obs_space, gym.spaces.Dict)
+        else np.stack(batch)
+    )
+    together, _ = net.predict(stacked)
+    np.testing.assert_array_equal(together, np.stack([net.predict(o)[0] for o in batch]))
+
+
+def test_what_the_path_cannot_compute_is_refused():
+    state = {
+        "mlp_extractor.policy_net.0.weight": np.ones((2, 11)),
+        "mlp_extractor.policy_net.0.bias": np.zeros(2),
+        "action_net.weight": np.ones((3, 2)),
+        "action_net.bias": np.zeros(3),
+    }
+    with pytest.raises(ValueError, match="GELU"):
+        PolicyNetwork.from_state_dict(state, "ppo", {"activation_fn": "GELU"}, BOX, ACT)
+    with pytest.raises(ValueError, match="use_sde"):
+        PolicyNetwork.from_state_dict(state, "ppo", {"use_sde": True}, BOX, ACT)
+    with pytest.raises(ValueError, match="algo"):
+        PolicyNetwork.from_state_dict(state, "a2c", {}, BOX, ACT)
+    net = PolicyNetwork.from_state_dict(state, "ppo", {}, BOX, ACT)
+    with pytest.raises(ValueError, match="deterministic"):
+        net.predict(np.zeros(11), deterministic=False)
+    with pytest.raises(ValueError, match="expects 11"):
+        net.predict(np.zeros(12))
+
+
+def _golden_inputs(net: PolicyNetwork, n: int = 8) -> np.ndarray:
+    """Normalised-looking inputs, the same on every machine (numpy's PCG64 stream is platform-independent)."""
+    width = net.hidden[0][0].shape[1]
+    return np.random.default_rng(2026).normal(0.0, 1.5, size=(n, width)).astype(np.float32)
+
+
+def golden_actions() -> dict[str, list[list[str]]]:
+    """Every zoo policy's float64 output layer on fixed inputs, as float hex strings (exact)."""
+    out = {}
+    for folder in sorted(p for p in ZOO_DIR.iterdir() if (p / "policy.pt").is_file()):
+        config = read_config(folder)
+        state = load_weights(folder / "policy.pt")
+        n_actions = len(state["action_net.bias" if config["algo"] == "ppo" else "actor.mu.bias"])
+        unit = gym.spaces.Box(
+            -1.0, 1.0, (n_actions,), np.float32
+        )  # spaces matter only for the bounds and the dict keys
+        obs = gym.spaces.Box(-np.inf, np.inf, (1,))
+        net = PolicyNetwork.from_state_dict(state, config["algo"], config.get("policy_kwargs", {}), obs, unit)
+        x = _golden_inputs(net)
+        out[folder.name] = [[float(v).hex() for v in row] for row in net.output_layer(x)]
+    return out
+
+
+def test_zoo_actions_are_the_committed_bits():
+    """Written once (``python tests/test_inference.py``); any CPU must compute the same bits."""
+    committed = json.loads(GOLDEN.read_text())
+    assert golden_actions() == committed
+
+
+def test_a_loaded_zoo_policy_acts_like_torch():
+    env = gym.make("agri_envs/GreenhouseCoverage-v0")
+    policy = LearnedPolicy(ZOO_DIR / "ppo-coverage-almeria", env)
+    flat_space = gym.spaces.flatten_space(env.observation_space)
+    net_arch = policy.config["policy_kwargs"]["net_arch"]
+    model = _sb3_model("ppo", flat_space, env.action_space, 0, net_arch=net_arch, activation_fn=torch.nn.Tanh)
+    model.policy.load_state_dict(load_weights(ZOO_DIR / "ppo-coverage-almeria" / "policy.pt"))
+    obs, _ = env.reset(seed=3)
+    for step in range(30):
+        action, _ = policy.predict(obs, episode_start=np.array([step == 0]))
+        expected, _ = model.predict(policy.transform(obs), deterministic=True)
+        np.testing.assert_allclose(action, expected, rtol=1e-5, atol=1e-6)
+        obs, *_ = env.step(action)
+
+
+if __name__ == "__main__":
+    GOLDEN.parent.mkdir(exist_ok=True)
+    GOLDEN.write_text(json.dumps(golden_actions(), indent=1) + "\n")
+    print(f"wrote {GOLDEN}")
