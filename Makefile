@@ -4,11 +4,18 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
+TORCH := torch==2.13.0
+TORCH_CPU_INDEX := https://download.pytorch.org/whl/cpu
+
+# torch's CPU build first (about 190 MB to download, 750 MB installed): a bare torch requirement pulls the
+# CUDA build from PyPI (several GB with its nvidia-* packages). PyTorch's CPU index is used when it answers;
+# where it is out of reach (machines that see only PyPI), the default index is used as configured.
 $(STAMP): pyproject.toml
 	test -x $(BIN)/python || $(PY) -m venv $(VENV)
 	$(BIN)/pip install -q --upgrade pip
-	# CPU build of torch first: a bare torch requirement would pull a multi-GB CUDA build.
-	$(BIN)/pip install -q torch==2.13.0
+	if $(BIN)/python -c "import urllib.request as u; u.urlopen('$(TORCH_CPU_INDEX)/torch/', timeout=10)" 2>/dev/null; \
+	then $(BIN)/pip install -q "$(TORCH)" --index-url $(TORCH_CPU_INDEX); \
+	else echo "PyTorch's CPU index is out of reach: $(TORCH) from the default index"; $(BIN)/pip install -q "$(TORCH)"; fi
 	$(BIN)/pip install -q -e ".[train,report,dev,ray]"
 	touch $(STAMP)
 
