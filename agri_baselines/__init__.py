@@ -39,7 +39,7 @@ class Policy(Protocol):
 
 @dataclasses.dataclass(frozen=True)
 class PolicySpec:
-    """A registered baseline.
+    """A registered policy: a scripted baseline, or a trained policy that a training package registers.
 
     Attributes:
         name: Registry name used by ``agri evaluate --policy NAME``.
@@ -48,7 +48,8 @@ class PolicySpec:
         env_kwargs: Env arguments the policy requires (merged into the user's, conflicts are errors).
         privileged: True when the policy uses information a real robot would not have.
         description: One line for tables and reports.
-        learned: True for a trained policy (its weights ship in ``agri_training/zoo/NAME``).
+        learned: True for a trained policy (registered by the package that ships its weights; the
+            entry point is then called with the env and the policy's name).
         algo: The training algorithm of a learned policy (``ppo``, ``sac``, ``td3``, ``tqc``).
         train_command: The ``agri train`` command that reproduces a learned policy.
     """
@@ -147,20 +148,6 @@ register_policy(
         description="Ablation of luo-apf: attraction only (eta = 0, no repulsion of eq. 15); collisions still rejected",
     )
 )
-register_policy(
-    PolicySpec(
-        name="sac-her-grape-reach",
-        env_id="agri_envs/GrapeHarvest-v1",
-        entry_point="agri_training.learned:load_zoo_policy",
-        env_kwargs={"min_clusters": 1, "max_clusters": 1, "n_leaves": 0, "n_canes": 0, "control": "ee"},
-        description="Learned (SAC + HER, 80k steps, agri_training/zoo/sac-her-grape-reach): the single-goal preset",
-        learned=True,
-        algo="sac",
-        train_command="agri train --env agri_envs/GrapeHarvest-v1 --scenario reach --algo sac --her --seed 0 "
-        "--out runs/grape-reach-sac-her",
-    )
-)
-
 
 def astar(occupancy: np.ndarray, start: tuple[int, int], goal: tuple[int, int]) -> list[tuple[int, int]] | None:
     """8-connected grid A* (Apoorva 2018, Alg. 1); see :func:`agri_baselines.grid_astar.astar`.
@@ -229,45 +216,5 @@ register_policy(
         entry_point="agri_baselines.gonzalez_policies:make_gonzalez_hybrid",
         env_kwargs={"localization": "odometry"},
         description="González 2009, Fig. 2: first run pseudo-reactive, later runs deliberative on its sensory map",
-    )
-)
-register_policy(
-    PolicySpec(
-        name="ppo-greenhouse-nav",
-        env_id="agri_envs/GreenhouseNav-v2",
-        entry_point="agri_training.learned:load_zoo_policy",
-        env_kwargs={"localization": "ground_truth"},
-        description="Learned (PPO, agri_training/zoo/ppo-greenhouse-nav): LIDAR, sonar and the next two waypoints "
-        "from the ground-truth pose, its last 3 observations; acts every 4th step",
-        privileged=True,
-        learned=True,
-        algo="ppo",
-        train_command="agri train --env agri_envs/GreenhouseNav-v2 --algo ppo --seed 0 --out runs/nav-ppo",
-    )
-)
-register_policy(
-    PolicySpec(
-        name="ppo-chain-office",
-        env_id="robot_chain_v0",
-        entry_point="agri_training.learned:load_zoo_policy",
-        description="Learned (one PPO policy shared by every robot, agri_training/zoo/ppo-chain-office): the "
-        "office-chain scenario",
-        learned=True,
-        algo="ppo",
-        train_command="agri train --env robot_chain_v0 --scenario office-chain --algo ppo --seed 0 "
-        "--out runs/chain-ppo",
-    )
-)
-register_policy(
-    PolicySpec(
-        name="ppo-coverage-almeria",
-        env_id="agri_envs/GreenhouseCoverage-v0",
-        entry_point="agri_training.learned:load_zoo_policy",
-        description="Learned (PPO on sonar, compass and odometry, agri_training/zoo/ppo-coverage-almeria): the "
-        "almeria scenario",
-        learned=True,
-        algo="ppo",
-        train_command="agri train --env agri_envs/GreenhouseCoverage-v0 --scenario almeria --algo ppo --seed 0 "
-        "--out runs/cover-ppo",
     )
 )

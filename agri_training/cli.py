@@ -10,7 +10,17 @@ from typing import Any
 
 import yaml
 
-from agri_training.yaml_values import load_yaml
+import agri_envs  # noqa: F401  (registers the env ids)
+from agri_baselines import list_policies, policy_spec
+from agri_envs.scenarios import list_scenarios
+from agri_training import leaderboard as lb
+from agri_training.core.yaml_values import load_yaml
+from agri_training.evaluation.evaluate import EvalRequest, evaluate, format_summary
+from agri_training.evaluation.parallel import EpisodeError
+from agri_training.report.page import build_report
+from agri_training.sweep import SUMMARY_MD, SweepRequest, parse_grid, run_sweep
+from agri_training.train import TrainRequest, train
+from agri_training.tune import TuneRequest, format_best, parse_space, run_tune
 
 
 def parse_env_kwargs(items: list[str]) -> dict[str, Any]:
@@ -29,8 +39,6 @@ def parse_env_kwargs(items: list[str]) -> dict[str, Any]:
 
 
 def _cmd_evaluate(args: argparse.Namespace) -> int:
-    from agri_training.evaluate import EvalRequest, evaluate, format_summary
-
     request = EvalRequest(
         env_id=args.env,
         policy=args.policy,
@@ -50,8 +58,6 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
 
 
 def _cmd_train(args: argparse.Namespace) -> int:
-    from agri_training.train import TrainRequest, train
-
     if args.seeds is not None or args.grid is not None:
         return _cmd_sweep(args)
     if args.workers is not None or args.ray is not None:
@@ -74,8 +80,6 @@ def _cmd_train(args: argparse.Namespace) -> int:
 
 
 def _cmd_sweep(args: argparse.Namespace) -> int:
-    from agri_training.sweep import SweepRequest, parse_grid, run_sweep
-
     if args.seed is not None:
         raise ValueError("give either --seed (one run) or --seeds (a sweep), not both")
     request = SweepRequest(
@@ -91,8 +95,6 @@ def _cmd_sweep(args: argparse.Namespace) -> int:
         hyperparams_file=Path(args.hyperparams) if args.hyperparams else None,
     )
     doc = run_sweep(request, workers=args.workers, ray=args.ray, progress=not args.quiet)
-    from agri_training.sweep import SUMMARY_MD
-
     print((Path(args.out) / SUMMARY_MD).read_text())
     failed = [r for r in doc["summary"]["runs"] if r["status"] != "ok"]
     print(f"wrote {len(doc['summary']['runs'])} run folders, {SUMMARY_MD}, summary.csv and sweep.json under {args.out}")
@@ -106,8 +108,6 @@ def _cmd_sweep(args: argparse.Namespace) -> int:
 
 
 def _cmd_tune(args: argparse.Namespace) -> int:
-    from agri_training.tune import TuneRequest, format_best, parse_space, run_tune
-
     request = TuneRequest(
         env_id=args.env,
         algo=args.algo,
@@ -131,8 +131,6 @@ def _cmd_tune(args: argparse.Namespace) -> int:
 
 
 def _cmd_report(args: argparse.Namespace) -> int:
-    from agri_training.report import build_report
-
     path = build_report(
         Path(args.out),
         suites_dir=Path(args.suites),
@@ -149,8 +147,6 @@ def _cmd_report(args: argparse.Namespace) -> int:
 
 
 def _cmd_leaderboard(args: argparse.Namespace) -> int:
-    from agri_training import leaderboard as lb
-
     suites_dir = Path(args.suites)
     entries_dir = Path(args.entries)
     md = Path(args.markdown)
@@ -178,8 +174,6 @@ def _cmd_leaderboard(args: argparse.Namespace) -> int:
                 chosen = [s for s in chosen if s.env_id == env_id] if names == ["all"] else chosen
             else:
                 ref = lb.policy_reference(args.policy)
-                from agri_baselines import policy_spec
-
                 env_id = policy_spec(args.policy).env_id
                 chosen = [s for s in chosen if s.env_id == env_id] if names == ["all"] else chosen
             pairs = [(s, ref) for s in chosen]
@@ -213,10 +207,6 @@ def _cmd_leaderboard(args: argparse.Namespace) -> int:
 
 def _cmd_list(args: argparse.Namespace) -> int:
     import gymnasium as gym
-
-    import agri_envs  # noqa: F401
-    from agri_baselines import list_policies
-    from agri_envs.scenarios import list_scenarios
 
     print("envs:")
     for env_id in sorted(k for k in gym.registry if k.startswith("agri_envs/")):
@@ -272,7 +262,9 @@ def build_parser() -> argparse.ArgumentParser:
     ev = sub.add_parser("evaluate", help="run a policy over seeds S, S+1, ... and write a JSON result")
     ev.add_argument("--env", required=True, help="env id, e.g. agri_envs/GreenhouseNav-v2")
     ev.add_argument("--scenario", default=None, help="named preset of env arguments (agri list)")
-    ev.add_argument("--policy", required=True, help="baseline name (agri list) or SB3 checkpoint .zip")
+    ev.add_argument(
+        "--policy", required=True, help="registered policy name (agri list) or an `agri train` run directory"
+    )
     ev.add_argument("--episodes", type=int, default=20)
     ev.add_argument("--seed", type=int, default=0)
     ev.add_argument("--env-kwargs", nargs="*", metavar="KEY=VALUE", help="extra env arguments")
@@ -350,11 +342,13 @@ def build_parser() -> argparse.ArgumentParser:
     rp.add_argument("--quiet", action="store_true")
     add_scale_arguments(rp)
     rp.set_defaults(func=_cmd_report)
-    lb = sub.add_parser("leaderboard", help="pinned suites, leaderboard entries, LEADERBOARD.md (docs/leaderboard.md)")
-    lb.add_argument("--suites", default="leaderboard/suites", help="folder of suite YAML files")
-    lb.add_argument("--entries", default="leaderboard/entries", help="folder of entry JSON files")
-    lb.add_argument("--markdown", default="LEADERBOARD.md", help="the generated leaderboard page")
-    lbsub = lb.add_subparsers(dest="action", required=True)
+    board = sub.add_parser(
+        "leaderboard", help="pinned suites, leaderboard entries, LEADERBOARD.md (docs/leaderboard.md)"
+    )
+    board.add_argument("--suites", default="leaderboard/suites", help="folder of suite YAML files")
+    board.add_argument("--entries", default="leaderboard/entries", help="folder of entry JSON files")
+    board.add_argument("--markdown", default="LEADERBOARD.md", help="the generated leaderboard page")
+    lbsub = board.add_subparsers(dest="action", required=True)
     lbsub.add_parser("suites", help="list the pinned suites")
     lbsub.add_parser("render", help="regenerate LEADERBOARD.md from the entries")
     su = lbsub.add_parser("submit", help="evaluate a policy on suites and write its entries (and LEADERBOARD.md)")
@@ -371,7 +365,7 @@ def build_parser() -> argparse.ArgumentParser:
     ve.add_argument("--rtol", type=float, default=0.0, help="relative tolerance for floats (default 0: exact)")
     ve.add_argument("--no-markdown", action="store_true", help="do not check that LEADERBOARD.md is current")
     ve.add_argument("--quiet", action="store_true")
-    lb.set_defaults(func=_cmd_leaderboard)
+    board.set_defaults(func=_cmd_leaderboard)
     ls = sub.add_parser("list", help="registered envs, scenarios and baselines")
     ls.set_defaults(func=_cmd_list)
     return parser
@@ -386,8 +380,6 @@ def main(argv: list[str] | None = None) -> int:
         print(f"agri: error: {exc}", file=sys.stderr)
         return 2
     except RuntimeError as exc:
-        from agri_training.parallel import EpisodeError
-
         if not isinstance(exc, EpisodeError):
             raise
         # A failing episode: where it failed (the worker's traceback), then which seed and why.

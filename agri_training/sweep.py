@@ -36,25 +36,24 @@ import dataclasses
 import itertools
 import json
 import math
-import multiprocessing
 import os
 import re
 import shlex
 import sys
 import time
 import traceback
-from collections.abc import Callable, Mapping, Sequence
-from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
-from concurrent.futures.process import BrokenProcessPool
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import yaml
 
-from agri_training.learned import CONFIG_FILE
+from agri_training.core.pool import default_workers, run_items
+from agri_training.core.stats import bootstrap_ci, format_interval
+from agri_training.core.yaml_values import load_yaml
+from agri_training.learned.policy import CONFIG_FILE
 from agri_training.train import HELD_OUT_SEED, HYPERPARAM_KEYS, TrainRequest, resolve_config, train
-from agri_training.yaml_values import load_yaml
 
 #: Hyperparameters a sweep or a search may vary (``torch_threads`` is pinned to 1, ``scenarios`` is structure).
 VARIABLE_KEYS = tuple(k for k in HYPERPARAM_KEYS if k not in ("torch_threads", "scenarios"))
@@ -73,7 +72,7 @@ def parse_value(text: str) -> Any:
         raise ValueError(f"{text!r} is not a YAML value: {exc}") from None
 
 
-def _split_top_level(text: str) -> list[str]:
+def split_top_level(text: str) -> list[str]:
     """Split on commas outside brackets and braces: ``1,[64,64]`` -> ``["1", "[64,64]"]``."""
     parts: list[str] = []
     current: list[str] = []
@@ -119,7 +118,7 @@ def parse_grid(items: Sequence[str]) -> dict[str, tuple[Any, ...]]:
         check_key(key, "--grid")
         if key in grid:
             raise ValueError(f"--grid: {key!r} is given twice")
-        raw = [v.strip() for v in _split_top_level(text)]
+        raw = [v.strip() for v in split_top_level(text)]
         if any(not v for v in raw):
             raise ValueError(f"--grid: {key!r} has an empty value in {text!r}; give V1,V2,... (one value at least)")
         values = tuple(parse_value(v) for v in raw)
@@ -339,82 +338,13 @@ def run_training(run: SweepRun) -> dict[str, Any]:
     return {"ok": True, "wall_s": time.perf_counter() - t0, "cpu_s": time.process_time() - c0, "curve": curve}
 
 
-def _worker_init() -> None:
-    import torch
-
-    torch.set_num_threads(1)
-
-
-def _pool_context() -> Any:
-    if "forkserver" not in multiprocessing.get_all_start_methods():
-        return multiprocessing.get_context("spawn")
-    ctx = multiprocessing.get_context("forkserver")
-    # Workers fork from a server that imported torch, SB3 and the envs once (torch._dynamo alone is ~4 s of
-    # imports, done lazily by the optimizer's first step otherwise).
-    ctx.set_forkserver_preload(["torch", "torch._dynamo", "stable_baselines3", "agri_envs", "agri_training.sweep"])
-    return ctx
+#: What the worker processes import once (torch._dynamo alone is ~4 s of imports, done lazily by the
+#: optimizer's first step otherwise).
+PRELOAD = ("torch", "torch._dynamo", "stable_baselines3", "agri_envs", "agri_training.sweep")
 
 
-#: ``on_done(index, run, result)``: called in this process as each run ends (in completion order).
-DoneCallback = Callable[[int, SweepRun, dict[str, Any]], None]
-
-
-def _run_pool(runs: Sequence[SweepRun], n: int, on_done: DoneCallback) -> None:
-    todo = list(range(len(runs)))
-    while todo:
-        with ProcessPoolExecutor(max_workers=n, mp_context=_pool_context(), initializer=_worker_init) as pool:
-            # At most n runs in flight: if a worker dies (a crash, not an exception), only those are lost.
-            pending: dict[Future[dict[str, Any]], int] = {}
-            broken = False
-            while (todo or pending) and not broken:
-                while todo and len(pending) < n:
-                    i = todo.pop(0)
-                    pending[pool.submit(run_training, runs[i])] = i
-                done, _ = wait(pending, return_when=FIRST_COMPLETED)
-                for fut in done:
-                    i = pending.pop(fut)
-                    try:
-                        result = fut.result()
-                    except BrokenProcessPool as exc:
-                        broken = True
-                        result = {"ok": False, "error": f"worker process died ({exc}); this run or one "
-                                  "running beside it crashed the process", "traceback": ""}  # fmt: skip
-                    on_done(i, runs[i], result)
-            if broken:  # the pool is gone: the runs still in it died with it; start a fresh pool for the rest
-                for i in pending.values():
-                    lost = {"ok": False, "error": "worker pool broke while this run was in flight", "traceback": ""}
-                    on_done(i, runs[i], lost)
-
-
-def _run_ray(runs: Sequence[SweepRun], address: str, workers: int | None, on_done: DoneCallback) -> None:
-    from agri_training.parallel import _import_ray, init_ray
-
-    ray = _import_ray()
-    started = init_ray(address, workers)
-    remaining: list[Any] = []
-    try:
-        # One CPU per run; Ray reuses its worker processes (and their imports) across runs, like the pool.
-        task = ray.remote(num_cpus=1, max_retries=0)(run_training)
-        refs = [task.remote(run) for run in runs]
-        index = {ref: i for i, ref in enumerate(refs)}
-        remaining = list(refs)
-        while remaining:
-            # A timeout, so that Ctrl-C reaches Python between waits (a blocking wait would swallow it).
-            done, remaining = ray.wait(remaining, num_returns=1, timeout=1.0)
-            for ref in done:
-                i = index[ref]
-                try:
-                    result = ray.get(ref)
-                except Exception as exc:  # the worker died or Ray failed the task
-                    result = {"ok": False, "error": f"{type(exc).__name__}: {exc}", "traceback": ""}
-                on_done(i, runs[i], result)
-    except BaseException:
-        for ref in remaining:
-            ray.cancel(ref, force=True)
-        raise
-    finally:
-        if started:
-            ray.shutdown()
+def _lost(index: int, message: str) -> dict[str, Any]:
+    return {"ok": False, "error": message, "traceback": ""}
 
 
 def _final(curve: Sequence[Mapping[str, float]], key: str) -> float | None:
@@ -422,8 +352,6 @@ def _final(curve: Sequence[Mapping[str, float]], key: str) -> float | None:
 
 
 def _interval(values: Sequence[float]) -> dict[str, Any]:
-    from agri_training.stats import bootstrap_ci
-
     if not values:
         return {"mean": None, "ci": None}
     lo, hi = bootstrap_ci(values)
@@ -477,8 +405,6 @@ def _cell(value: Any, fmt: str) -> str:
 
 
 def _mean_ci(stat: Mapping[str, Any], fmt: str) -> str:
-    from agri_training.stats import format_interval
-
     return format_interval(stat["mean"], stat["ci"], fmt)
 
 
@@ -564,8 +490,6 @@ def run_sweep(
     Raises:
         ValueError: For a bad request, grid or ``workers`` (before anything runs), or a missing ``ray`` extra.
     """
-    from agri_training.parallel import default_workers
-
     if workers is not None and (isinstance(workers, bool) or not isinstance(workers, int) or workers < 1):
         raise ValueError(f"workers must be an int >= 1, got {workers!r}")
     runs = plan_sweep(request)
@@ -588,14 +512,12 @@ def run_sweep(
     n = min(workers if workers is not None else default_workers(), len(runs))
     if ray is not None:
         backend = f"Ray ({ray}), one CPU per run"
-        _run_ray(runs, ray, workers, on_done)
     elif n == 1:
         backend = "1 process (runs one after the other)"
-        for i, run in enumerate(runs):
-            on_done(i, run, run_training(run))
     else:
         backend = f"{n} worker processes, one run each at a time"
-        _run_pool(runs, n, on_done)
+    # One run in flight per worker: if a worker dies (a crash, not an exception), only those runs are lost.
+    run_items(run_training, runs, lambda i, result: on_done(i, runs[i], result), workers, ray, PRELOAD, _lost)
     done = [r if r is not None else {"ok": False, "error": "not run", "traceback": ""} for r in results]
     doc = {
         "command": command,

@@ -53,9 +53,14 @@ import yaml
 
 import agri_envs  # noqa: F401  (registers the env ids)
 from agri_envs.scenarios import scenario as get_scenario
-from agri_training.curricula import apply_train_wrappers
-from agri_training.inference import PolicyNetwork
-from agri_training.learned import (
+from agri_training.core.documents import git_commit
+from agri_training.core.envs import is_multiagent, is_parallel_env, make_env
+from agri_training.core.yaml_values import load_yaml
+from agri_training.evaluation.episode import run_episode
+from agri_training.learned.curricula import apply_train_wrappers
+from agri_training.learned.inference import PolicyNetwork
+from agri_training.learned.parameter_sharing import make_shared_vec_env, predict_shared
+from agri_training.learned.policy import (
     ALGORITHMS,
     CONFIG_FILE,
     NORMALIZE_FILE,
@@ -71,9 +76,6 @@ from agri_training.learned import (
     resolve_algo_kwargs,
     resolve_policy_kwargs,
 )
-from agri_training.multiagent import is_multiagent, is_parallel_env
-from agri_training.multiagent import make_env as make_multiagent_env
-from agri_training.yaml_values import load_yaml
 
 HYPERPARAMS_DIR = Path(__file__).parent / "hyperparams"
 #: Seeds from here on are reserved for held-out evaluation suites; training never uses them.
@@ -318,10 +320,8 @@ def make_vec_env(config: Mapping[str, Any]) -> Any:
 
     venv: Any
     if is_multiagent(config["env_id"]):
-        from agri_training.parameter_sharing import make_shared_vec_env
-
         env_id, env_kwargs = config["env_id"], dict(config["env_kwargs"])
-        venv = make_shared_vec_env(lambda: make_multiagent_env(env_id, env_kwargs), config["n_envs"])
+        venv = make_shared_vec_env(lambda: make_env(env_id, env_kwargs), config["n_envs"])
         venv = VecMonitor(venv, info_keywords=("is_success",))
     else:
         fns = [_env_factory(config, i) for i in range(config["n_envs"])]
@@ -359,8 +359,6 @@ class _LivePolicy:
         self, observation: Any, state: Any = None, episode_start: Any = None, deterministic: bool = True
     ) -> tuple[Any, Any]:
         if self.multiagent:  # per-agent dicts in and out, one batched pass of the shared network
-            from agri_training.parameter_sharing import predict_shared
-
             return predict_shared(self.network, observation, self.replay, deterministic), state
         return decide_held(self._hold, self.replay, self.network, observation, state, episode_start, deterministic)
 
@@ -383,8 +381,6 @@ def _make_callback(
 ) -> Any:
     from stable_baselines3.common.callbacks import BaseCallback
 
-    from agri_training.evaluate import run_episode
-
     class TrainMonitor(BaseCallback):  # type: ignore[misc]
         """Periodic evaluation on fixed seeds, checkpoints, best weights, curve CSV and the progress bar."""
 
@@ -401,7 +397,7 @@ def _make_callback(
 
         def _on_training_start(self) -> None:
             self.eval_env = (
-                make_multiagent_env(config["env_id"], config["env_kwargs"])
+                make_env(config["env_id"], config["env_kwargs"])
                 if is_multiagent(config["env_id"])
                 else gym.make(config["env_id"], **config["env_kwargs"])
             )
@@ -530,8 +526,6 @@ def train(
         ValueError: For a bad request or hyperparameters, or an ``out`` folder that already holds a run.
     """
     import torch
-
-    from agri_training.evaluate import git_commit
 
     config = resolve_config(request)
     run_dir = Path(request.out)

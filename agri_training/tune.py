@@ -39,8 +39,9 @@ from typing import Any
 
 import yaml
 
-from agri_training.sweep import _split_top_level, check_key, merge, nested, parse_value, train_command
-from agri_training.train import TrainRequest, resolve_config
+from agri_training.core.pool import RAY_EXTRA_HINT, import_ray, init_ray
+from agri_training.sweep import check_key, merge, nested, parse_value, split_top_level, train_command
+from agri_training.train import TrainRequest, resolve_config, train
 
 DISTRIBUTIONS = ("uniform", "loguniform", "randint", "choice")
 SEARCHERS = ("optuna", "random")
@@ -112,7 +113,7 @@ def parse_param(item: str) -> tuple[str, Param]:
     kind, rest = spec.split(":", 1)
     kind = kind.strip()
     if kind == "choice":
-        values = tuple(parse_value(v.strip()) for v in _split_top_level(rest))
+        values = tuple(parse_value(v.strip()) for v in split_top_level(rest))
     else:
         values = tuple(parse_value(v.strip()) for v in rest.split(":"))
     try:
@@ -220,8 +221,6 @@ def _trial(config: dict[str, Any], request: TuneRequest, trials_dir: str) -> Non
     import torch
     from ray import tune
 
-    from agri_training.train import train
-
     torch.set_num_threads(1)
     trial_id = tune.get_context().get_trial_id()
     point = {key: _plain(config[key]) for key in request.space}
@@ -242,8 +241,6 @@ def _searcher(request: TuneRequest) -> Any:
         import optuna  # noqa: F401
         from ray.tune.search.optuna import OptunaSearch
     except ImportError:
-        from agri_training.parallel import RAY_EXTRA_HINT
-
         raise ValueError(f"--search optuna needs optuna, part of the 'ray' extra: {RAY_EXTRA_HINT}") from None
     return OptunaSearch(metric=request.metric, mode="max", seed=request.search_seed)
 
@@ -266,8 +263,6 @@ def run_tune(
         ValueError: For a space or hyperparameters that do not resolve (before anything runs), a missing
             extra, an ``out`` that holds a search already, or a search in which every trial failed.
     """
-    from agri_training.parallel import _import_ray, init_ray
-
     out = Path(request.out).resolve()
     if (out / BEST_FILE).exists() or (out / TRIALS_DIR).exists():
         raise ValueError(f"{out} already holds a search; pass another --out")
@@ -279,7 +274,7 @@ def run_tune(
     if config["vec_env"] != "dummy":
         raise ValueError("vec_env 'subproc' starts n_envs processes per trial; a trial gets one CPU: use dummy")
     searcher = _searcher(request)
-    _import_ray()
+    import_ray()
     from ray import tune
 
     started = init_ray(ray, workers)

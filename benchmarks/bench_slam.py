@@ -29,7 +29,7 @@ import agri_envs  # noqa: F401
 from agri_baselines import make_policy
 from agri_baselines.hector_slam import HectorSlam, HectorSlamConfig
 from agri_envs.scenarios import scenario
-from agri_training.evaluate import localization_errors, start_frame_to_world
+from agri_training.evaluation.episode import localization_errors, start_frame_to_world
 
 ENV_ID = "agri_envs/GreenhouseNav-v2"
 

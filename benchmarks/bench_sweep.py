@@ -70,7 +70,7 @@ def main() -> None:
         if ray:  # start Ray apart, to print its start-up; the sweep then joins this instance
             import ray as ray_module
 
-            from agri_training.parallel import init_ray
+            from agri_training.core.pool import init_ray
 
             init_ray("local", 2)
             print(f"  Ray start-up (ray.init, 2 CPUs): {time.perf_counter() - t:.1f} s", flush=True)

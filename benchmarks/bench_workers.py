@@ -20,7 +20,8 @@ import os
 import time
 from typing import Any
 
-from agri_training.evaluate import EvalRequest, evaluate_many
+from agri_training.evaluation.evaluate import evaluate_many
+from agri_training.evaluation.policies import EvalRequest
 
 TIMINGS = ("wall_time_s", "planning_time_ms")
 
@@ -51,7 +52,7 @@ def episode_seconds(docs: list[dict[str, Any]]) -> list[float]:
 def ray_noop_overhead(cpus: int, tasks: int = 500) -> dict[str, float]:
     import ray
 
-    from agri_training.parallel import init_ray
+    from agri_training.core.pool import init_ray
 
     t0 = time.perf_counter()
     init_ray("local", cpus)

@@ -86,7 +86,7 @@ def test_evaluate_errors_are_clear(tmp_path, capsys):
 
 
 def test_failures_are_counted_by_cause():
-    from agri_training.plots_rover import failure_cause, failure_lines
+    from agri_training.report.rover import failure_cause, failure_lines
 
     base = {"is_success": False, "collision": False, "episode_time": 150.0, "waypoints_reached": 3, "n_waypoints": 8}
     episodes = [

@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 import agri_envs  # noqa: F401
-from agri_training.curricula import RandomStartWaypoint, apply_train_wrappers
+from agri_training.learned.curricula import RandomStartWaypoint, apply_train_wrappers
 
 ENV_ID = "agri_envs/GreenhouseNav-v2"
 
@@ -83,7 +83,7 @@ def test_train_wrappers_are_allow_listed():
 
 
 def test_action_repeat_sums_the_held_steps_and_stops_at_the_end():
-    from agri_training.learned import ActionRepeat
+    from agri_training.learned.policy import ActionRepeat
 
     plain = gym.make(ENV_ID, n_people=0)
     held = ActionRepeat(gym.make(ENV_ID, n_people=0), 4)
@@ -104,7 +104,7 @@ def test_action_repeat_sums_the_held_steps_and_stops_at_the_end():
 
 
 def test_held_actions_ask_every_k_steps_and_restart_with_the_episode():
-    from agri_training.learned import HeldActions
+    from agri_training.learned.policy import HeldActions
 
     hold = HeldActions(3)
     calls = []
@@ -120,7 +120,7 @@ def test_held_actions_ask_every_k_steps_and_restart_with_the_episode():
 
 
 def test_crash_cost_ramp_refunds_a_shrinking_share_of_the_crash():
-    from agri_training.curricula import CrashCostRamp
+    from agri_training.learned.curricula import CrashCostRamp
 
     def crash(env):
         env.reset(seed=0)

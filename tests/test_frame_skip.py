@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 import agri_envs  # noqa: F401
-from agri_training.learned import ActionRepeat
+from agri_training.learned.policy import ActionRepeat
 from agri_training.train import make_repeating
 
 ENV_ID = "agri_envs/GreenhouseNav-v2"

@@ -181,14 +181,14 @@ def test_sensory_map_eq2_places_echoes():
 
 def test_deliberative_solves_default_preset():
     env = gym.make("agri_envs/GreenhouseCoverage-v0", localization="ground_truth", n_rows=2, row_length=6.0)
-    from agri_training.evaluate import run_episode
+    from agri_training.evaluation.episode import run_episode
 
     out = run_episode(env, make_policy("gonzalez-deliberative", env), 0, None)["record"]
     assert out["is_success"] and out["crop_contacts"] == 0 and out["max_cross_track"] < 0.1
 
 
 def test_pseudo_reactive_solves_preset_and_returns_its_sensory_map():
-    from agri_training.evaluate import run_episode
+    from agri_training.evaluation.episode import run_episode
 
     env = gym.make("agri_envs/GreenhouseCoverage-v0", localization="odometry", n_rows=2, row_length=6.0)
     out = run_episode(env, make_policy("gonzalez-pseudo-reactive", env), 1, None)["record"]
@@ -206,7 +206,7 @@ def test_pseudo_reactive_solves_preset_and_returns_its_sensory_map():
 
 
 def test_hybrid_plans_its_second_run_on_the_first_runs_map():
-    from agri_training.evaluate import run_episode
+    from agri_training.evaluation.episode import run_episode
 
     env = gym.make("agri_envs/GreenhouseCoverage-v0", localization="odometry", n_rows=2, row_length=6.0, layout_seed=1)
     policy = make_policy("gonzalez-hybrid", env)
@@ -218,8 +218,9 @@ def test_hybrid_plans_its_second_run_on_the_first_runs_map():
 
 
 def test_report_section_writes_the_figures(tmp_path):
-    from agri_training.evaluate import EvalRequest, evaluate
-    from agri_training.plots_coverage import report_section
+    from agri_training.evaluation.evaluate import evaluate
+    from agri_training.evaluation.policies import EvalRequest
+    from agri_training.report.coverage import report_section
 
     kw = {"n_rows": 1, "row_length": 5.0}
     results = [

@@ -12,7 +12,7 @@ from agri_baselines import make_policy, policy_spec
 from agri_baselines.harik_apf import HarikApfController, HarikApfParams, RobotGeometry
 from agri_envs.rover import robot as rover
 from agri_envs.sim2d.sensors import tim561
-from agri_training.evaluate import run_episode
+from agri_training.evaluation.episode import run_episode
 
 ENV_ID = "agri_envs/GreenhouseNav-v2"
 

@@ -10,17 +10,9 @@ import pytest
 import torch
 
 import agri_envs  # noqa: F401  (registers the env ids)
-from agri_training.inference import (
-    _EXP_TAYLOR,
-    _INV_LN2,
-    _LN2_HI,
-    _LN2_LO,
-    PolicyNetwork,
-    exp,
-    fold_sum,
-    tanh,
-)
-from agri_training.learned import ZOO_DIR, LearnedPolicy, load_weights, read_config
+from agri_training.learned.inference import _EXP_TAYLOR, _INV_LN2, _LN2_HI, _LN2_LO, PolicyNetwork, exp, fold_sum, tanh
+from agri_training.learned.policy import LearnedPolicy, load_weights, read_config
+from agri_training.learned.zoo import ZOO_DIR
 
 GOLDEN = Path(__file__).parent / "data" / "inference_golden.json"
 

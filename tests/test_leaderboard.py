@@ -207,11 +207,11 @@ def test_learned_policy_reference_pins_the_weights(tmp_path):
     ref = lb.policy_reference(str(run))
     assert ref["kind"] == "learned" and ref["name"] == "ppo_nav" and ref["privileged"] is False
     assert ref["sha256"] == lb.sha256_file(run / "policy.pt")
-    assert lb._policy_argument(ref) == str(run)
+    assert lb.policy_argument(ref) == str(run)
     (run / "policy.pt").write_bytes(b"weights v2")
     with pytest.raises(ValueError, match="changed"):
-        lb._policy_argument(ref)
+        lb.policy_argument(ref)
     (run / "policy.pt").unlink()
     with pytest.raises(ValueError, match="not found"):
-        lb._policy_argument(ref)
+        lb.policy_argument(ref)
     assert lb.policy_reference("luo-apf") == {"kind": "baseline", "name": "luo-apf", "privileged": False}

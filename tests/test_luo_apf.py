@@ -19,7 +19,7 @@ from agri_baselines.luo_apf import (
 )
 from agri_envs.arm.robot_model import tip_pose
 from agri_envs.arm.scene import HOME_Q
-from agri_training.evaluate import run_episode
+from agri_training.evaluation.episode import run_episode
 
 ENV_ID = "agri_envs/GrapeHarvest-v1"
 

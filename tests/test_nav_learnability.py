@@ -6,7 +6,8 @@ import pytest
 
 import agri_envs  # noqa: F401
 from agri_envs.rover.task import RewardWeights, mission_time_limit
-from agri_training.evaluate import load_policy, run_episode
+from agri_training.evaluation.episode import run_episode
+from agri_training.evaluation.policies import load_policy
 
 ENV_ID = "agri_envs/GreenhouseNav-v2"
 SMALL = {"n_rows": 1, "row_length": 3.0, "n_people": 0}

@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 import agri_envs  # noqa: F401
-from agri_training.learned import (
+from agri_training.learned.policy import (
     ActionRepeat,
     HeldActions,
     ObservationHistory,

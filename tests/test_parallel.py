@@ -7,12 +7,13 @@ import gymnasium as gym
 import pytest
 
 from agri_baselines import list_policies
-from agri_training import evaluate as evaluate_mod
-from agri_training import parallel
 from agri_training.cli import main
-from agri_training.evaluate import EvalRequest, evaluate, evaluate_many, load_policy, resolve_env_kwargs, run_episode
-from agri_training.multiagent import is_multiagent, make_env
-from agri_training.parallel import EpisodeError, EpisodeJob, run_episodes, run_job
+from agri_training.core.envs import is_multiagent, make_env
+from agri_training.evaluation import parallel
+from agri_training.evaluation.episode import run_episode
+from agri_training.evaluation.evaluate import evaluate, evaluate_many
+from agri_training.evaluation.parallel import EpisodeError, EpisodeJob, run_episodes, run_job
+from agri_training.evaluation.policies import EvalRequest, load_policy, resolve_env_kwargs
 
 NAV = "agri_envs/GreenhouseNav-v2"
 GRAPE = "agri_envs/GrapeHarvest-v1"
@@ -76,14 +77,14 @@ def test_reused_env_equals_fresh_one(spec):
 
 
 def test_episode_error_names_seed_and_exception(monkeypatch):
-    real = evaluate_mod.run_episode
+    real = parallel.run_episode
 
     def flaky(env, policy, seed, trace_keys):
         if seed == 4:
             raise FloatingPointError("pose became NaN")
         return real(env, policy, seed, trace_keys)
 
-    monkeypatch.setattr(evaluate_mod, "run_episode", flaky)
+    monkeypatch.setattr(parallel, "run_episode", flaky)
     kwargs, _ = resolve_env_kwargs(EvalRequest(NAV, "harik-apf-gt", env_kwargs=SMALL_NAV))
     jobs = [EpisodeJob(NAV, kwargs, "harik-apf-gt", s) for s in (3, 4, 5)]
     seen = []

@@ -3,7 +3,7 @@
 import re
 import time
 
-from agri_training.evaluate import Progress, format_duration
+from agri_training.core.progress import Progress, format_duration
 
 
 def test_plain_lines_keep_coming_while_nothing_finishes(capsys):

@@ -8,7 +8,7 @@ import yaml
 
 from agri_training import leaderboard as lb
 from agri_training.cli import main
-from agri_training.report import Row, comparison_table, find_runs, markdown_to_html
+from agri_training.report.page import Row, comparison_table, find_runs, markdown_to_html
 
 SUITE = {
     "name": "tiny-rover",
@@ -141,7 +141,8 @@ def test_markdown_to_html_escapes_and_links():
 def test_progress_names_the_block_and_prints_no_rows_per_episode(capsys, monkeypatch):
     import sys
 
-    from agri_training.evaluate import EvalRequest, evaluate_many
+    from agri_training.evaluation.evaluate import evaluate_many
+    from agri_training.evaluation.policies import EvalRequest
 
     kwargs = {"n_rows": 1, "row_length": 3, "n_people": 0}
     requests = [

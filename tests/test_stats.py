@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 from scipy.stats import binomtest, trim_mean
 
-from agri_training.stats import (
+from agri_training.core.stats import (
     clopper_pearson_interval,
     format_interval,
     iqm,

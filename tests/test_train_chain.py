@@ -8,10 +8,10 @@ import torch
 import yaml
 
 from agri_training.cli import main
-from agri_training.evaluate import load_policy
-from agri_training.learned import LearnedPolicy
-from agri_training.multiagent import make_env
-from agri_training.parameter_sharing import make_shared_vec_env
+from agri_training.core.envs import make_env
+from agri_training.evaluation.policies import load_policy
+from agri_training.learned.parameter_sharing import make_shared_vec_env
+from agri_training.learned.policy import LearnedPolicy
 from agri_training.train import TrainRequest, resolve_config, train
 
 ENV_ID = "robot_chain_v0"

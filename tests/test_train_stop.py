@@ -7,8 +7,8 @@ import signal
 import gymnasium as gym
 
 import agri_training.train as train_module
-from agri_training.evaluate import load_policy
-from agri_training.learned import LearnedPolicy
+from agri_training.evaluation.policies import load_policy
+from agri_training.learned.policy import LearnedPolicy
 from agri_training.train import TrainRequest, train
 
 ENV_ID = "agri_envs/GreenhouseNav-v2"

@@ -12,8 +12,9 @@ from stable_baselines3 import PPO
 from stable_baselines3.common.vec_env import DummyVecEnv
 
 import agri_envs  # noqa: F401
-from agri_training.evaluate import EvalRequest, evaluate, load_policy
-from agri_training.learned import LearnedPolicy, UnsafeCheckpointError, load_weights, resolve_policy_kwargs
+from agri_training.evaluation.evaluate import evaluate
+from agri_training.evaluation.policies import EvalRequest, load_policy
+from agri_training.learned.policy import LearnedPolicy, UnsafeCheckpointError, load_weights, resolve_policy_kwargs
 from agri_training.train import TrainRequest, load_hyperparams, resolve_config, train
 
 ENV_ID = "agri_envs/GreenhouseNav-v2"
@@ -139,14 +140,14 @@ def test_hyperparameters_resolve_and_stay_strict(tmp_path):
 
 def test_a_registered_trained_policy_loads_by_name(tiny_run, monkeypatch, capsys):
     import agri_baselines
-    import agri_training.learned as learned
+    import agri_training.learned.zoo as zoo
     from agri_training.cli import main
 
-    monkeypatch.setattr(learned, "ZOO_DIR", tiny_run.parent)
+    monkeypatch.setattr(zoo, "ZOO_DIR", tiny_run.parent)
     spec = agri_baselines.PolicySpec(
         name=tiny_run.name,
         env_id=ENV_ID,
-        entry_point="agri_training.learned:load_zoo_policy",
+        entry_point="agri_training.learned.zoo:load_zoo_policy",
         env_kwargs={"localization": "ground_truth"},
         privileged=True,
         learned=True,

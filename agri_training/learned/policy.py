@@ -31,7 +31,9 @@ import gymnasium as gym
 import numpy as np
 import yaml
 
-from agri_training.inference import PolicyNetwork
+from agri_training.core.envs import is_parallel_env
+from agri_training.learned.inference import PolicyNetwork
+from agri_training.learned.parameter_sharing import predict_shared
 
 #: Algorithms ``agri train`` knows: name -> (module, class).
 ALGORITHMS: dict[str, tuple[str, str]] = {
@@ -42,8 +44,6 @@ ALGORITHMS: dict[str, tuple[str, str]] = {
 }
 #: Activation functions a config may name in ``policy_kwargs.activation_fn``.
 ACTIVATIONS = ("ReLU", "Tanh", "ELU", "LeakyReLU", "SiLU", "GELU")
-#: Where the committed trained policies live (one folder per registered name).
-ZOO_DIR = Path(__file__).parent / "zoo"
 CONFIG_FILE = "config.yaml"
 WEIGHTS_FILE = "policy.pt"
 NORMALIZE_FILE = "normalize.json"
@@ -412,8 +412,6 @@ class LearnedPolicy:
     """
 
     def __init__(self, path: str | Path, env: Any) -> None:
-        from agri_training.multiagent import is_parallel_env
-
         folder = Path(path)
         self.config = read_config(folder)
         self.folder = folder
@@ -462,8 +460,6 @@ class LearnedPolicy:
         run trained with ``action_repeat`` k holds each action for k calls, as in training.
         """
         if self.multiagent:
-            from agri_training.parameter_sharing import predict_shared
-
             return predict_shared(self.network, observation, self.transform, deterministic), state
         return decide_held(self._hold, self._replay, self.network, observation, state, episode_start, deterministic)
 
@@ -487,13 +483,3 @@ def decide_held(
         return model.predict(replay(observation, new_episode), state, episode_start, deterministic)
 
     return hold(decide, episode_start)
-
-
-def zoo_path(name: str) -> Path:
-    """Folder of a committed trained policy."""
-    return ZOO_DIR / name
-
-
-def load_zoo_policy(env: Any, name: str) -> LearnedPolicy:
-    """Entry point of the registered trained policies: the committed run folder ``zoo/NAME``."""
-    return LearnedPolicy(zoo_path(name), env)

@@ -13,6 +13,9 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
+from agri_baselines.gonzalez import peak_filter
+from agri_training.report.rover import draw_geometry
+
 #: The lateral sonar whose series Fig. 9 shows (the middle one on the left).
 FIG9_SONAR = "sonar_left_middle"
 
@@ -80,8 +83,6 @@ def plot_paths(result: dict[str, Any], trace: dict[str, Any], episode: dict[str,
     """The greenhouse with the planned path (if any), the driven trajectory and the corridor centre lines."""
     import matplotlib.pyplot as plt
 
-    from agri_training.plots_rover import draw_geometry
-
     env = _scene(result, int(trace["seed"]))
     fig, ax = plt.subplots(figsize=(9, 6))
     draw_geometry(ax, env.layout.geometry)
@@ -107,8 +108,6 @@ def plot_paths(result: dict[str, Any], trace: dict[str, Any], episode: dict[str,
 def plot_sonar(trace: dict[str, Any], path: Path, n: int = 5, eps: float = 0.3) -> tuple[float, float] | None:
     """Raw and filtered (eq. 1) lateral sonar readings along the longest corridor pass; returns both stds."""
     import matplotlib.pyplot as plt
-
-    from agri_baselines.gonzalez import peak_filter
 
     data = trace["data"]
     corridor = np.asarray(data["corridor"], dtype=float)
@@ -153,8 +152,6 @@ def plot_sonar(trace: dict[str, Any], path: Path, n: int = 5, eps: float = 0.3) 
 def plot_sensory_map(result: dict[str, Any], seed: int, episode: dict[str, Any], path: Path) -> None:
     """The sensory map of eq. 2 (odometry frame) next to the true greenhouse."""
     import matplotlib.pyplot as plt
-
-    from agri_training.plots_rover import draw_geometry
 
     env = _scene(result, seed)
     fig, (a, b) = plt.subplots(1, 2, figsize=(12, 4.8), sharex=True, sharey=True)

@@ -8,6 +8,7 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
+from agri_baselines import policy_spec
 from agri_envs.sim2d.geometry import Geometry, Kind
 
 _KIND_COLOURS = {
@@ -274,8 +275,6 @@ def report_section(results: list[dict[str, Any]], out_dir: Path) -> str:
     figure with a trajectory per level (Figs. 10-12); for repeated missions the overlay of the cycles and
     the drift per cycle (Fig. 17); and one panel figure of failed episodes, one per policy and level.
     """
-    from agri_baselines import policy_spec
-
     parts: list[str] = ["Policies:", ""]
     for name in dict.fromkeys(r["policy"] for r in results):
         try:

@@ -10,13 +10,12 @@ from typing import Any
 
 import numpy as np
 
-from agri_training.plots_rover import draw_geometry
+from agri_envs.chain import robot_chain_v0
+from agri_training.report.rover import draw_geometry
 
 
 def _scene(result: dict[str, Any], seed: int) -> Any:
     """The env of a result rebuilt at ``seed`` (the map and the A* path are deterministic)."""
-    from agri_envs.chain import robot_chain_v0
-
     env = robot_chain_v0.parallel_env(**result["env_kwargs"])
     env.reset(seed=seed)
     return env

@@ -27,18 +27,18 @@ from __future__ import annotations
 
 import dataclasses
 import json
-import multiprocessing
-import os
-import sys
 import traceback
 from collections import OrderedDict
 from collections.abc import Callable, Mapping, Sequence
-from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
 from typing import Any
 
 import gymnasium as gym
 
-RAY_EXTRA_HINT = 'pip install -e ".[ray]"'
+from agri_training.core.documents import EpisodeOutput
+from agri_training.core.envs import make_env
+from agri_training.core.pool import limit_torch_threads, run_items
+from agri_training.evaluation.episode import run_episode
+from agri_training.evaluation.policies import load_policy
 
 #: Per-process cache of built envs (and their trace keys), keyed by :meth:`EpisodeJob.config_key`. A worker
 #: usually sees one configuration at a time (jobs are handed out in order), so a few entries suffice.
@@ -92,21 +92,6 @@ class EpisodeError(RuntimeError):
         self.remote_traceback = remote_traceback
 
 
-def default_workers() -> int:
-    """The number of cores this process may use (the ``--workers`` default)."""
-    try:
-        return max(1, len(os.sched_getaffinity(0)))
-    except AttributeError:  # not on Linux
-        return max(1, os.cpu_count() or 1)
-
-
-def limit_torch_threads() -> None:
-    """One intra-op thread for torch, when torch is loaded, so that parallel workers do not oversubscribe."""
-    torch = sys.modules.get("torch")
-    if torch is not None:
-        torch.set_num_threads(1)
-
-
 def _env_for(job: EpisodeJob) -> tuple[gym.Env[Any, Any], tuple[str, ...]]:
     key = job.config_key()
     if key in _CACHE:
@@ -114,10 +99,7 @@ def _env_for(job: EpisodeJob) -> tuple[gym.Env[Any, Any], tuple[str, ...]]:
         return _CACHE[key]
     while len(_CACHE) >= _CACHE_SIZE:
         _CACHE.popitem(last=False)[1][0].close()
-    from agri_training.multiagent import is_multiagent, make_env
-
-    multi = is_multiagent(job.env_id)  # PettingZoo envs (the robot chain) are not Gymnasium ids
-    env: Any = make_env(job.env_id, job.env_kwargs) if multi else gym.make(job.env_id, **job.env_kwargs)
+    env = make_env(job.env_id, job.env_kwargs)
     _CACHE[key] = (env, tuple(getattr(env, "unwrapped", env).metadata.get("trace_keys", ())))
     return _CACHE[key]
 
@@ -136,8 +118,6 @@ def run_job(job: EpisodeJob) -> dict[str, Any]:
         "error": ..., "exc_type": ..., "traceback": ...}`` when building or running raised (so that every
         backend reports failures the same way, and a failed build's ``ValueError`` stays a user error).
     """
-    from agri_training.evaluate import load_policy, run_episode
-
     stage = "build"
     try:
         env, trace_keys = _env_for(job)
@@ -158,9 +138,9 @@ def run_job(job: EpisodeJob) -> dict[str, Any]:
     return {"ok": True, "out": out}
 
 
-def _unwrap(job: EpisodeJob, result: dict[str, Any]) -> dict[str, Any]:
+def _unwrap(job: EpisodeJob, result: dict[str, Any]) -> EpisodeOutput:
     if result["ok"]:
-        out: dict[str, Any] = result["out"]
+        out: EpisodeOutput = result["out"]
         return out
     if result["stage"] == "build" and result["exc_type"] == "ValueError":
         # A bad env argument or policy name: the same clear user error as in a serial run.
@@ -168,12 +148,17 @@ def _unwrap(job: EpisodeJob, result: dict[str, Any]) -> dict[str, Any]:
     raise EpisodeError(job, result["error"], result["traceback"])
 
 
-def _worker_init() -> None:
-    limit_torch_threads()
 
 
 #: ``on_result(index, job, output)``: called in this process as each job finishes (in completion order).
-ResultCallback = Callable[[int, EpisodeJob, dict[str, Any]], None]
+ResultCallback = Callable[[int, EpisodeJob, EpisodeOutput], None]
+
+#: What the worker processes import once (numba kernels loaded, envs and baselines registered).
+PRELOAD = ("agri_training.evaluation.parallel", "agri_envs", "agri_baselines")
+
+
+def _lost(index: int, message: str) -> dict[str, Any]:
+    return {"ok": False, "stage": "episode", "exc_type": "BrokenProcessPool", "error": message, "traceback": ""}
 
 
 def run_episodes(
@@ -181,13 +166,13 @@ def run_episodes(
     workers: int | None = None,
     ray: str | None = None,
     on_result: ResultCallback | None = None,
-) -> list[dict[str, Any]]:
-    """Run the jobs and return their outputs in job order (each as :func:`~agri_training.evaluate.run_episode`).
+) -> list[EpisodeOutput]:
+    """Run the jobs and return their outputs in job order (each as :func:`~.episode.run_episode`'s).
 
     Args:
         jobs: The episodes.
-        workers: Worker processes (None: :func:`default_workers`; 1: in this process). With ``ray``, the
-            number of CPUs of a ``"local"`` Ray instance (None: all).
+        workers: Worker processes (None: one per core; 1: in this process). With ``ray``, the number of CPUs
+            of a ``"local"`` Ray instance (None: all).
         ray: None (local workers), ``"local"``, ``"auto"`` or a Ray cluster address.
         on_result: Called in this process as each job finishes, e.g. for progress.
 
@@ -195,131 +180,17 @@ def run_episodes(
         ValueError: For ``workers < 1``, a missing ``ray`` extra, or an env/policy that cannot be built.
         EpisodeError: When an episode raises (the run stops; unfinished jobs are cancelled).
     """
-    if workers is not None and (isinstance(workers, bool) or not isinstance(workers, int) or workers < 1):
-        raise ValueError(f"workers must be an int >= 1, got {workers!r}")
-    if not jobs:
-        return []
-    if ray is not None:
-        return _run_ray(jobs, ray, workers, on_result)
-    n = min(workers if workers is not None else default_workers(), len(jobs))
-    if n == 1:
-        return _run_serial(jobs, on_result)
-    return _run_pool(jobs, n, on_result)
+    outs: list[EpisodeOutput | None] = [None] * len(jobs)
 
+    def done(i: int, result: dict[str, Any]) -> None:
+        outs[i] = out = _unwrap(jobs[i], result)
+        if on_result is not None:
+            on_result(i, jobs[i], out)
 
-def _run_serial(jobs: Sequence[EpisodeJob], on_result: ResultCallback | None) -> list[dict[str, Any]]:
-    outs = []
     try:
-        for i, job in enumerate(jobs):
-            out = _unwrap(job, run_job(job))
-            outs.append(out)
-            if on_result is not None:
-                on_result(i, job, out)
+        # Jobs go out in order, two per worker in flight: jobs of one configuration stay together on a
+        # worker (its cached env is reused) and the tail of the run stays balanced.
+        run_items(run_job, jobs, done, workers, ray, PRELOAD, _lost, in_flight_per_worker=2)
     finally:
         clear_cache()
-    return outs
-
-
-def _pool_context() -> Any:
-    methods = multiprocessing.get_all_start_methods()
-    if "forkserver" not in methods:
-        return multiprocessing.get_context("spawn")
-    ctx = multiprocessing.get_context("forkserver")
-    # Workers fork from a server that has imported the envs and baselines once (numba kernels loaded).
-    ctx.set_forkserver_preload(["agri_training.parallel", "agri_training.evaluate", "agri_envs", "agri_baselines"])
-    return ctx
-
-
-def _run_pool(jobs: Sequence[EpisodeJob], n: int, on_result: ResultCallback | None) -> list[dict[str, Any]]:
-    outs: list[dict[str, Any] | None] = [None] * len(jobs)
-    with ProcessPoolExecutor(max_workers=n, mp_context=_pool_context(), initializer=_worker_init) as pool:
-        # Hand jobs out one at a time, in order, at most 2 per worker in flight: jobs of one configuration
-        # stay together on a worker (its cached env is reused) and the tail of the run stays balanced.
-        pending: dict[Future[dict[str, Any]], int] = {}
-        next_job = 0
-        try:
-            while next_job < len(jobs) or pending:
-                while next_job < len(jobs) and len(pending) < 2 * n:
-                    pending[pool.submit(run_job, jobs[next_job])] = next_job
-                    next_job += 1
-                done, _ = wait(pending, return_when=FIRST_COMPLETED)
-                for fut in sorted(done, key=pending.__getitem__):
-                    i = pending.pop(fut)
-                    out = _unwrap(jobs[i], fut.result())
-                    outs[i] = out
-                    if on_result is not None:
-                        on_result(i, jobs[i], out)
-        except BaseException:
-            for fut in pending:
-                fut.cancel()
-            raise
     return [o for o in outs if o is not None]
-
-
-def _import_ray() -> Any:
-    try:
-        import ray
-    except ImportError:
-        raise ValueError(f"--ray needs Ray, the optional 'ray' extra: {RAY_EXTRA_HINT}") from None
-    return ray
-
-
-def _ray_job(job: EpisodeJob) -> dict[str, Any]:
-    limit_torch_threads()
-    return run_job(job)
-
-
-def init_ray(address: str, workers: int | None = None) -> bool:
-    """Connect to Ray: ``"local"`` starts a private instance, else join ``address`` (``"auto"`` or a cluster).
-
-    Returns:
-        Whether this call started Ray here (the caller then shuts it down with ``ray.shutdown()``).
-
-    Raises:
-        ValueError: Without the ``ray`` extra, or for an empty address.
-    """
-    ray = _import_ray()
-    if not address:
-        raise ValueError("--ray expects 'local', 'auto' or a cluster address HOST:PORT, got an empty string")
-    if ray.is_initialized():
-        return False
-    if address == "local":
-        ray.init(
-            num_cpus=workers if workers is not None else default_workers(),
-            include_dashboard=False,
-            logging_level="ERROR",
-            log_to_driver=False,
-        )
-    else:
-        ray.init(address=address, logging_level="ERROR")
-    return True
-
-
-def _run_ray(
-    jobs: Sequence[EpisodeJob], address: str, workers: int | None, on_result: ResultCallback | None
-) -> list[dict[str, Any]]:
-    ray = _import_ray()
-    started = init_ray(address, workers)
-    try:
-        task = ray.remote(num_cpus=1, max_retries=0)(_ray_job)
-        refs = [task.remote(job) for job in jobs]
-        index = {ref: i for i, ref in enumerate(refs)}
-        outs: list[dict[str, Any] | None] = [None] * len(jobs)
-        remaining = list(refs)
-        try:
-            while remaining:
-                done, remaining = ray.wait(remaining, num_returns=1)
-                for ref in done:
-                    i = index[ref]
-                    out = _unwrap(jobs[i], ray.get(ref))
-                    outs[i] = out
-                    if on_result is not None:
-                        on_result(i, jobs[i], out)
-        except BaseException:
-            for ref in remaining:
-                ray.cancel(ref, force=True)
-            raise
-        return [o for o in outs if o is not None]
-    finally:
-        if started:
-            ray.shutdown()

@@ -14,7 +14,7 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
-from agri_training.learned import wrap_by_name
+from agri_training.learned.policy import wrap_by_name
 
 
 class RandomStartWaypoint(gym.Wrapper[Any, Any, Any, Any]):

@@ -8,6 +8,8 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
+from agri_baselines import make_policy
+
 #: Luo et al. 2018, Table 2: clusters, order, path length (printed "cm", read as mm), path points,
 #: collision, planning time (ms).
 PAPER_TABLE2 = (
@@ -125,8 +127,6 @@ def plot_planned_path(result: dict[str, Any], seed: int, out_dir: Path, stem: st
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-
-    from agri_baselines import make_policy
 
     env = gym.make(
         result["env_id"], render_mode="rgb_array", render_width=640, render_height=480, **result["env_kwargs"]

@@ -28,14 +28,21 @@ from pathlib import Path
 from typing import Any
 
 from agri_training import leaderboard as lb
-from agri_training.stats import newcombe_interval, paired_comparison, wilson_interval
+from agri_training.core.documents import git_commit
+from agri_training.core.envs import make_env
+from agri_training.core.progress import Progress
+from agri_training.core.stats import newcombe_interval, paired_comparison, wilson_interval
+from agri_training.evaluation.episode import run_episode
+from agri_training.evaluation.evaluate import INTERVALS_NOTE
+from agri_training.evaluation.policies import load_policy
+from agri_training.learned.zoo import ZOO_DIR
 
 #: Per-env report sections: env id -> ``"module:function"`` (see the module docstring).
 SECTION_HOOKS: dict[str, str] = {
-    "agri_envs/GreenhouseNav-v2": "agri_training.plots_rover:report_section",
-    "agri_envs/GrapeHarvest-v1": "agri_training.plots_arm:report_section",
-    "robot_chain_v0": "agri_training.plots_chain:report_section",
-    "agri_envs/GreenhouseCoverage-v0": "agri_training.plots_coverage:report_section",
+    "agri_envs/GreenhouseNav-v2": "agri_training.report.rover:report_section",
+    "agri_envs/GrapeHarvest-v1": "agri_training.report.arm:report_section",
+    "robot_chain_v0": "agri_training.report.chain:report_section",
+    "agri_envs/GreenhouseCoverage-v0": "agri_training.report.coverage:report_section",
 }
 
 #: Success rates the papers report, as (successes, trials, source), per suite name: our rate is compared
@@ -142,8 +149,6 @@ def level_results(rows: Sequence[Row], progress: bool = True) -> list[dict[str, 
     Traced: per level, the first seed of the lead policy (the first unprivileged one) and the first failed
     seed of every policy.
     """
-    from agri_training.evaluate import Progress
-
     plan: list[tuple[Row, int, list[int]]] = []
     for suite_name in dict.fromkeys(r.suite.name for r in rows):
         group = [r for r in rows if r.suite.name == suite_name]
@@ -185,16 +190,10 @@ def _level_document(row: Row, k: int, seeds: list[int], bar: Any) -> dict[str, A
     }
     if not seeds:
         return doc
-    import gymnasium as gym
-
-    from agri_training.evaluate import load_policy, run_episode
-    from agri_training.multiagent import is_multiagent, make_env
-
     bar.start_block(f"traces: {doc['policy']} on {doc['label']}")
-    multi = is_multiagent(doc["env_id"])
-    env: Any = make_env(doc["env_id"], doc["env_kwargs"]) if multi else gym.make(doc["env_id"], **doc["env_kwargs"])
+    env = make_env(doc["env_id"], doc["env_kwargs"])
     try:
-        name = lb._policy_argument(entry["policy"])
+        name = lb.policy_argument(entry["policy"])
         keys = tuple(getattr(env, "unwrapped", env).metadata.get("trace_keys", ()))
         for seed in seeds:
             # a fresh policy per episode, as the evaluator's workers build it: the re-run is the counted episode
@@ -221,8 +220,8 @@ def _margin(metric: str, reference: float) -> float:
 
 def compare(x: Mapping[str, Any], y: Mapping[str, Any], metric: str, higher_is_better: bool) -> Any:
     """Paired comparison of entry ``x`` with entry ``y`` on a suite metric, with the report's margins."""
-    vx, binary = lb._episode_values(x, metric)
-    vy, _ = lb._episode_values(y, metric)
+    vx, binary = lb.episode_values(x, metric)
+    vy, _ = lb.episode_values(y, metric)
     if not vx or len(vx) != len(vy):
         return None
     finite = [float(v) for v in vy if v is not None and math.isfinite(float(v))]
@@ -277,7 +276,7 @@ def comparison_table(group: Sequence[Row]) -> tuple[list[str], list[str]]:
             if c is None:
                 cells.append("n/a")
                 continue
-            fmt = "{:+" + lb._metric_format(rk.metric)[2:]
+            fmt = "{:+" + lb.metric_format(rk.metric)[2:]
             word = {"better": "**X better**", "worse": "**X worse**", "matches": "match", "inconclusive": "-"}
             cells.append(
                 f"{fmt.format(c.difference)} [{fmt.format(c.ci[0])}, {fmt.format(c.ci[1])}], "
@@ -372,8 +371,6 @@ def find_runs(runs_dir: Path) -> list[dict[str, Any]]:
 
 def zoo_runs() -> list[dict[str, Any]]:
     """The learning curves of the shipped trained policies (``agri_training/zoo/NAME``), named ``zoo/NAME``."""
-    from agri_training.learned import ZOO_DIR
-
     return [{**run, "name": f"zoo/{run['name']}"} for run in find_runs(ZOO_DIR)]
 
 
@@ -528,8 +525,6 @@ def build_report(
     Returns:
         Path of ``report.md``.
     """
-    from agri_training.evaluate import INTERVALS_NOTE, git_commit
-
     t0 = time.perf_counter()
     out_dir.mkdir(parents=True, exist_ok=True)
     suites = [s for s in lb.load_suites(suites_dir) if not only_env or s.env_id == only_env]

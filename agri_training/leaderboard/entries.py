@@ -1,0 +1,364 @@
+"""Leaderboard entries: one JSON document per (suite, policy), made by evaluation and checked by verify.
+
+``leaderboard/entries/<suite>/<policy>.json`` holds the suite's name, version and sha256, the policy
+reference (a registered name, or a learned run with the sha256 of its weights), env id and version,
+package version, git commit, the pooled summary and, per level, its summary and per-episode records.
+
+Verify re-runs an entry's policy on its suite and compares every number of the committed entry with the
+fresh one. Wall-clock keys (:data:`agri_training.core.documents.TIMING_KEYS`) are skipped; everything
+else must be identical (the envs, the baselines and the learned policies' forward pass compute the same
+bits on every x86-64 CPU), or within ``rtol`` when asked for.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import math
+import re
+import sys
+import time
+from collections.abc import Iterable, Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+import agri_envs
+from agri_baselines import list_policies, policy_spec
+from agri_training.core.documents import EvaluationDocument, git_commit, is_timing_key, jsonable
+from agri_training.evaluation.evaluate import EvalRequest, evaluate_many, summarize
+from agri_training.leaderboard.suites import ENTRIES_DIR, ENTRY_FORMAT, ROOT, SUITES_DIR, Suite, find_suite, sha256_file
+from agri_training.learned.zoo import zoo_path
+
+#: The weights file of an ``agri train`` run directory (hashed into learned entries).
+RUN_WEIGHTS = "policy.pt"
+
+
+def _weights_file(path: Path) -> Path:
+    """The file whose sha256 identifies a learned policy: a run folder's weights, or the file itself."""
+    return path / RUN_WEIGHTS if path.is_dir() else path
+
+
+def _shown(path: Path) -> str:
+    try:
+        return str(path.resolve().relative_to(ROOT))
+    except ValueError:
+        return str(path)
+
+
+def policy_reference(policy: str, name: str | None = None) -> dict[str, Any]:
+    """What an entry records about its policy.
+
+    Args:
+        policy: A registered policy name (baseline, or trained with ``learned=True`` in its spec), or the
+            folder of an ``agri train`` run (its weights are ``policy.pt``).
+        name: Display name of a run (default: the run folder's name).
+
+    Raises:
+        ValueError: For an unknown name or a run folder without weights.
+    """
+    path = Path(policy)
+    if path.is_dir() or policy.endswith((".zip", ".pt")):
+        weights = _weights_file(path)
+        if not weights.is_file():
+            raise ValueError(f"policy weights {str(weights)!r} not found")
+        privileged = False
+        config = (path if path.is_dir() else path.parent) / "config.yaml"
+        if config.is_file():
+            doc = yaml.safe_load(config.read_text())
+            privileged = bool(isinstance(doc, Mapping) and doc.get("privileged", False))
+        return {
+            "kind": "learned",
+            "name": name or (path.name if path.is_dir() else f"{path.parent.name}/{path.stem}"),
+            "path": _shown(path),
+            "sha256": sha256_file(weights),
+            "privileged": privileged,
+        }
+    spec = policy_spec(policy)
+    ref: dict[str, Any] = {"kind": "baseline", "name": spec.name, "privileged": spec.privileged}
+    if getattr(spec, "learned", False):  # a trained policy registered by name: hash its committed weights
+        ref["kind"] = "learned"
+        weights = _weights_file(zoo_path(spec.name))
+        if weights.is_file():
+            ref["sha256"] = sha256_file(weights)
+    return ref
+
+
+def policy_argument(ref: Mapping[str, Any]) -> str:
+    """The ``policy`` argument of the evaluator for a reference (checks a learned policy's weights).
+
+    Raises:
+        ValueError: When a learned policy's weights are missing or their sha256 changed.
+    """
+    if "path" not in ref:
+        if ref.get("sha256"):
+            fresh = policy_reference(str(ref["name"])).get("sha256")
+            if fresh != ref["sha256"]:
+                raise ValueError(
+                    f"weights of {ref['name']!r} changed: sha256 {str(fresh)[:12]} != {ref['sha256'][:12]}"
+                )
+        return str(ref["name"])
+    path = Path(ref["path"])
+    if not path.is_absolute():
+        path = ROOT / path
+    weights = _weights_file(path)
+    if not weights.is_file():
+        raise ValueError(f"weights of {ref['name']!r} not found at {weights}")
+    digest = sha256_file(weights)
+    if digest != ref["sha256"]:
+        raise ValueError(f"weights of {ref['name']!r} changed: sha256 {digest[:12]} != committed {ref['sha256'][:12]}")
+    return str(path)
+
+
+def slug(name: str) -> str:
+    """File-name-safe form of a policy name."""
+    return re.sub(r"[^A-Za-z0-9._-]+", "_", name).strip("_")
+
+
+def entry_path(suite: str, policy_name: str, entries_dir: Path | str = ENTRIES_DIR) -> Path:
+    """Where the entry of ``policy_name`` on ``suite`` lives."""
+    return Path(entries_dir) / suite / f"{slug(policy_name)}.json"
+
+
+# ---------------------------------------------------------------- evaluation
+
+
+@dataclasses.dataclass(frozen=True)
+class Block:
+    """One unit of work: a policy on one level of a suite."""
+
+    suite: Suite
+    policy: str
+    label: str
+    env_kwargs: Mapping[str, Any]
+    traces: int = 0
+
+
+def run_blocks(
+    blocks: Sequence[Block], workers: int | None = 1, progress: bool = True, ray: str | None = None
+) -> list[EvaluationDocument]:
+    """Evaluate blocks and return the evaluator's level document of each, in order.
+
+    All episodes of all blocks go to one pool of ``workers`` processes (or Ray tasks; see
+    :func:`agri_training.evaluate.evaluate_many`) behind one progress bar (block k of N, overall ETA).
+    Results do not depend on where episodes run: each is seeded by the suite.
+    """
+    requests = [
+        EvalRequest(
+            env_id=b.suite.env_id,
+            policy=b.policy,
+            episodes=b.suite.episodes,
+            seed=b.suite.seed_start,
+            env_kwargs=dict(b.env_kwargs),
+            record_traces=b.traces,
+            label=b.label,
+        )
+        for b in blocks
+    ]
+    docs = evaluate_many(requests, progress=progress, workers=workers, ray=ray)
+    for b, doc in zip(blocks, docs, strict=True):
+        doc["scenario"] = b.suite.scenario
+    return docs
+
+
+def blocks_of(suite: Suite, policy: str, traces: int = 0) -> list[Block]:
+    """The blocks of a policy on a suite (one per level)."""
+    return [Block(suite, policy, label, kwargs, traces) for label, kwargs in suite.levels()]
+
+
+def make_entry(
+    suite: Suite, ref: Mapping[str, Any], levels: Sequence[Mapping[str, Any]], command: str
+) -> dict[str, Any]:
+    """Assemble an entry from the level results of one policy on one suite."""
+    pooled = [e for lv in levels for e in lv["episodes"]]
+    strata = [lv["label"] for lv in levels for _ in lv["episodes"]]
+    return {
+        "format": ENTRY_FORMAT,
+        "suite": {"name": suite.name, "version": suite.version, "sha256": suite.sha256},
+        "policy": dict(ref),
+        "env_id": suite.env_id,
+        "env_version": suite.env_version,
+        "package_version": agri_envs.__version__,
+        "git_commit": git_commit(),
+        "command": command,
+        "privileged": bool(levels[0]["privileged"]) if levels else bool(ref.get("privileged")),
+        "summary": jsonable(summarize(pooled, strata if suite.sweep else None)),
+        "levels": [
+            {
+                "label": lv["label"],
+                "env_kwargs": lv["env_kwargs"],
+                "summary": lv["summary"],
+                "episodes": lv["episodes"],
+            }
+            for lv in levels
+        ],
+    }
+
+
+def evaluate_entries(
+    pairs: Sequence[tuple[Suite, Mapping[str, Any]]],
+    workers: int | None = 1,
+    progress: bool = True,
+    command: str = "",
+    ray: str | None = None,
+) -> list[dict[str, Any]]:
+    """Evaluate each (suite, policy reference) pair and return the entries, all blocks in one pool."""
+    blocks: list[Block] = []
+    spans = []
+    for suite, ref in pairs:
+        bl = blocks_of(suite, policy_argument(ref))
+        spans.append((len(blocks), len(blocks) + len(bl)))
+        blocks += bl
+    results = run_blocks(blocks, workers, progress, ray)
+    return [make_entry(suite, ref, results[a:b], command) for (suite, ref), (a, b) in zip(pairs, spans, strict=True)]
+
+
+def write_entry(entry: Mapping[str, Any], entries_dir: Path | str = ENTRIES_DIR) -> Path:
+    """Write an entry as indented JSON (one key per line, so diffs are readable) and return its path."""
+    path = entry_path(entry["suite"]["name"], entry["policy"]["name"], entries_dir)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(json.dumps(entry, indent=1, sort_keys=False) + "\n")
+    return path
+
+
+def load_entries(entries_dir: Path | str = ENTRIES_DIR) -> list[dict[str, Any]]:
+    """Every committed entry, sorted by suite then policy name."""
+    out = []
+    for p in sorted(Path(entries_dir).glob("*/*.json")):
+        doc = json.loads(p.read_text())
+        doc["_path"] = str(p)
+        out.append(doc)
+    return sorted(out, key=lambda e: (e["suite"]["name"], e["policy"]["name"]))
+
+
+def all_baseline_pairs(suites: Iterable[Suite]) -> list[tuple[Suite, dict[str, Any]]]:
+    """Every registered policy (baselines and shipped learned ones) on every suite of its env it can run."""
+    pairs = []
+    for suite in suites:
+        for spec in list_policies(suite.env_id):
+            # a policy that needs other env arguments than the suite pins cannot run it (luo-apf drives joints,
+            # the reach suite end-effector steps; the learned reach policy is sized for one cluster)
+            if any(k in suite.env_kwargs and suite.env_kwargs[k] != v for k, v in spec.env_kwargs.items()):
+                continue
+            pairs.append((suite, policy_reference(spec.name)))
+    return pairs
+
+
+# ---------------------------------------------------------------- verify
+
+
+def compare_documents(committed: Any, fresh: Any, rtol: float = 0.0, path: str = "") -> list[str]:
+    """Differences between a committed and a fresh document, skipping wall-clock keys.
+
+    Args:
+        committed: The committed value (JSON types).
+        fresh: The recomputed value.
+        rtol: Relative tolerance for floats (0: exact). Integers, strings and booleans are always exact.
+        path: Location prefix for messages.
+
+    Returns:
+        One message per difference (empty when everything reproduces).
+
+    Raises:
+        ValueError: For a negative ``rtol``.
+    """
+    if rtol < 0:
+        raise ValueError(f"rtol must be >= 0, got {rtol}")
+    out: list[str] = []
+    if isinstance(committed, Mapping) and isinstance(fresh, Mapping):
+        for key in sorted(set(committed) | set(fresh)):
+            if is_timing_key(str(key)):
+                continue
+            where = f"{path}.{key}" if path else str(key)
+            if key not in fresh:
+                out.append(f"{where}: committed but not reproduced")
+            elif key not in committed:
+                out.append(f"{where}: reproduced but not committed")
+            else:
+                out += compare_documents(committed[key], fresh[key], rtol, where)
+        return out
+    if isinstance(committed, list) and isinstance(fresh, list):
+        if len(committed) != len(fresh):
+            return [f"{path}: {len(committed)} items committed, {len(fresh)} reproduced"]
+        for i, (a, b) in enumerate(zip(committed, fresh, strict=True)):
+            out += compare_documents(a, b, rtol, f"{path}[{i}]")
+        return out
+    floats = isinstance(committed, float) or isinstance(fresh, float)
+    numbers = all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in (committed, fresh))
+    if floats and numbers and rtol > 0:
+        if math.isclose(float(committed), float(fresh), rel_tol=rtol, abs_tol=rtol * 1e-3):
+            return []
+    elif committed == fresh and type(committed) is type(fresh):
+        return []
+    elif numbers and committed == fresh and floats:  # 1 vs 1.0 after a JSON round trip
+        return []
+    return [f"{path}: committed {committed!r} != reproduced {fresh!r}"]
+
+
+#: Entry keys that describe the run, not its results (not compared by verify).
+_META_KEYS = ("git_commit", "command", "package_version", "_path")
+
+
+def verify_entries(
+    entries: Sequence[Mapping[str, Any]],
+    suites_dir: Path | str = SUITES_DIR,
+    workers: int | None = 1,
+    rtol: float = 0.0,
+    progress: bool = True,
+    ray: str | None = None,
+) -> list[str]:
+    """Re-evaluate entries on their pinned seeds and list every number that does not reproduce.
+
+    Also fails an entry whose suite file changed since it was made (stale: the suite's sha256 differs).
+
+    Returns:
+        Problems, one line each (empty when all reproduce).
+    """
+    problems: list[str] = []
+    pairs = []
+    kept = []
+    for entry in entries:
+        name = f"{entry['suite']['name']}/{entry['policy']['name']}"
+        try:
+            suite = find_suite(entry["suite"]["name"], suites_dir)
+            if suite.sha256 != entry["suite"]["sha256"] or suite.version != entry["suite"]["version"]:
+                problems.append(
+                    f"{name}: stale, made for suite version {entry['suite']['version']} "
+                    f"({entry['suite']['sha256'][:12]}), the suite is now v{suite.version} "
+                    f"({suite.sha256[:12]}); regenerate it"
+                )
+                continue
+            policy_argument(entry["policy"])
+        except ValueError as exc:
+            problems.append(f"{name}: {exc}")
+            continue
+        pairs.append((suite, entry["policy"]))
+        kept.append(entry)
+    fresh = evaluate_entries(pairs, workers, progress, ray=ray)
+    for entry, new in zip(kept, fresh, strict=True):
+        name = f"{entry['suite']['name']}/{entry['policy']['name']}"
+        committed = {k: v for k, v in entry.items() if k not in _META_KEYS}
+        recomputed = {k: v for k, v in new.items() if k not in _META_KEYS}
+        problems += [f"{name}: {d}" for d in compare_documents(committed, recomputed, rtol)]
+    return problems
+
+
+def timed(fn: Any, *args: Any, **kwargs: Any) -> tuple[Any, float]:
+    """``(fn(*args, **kwargs), seconds)``."""
+    t0 = time.perf_counter()
+    out = fn(*args, **kwargs)
+    return out, time.perf_counter() - t0
+
+
+def print_problems(problems: Sequence[str], per_entry: int = 5) -> None:
+    """Print verify's problems to stderr: how many per entry, and the first ``per_entry`` of each."""
+    groups: dict[str, list[str]] = {}
+    for line in problems:
+        groups.setdefault(line.split(": ", 1)[0], []).append(line)
+    for name, lines in groups.items():
+        print(f"  {name}: {len(lines)} difference(s)", file=sys.stderr)
+        for line in lines[:per_entry]:
+            print(f"    {line}", file=sys.stderr)
+        if len(lines) > per_entry:
+            print(f"    ... and {len(lines) - per_entry} more", file=sys.stderr)

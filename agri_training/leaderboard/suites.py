@@ -1,0 +1,237 @@
+"""Leaderboard suites: versioned YAML files that pin an env's arguments, held-out seeds and ranking keys.
+
+A suite is ``leaderboard/suites/<name>.yaml`` (format: ``docs/leaderboard.md``)::
+
+    name: greenhouse-corridor        # unique; the file is <name>.yaml
+    version: 1                       # bump on any change: entries of other versions are stale
+    env_id: agri_envs/GreenhouseNav-v2
+    scenario: corridor               # optional: the named preset it was copied from (informational)
+    description: Harik sec. 3.4 ...
+    env_kwargs: {scene: corridor, n_people: 1}   # pinned here, not looked up by scenario name
+    sweep: {parameter: growth, values: [0.0, 0.5, 1.0]}   # optional: one level per value
+    seeds: {start: 100000, episodes: 20}           # per level; held out: start >= 100000
+    traces: 1                        # episodes per level the report re-runs with traces for plots
+    rank_by:                         # summary keys, most important first
+      - {metric: success_rate, higher_is_better: true}
+      - {metric: mean_episode_time, higher_is_better: false}
+
+Evaluation seeds start at :data:`HELD_OUT_SEED`; training never uses seeds at or above it.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+import re
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+from agri_training.core.envs import is_multiagent
+
+#: First evaluation seed of every suite; training must never use seeds at or above it.
+HELD_OUT_SEED = 100_000
+#: Fewest episodes per level of a committed suite.
+MIN_EPISODES = 20
+#: Version of the entry format.
+ENTRY_FORMAT = 1
+
+ROOT = Path(__file__).resolve().parents[2]
+LEADERBOARD_DIR = ROOT / "leaderboard"
+SUITES_DIR = LEADERBOARD_DIR / "suites"
+ENTRIES_DIR = LEADERBOARD_DIR / "entries"
+LEADERBOARD_MD = ROOT / "LEADERBOARD.md"
+
+
+@dataclasses.dataclass(frozen=True)
+class RankKey:
+    """A summary key a suite ranks by.
+
+    Attributes:
+        metric: Key of the summary (``success_rate``, ``mean_episode_time``, ``iqm_path_length``, ...).
+        higher_is_better: Orientation.
+    """
+
+    metric: str
+    higher_is_better: bool = True
+
+    def __post_init__(self) -> None:
+        if not self.metric or not re.fullmatch(r"[a-z0-9_]+", self.metric):
+            raise ValueError(f"rank_by metric must be a summary key (a-z, 0-9, _), got {self.metric!r}")
+
+
+_SUITE_KEYS = (
+    "name",
+    "version",
+    "env_id",
+    "scenario",
+    "description",
+    "env_kwargs",
+    "sweep",
+    "seeds",
+    "traces",
+    "rank_by",
+)
+
+
+@dataclasses.dataclass(frozen=True)
+class Suite:
+    """A pinned evaluation suite (one YAML file).
+
+    Attributes:
+        name: Unique name (lowercase, digits, ``-``); the file is ``<name>.yaml``.
+        version: Integer >= 1, bumped on any change.
+        env_id: Registered env id.
+        env_kwargs: Env arguments (the policy's own needs are merged in at evaluation).
+        seed_start: First seed, >= :data:`HELD_OUT_SEED`.
+        episodes: Episodes per level (seeds ``seed_start`` .. ``seed_start + episodes - 1``), >= 1.
+        rank_by: Summary keys to rank by, most important first (at least one).
+        description: What the suite reproduces.
+        scenario: Named preset the arguments were copied from, or None.
+        sweep: Optional ``(argument, values)``: one level per value.
+        traces: Episodes per level re-run with per-step traces for the report's plots, >= 0.
+        sha256: Hash of the file's bytes (set by :func:`load_suite`).
+    """
+
+    name: str
+    version: int
+    env_id: str
+    env_kwargs: Mapping[str, Any]
+    seed_start: int
+    episodes: int
+    rank_by: tuple[RankKey, ...]
+    description: str = ""
+    scenario: str | None = None
+    sweep: tuple[str, tuple[Any, ...]] | None = None
+    traces: int = 1
+    sha256: str = ""
+
+    def __post_init__(self) -> None:
+        if not re.fullmatch(r"[a-z0-9][a-z0-9-]*", self.name):
+            raise ValueError(f"name must be lowercase letters, digits and '-', got {self.name!r}")
+        if not isinstance(self.version, int) or self.version < 1:
+            raise ValueError(f"version must be an integer >= 1, got {self.version!r}")
+        if not (self.env_id.startswith("agri_envs/") or is_multiagent(self.env_id)):
+            raise ValueError(f"env_id must be an agri_envs id or a multi-agent env of the package, got {self.env_id!r}")
+        if self.seed_start < HELD_OUT_SEED:
+            raise ValueError(f"seeds.start must be >= {HELD_OUT_SEED} (held out from training), got {self.seed_start}")
+        if self.episodes < 1:
+            raise ValueError(f"seeds.episodes must be >= 1, got {self.episodes}")
+        if not self.rank_by:
+            raise ValueError("rank_by must name at least one summary key")
+        if self.traces < 0:
+            raise ValueError(f"traces must be >= 0, got {self.traces}")
+        if self.sweep is not None and (not self.sweep[1] or self.sweep[0] in self.env_kwargs):
+            raise ValueError(f"sweep must give values for an argument not also in env_kwargs, got {self.sweep!r}")
+
+    @property
+    def env_version(self) -> str:
+        """The env's version tag, e.g. ``v1``."""
+        return self.env_id.rsplit("-", 1)[-1]
+
+    @property
+    def seeds(self) -> list[int]:
+        """The seeds of every level."""
+        return list(range(self.seed_start, self.seed_start + self.episodes))
+
+    def levels(self) -> list[tuple[str, dict[str, Any]]]:
+        """``(label, env_kwargs)`` of each level: one, or one per sweep value."""
+        if self.sweep is None:
+            return [(self.name, dict(self.env_kwargs))]
+        key, values = self.sweep
+        return [(f"{self.name} {key}={v}", {**self.env_kwargs, key: v}) for v in values]
+
+
+def parse_suite(doc: Mapping[str, Any], sha256: str = "") -> Suite:
+    """Build a suite from its YAML mapping.
+
+    Raises:
+        ValueError: For an unknown or missing key (the message lists the valid ones) or a bad value.
+    """
+    unknown = sorted(set(doc) - set(_SUITE_KEYS))
+    if unknown:
+        raise ValueError(f"unknown suite keys {unknown}; valid: {', '.join(_SUITE_KEYS)}")
+    for key in ("name", "version", "env_id", "seeds", "rank_by"):
+        if key not in doc:
+            raise ValueError(f"suite is missing {key!r}")
+    seeds = doc["seeds"]
+    if not isinstance(seeds, Mapping) or set(seeds) != {"start", "episodes"}:
+        raise ValueError(f"seeds must be a mapping with exactly 'start' and 'episodes', got {seeds!r}")
+    sweep = doc.get("sweep")
+    if sweep is not None:
+        if not isinstance(sweep, Mapping) or set(sweep) != {"parameter", "values"}:
+            raise ValueError(f"sweep must be a mapping with exactly 'parameter' and 'values', got {sweep!r}")
+        sweep = (str(sweep["parameter"]), tuple(sweep["values"]))
+    rank = []
+    for item in doc["rank_by"]:
+        if not isinstance(item, Mapping) or not set(item) <= {"metric", "higher_is_better"} or "metric" not in item:
+            raise ValueError(f"rank_by items must be {{metric: KEY, higher_is_better: BOOL}}, got {item!r}")
+        rank.append(RankKey(str(item["metric"]), bool(item.get("higher_is_better", True))))
+    return Suite(
+        name=str(doc["name"]),
+        version=doc["version"],
+        env_id=str(doc["env_id"]),
+        env_kwargs=dict(doc.get("env_kwargs") or {}),
+        seed_start=int(seeds["start"]),
+        episodes=int(seeds["episodes"]),
+        rank_by=tuple(rank),
+        description=str(doc.get("description", "")).strip(),
+        scenario=doc.get("scenario"),
+        sweep=sweep,
+        traces=int(doc.get("traces", 1)),
+        sha256=sha256,
+    )
+
+
+def load_suite(path: Path | str) -> Suite:
+    """Load a suite YAML file (its name must match the file name).
+
+    Raises:
+        ValueError: For a malformed file (see :func:`parse_suite`) or a name that differs from the file's.
+    """
+    path = Path(path)
+    raw = path.read_bytes()
+    doc = yaml.safe_load(raw)
+    if not isinstance(doc, Mapping):
+        raise ValueError(f"{path}: a suite is a YAML mapping")
+    try:
+        suite = parse_suite(doc, hashlib.sha256(raw).hexdigest())
+    except ValueError as exc:
+        raise ValueError(f"{path}: {exc}") from None
+    if suite.name != path.stem:
+        raise ValueError(f"{path}: suite name {suite.name!r} must match the file name")
+    return suite
+
+
+def load_suites(directory: Path | str = SUITES_DIR) -> list[Suite]:
+    """Every suite in a folder, sorted by env id then name."""
+    suites = [load_suite(p) for p in sorted(Path(directory).glob("*.yaml"))]
+    return sorted(suites, key=lambda s: (s.env_id, s.name))
+
+
+def find_suite(name: str, directory: Path | str = SUITES_DIR) -> Suite:
+    """The suite called ``name``.
+
+    Raises:
+        ValueError: For an unknown name (listing the known ones).
+    """
+    path = Path(directory) / f"{name}.yaml"
+    if not path.exists():
+        known = ", ".join(sorted(p.stem for p in Path(directory).glob("*.yaml")))
+        raise ValueError(f"unknown suite {name!r}; known: {known or 'none'}")
+    return load_suite(path)
+
+
+
+
+def sha256_file(path: Path | str) -> str:
+    """Hex sha256 of a file's bytes."""
+    h = hashlib.sha256()
+    with open(path, "rb") as f:
+        for chunk in iter(lambda: f.read(1 << 20), b""):
+            h.update(chunk)
+    return h.hexdigest()
+
+
