@@ -4,10 +4,12 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import sys
 from pathlib import Path
 from typing import Any
 
+import gymnasium as gym
 import yaml
 
 import agri_envs  # noqa: F401  (registers the env ids)
@@ -206,8 +208,6 @@ def _cmd_leaderboard(args: argparse.Namespace) -> int:
 
 
 def _cmd_list(args: argparse.Namespace) -> int:
-    import gymnasium as gym
-
     print("envs:")
     for env_id in sorted(k for k in gym.registry if k.startswith("agri_envs/")):
         print(f"  {env_id}")
@@ -234,8 +234,6 @@ def _workers(text: str) -> int:
 
 def add_scale_arguments(parser: argparse.ArgumentParser) -> None:
     """Add ``--workers N`` (default: one per core) and ``--ray ADDRESS`` to a subcommand that runs episodes."""
-    import os
-
     try:
         cores = len(os.sched_getaffinity(0))
     except AttributeError:  # not on Linux

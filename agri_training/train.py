@@ -40,7 +40,9 @@ import json
 import os
 import platform
 import shlex
+import signal
 import sys
+import threading
 import time
 from collections.abc import Callable, Mapping
 from importlib import metadata
@@ -492,9 +494,6 @@ def package_versions() -> dict[str, str]:
 
 def _stop_on_sigterm() -> Callable[[], None]:
     """Turn SIGTERM into ``KeyboardInterrupt`` while training (main thread only); return the undo."""
-    import signal
-    import threading
-
     if threading.current_thread() is not threading.main_thread():
         return lambda: None
 

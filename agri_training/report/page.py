@@ -27,6 +27,9 @@ from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
+import gymnasium as gym
+import yaml
+
 from agri_training import leaderboard as lb
 from agri_training.core.documents import git_commit
 from agri_training.core.envs import make_env
@@ -338,8 +341,6 @@ def find_runs(runs_dir: Path) -> list[dict[str, Any]]:
     config (``config.yaml``, ``config.yml``, ``config.json``, ``run.json`` or ``meta.json``) naming its env
     (``env_id`` or ``env``). Runs without a readable env id are skipped.
     """
-    import yaml
-
     runs: list[dict[str, Any]] = []
     if not runs_dir.is_dir():
         return runs
@@ -471,8 +472,6 @@ def learning_curves(env_id: str, runs: list[dict[str, Any]], rows: Sequence[Row]
 
 def _env_blurb(env_id: str) -> str:
     """The first paragraph of the env class's docstring (its Description), or ''."""
-    import gymnasium as gym
-
     try:
         entry = gym.spec(env_id).entry_point
         if not isinstance(entry, str):
