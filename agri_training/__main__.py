@@ -1,0 +1,52 @@
+"""The ``agri`` command (``python -m agri_training``): pins numpy's and OpenBLAS's CPU kernels, then runs the CLI.
+
+numpy picks its vectorised loops (``exp``, ``log``, ``arctan2``, ``power``, ``sin``, ...) and OpenBLAS its
+kernels (``dot``, ``norm``, matrix products) from the CPU it runs on, at import. An AVX-512 machine then
+computes some results one ulp away from an AVX2 machine, a scripted controller's trajectory parts over a
+long episode, and a leaderboard entry written on one machine fails verify on the other. Every ``agri``
+command therefore caps numpy's dispatch at ``X86_V3`` (AVX2 + FMA: the loops an AVX-512 machine would
+otherwise replace) and selects OpenBLAS's Haswell kernels, before numpy is imported; the worker
+processes inherit the pins. A variable the user has set is left alone. x86-64 CPUs without AVX2 and FMA
+still compute differently (glibc and OpenBLAS pick other code there).
+
+The pins are set only by this entry point and by the test suite (``tests/conftest.py``), never on
+``import agri_envs``: a library does not change its user's process. A script that must reproduce entries
+exactly sets the same variables (:data:`NUMERIC_PINS`) before it imports numpy.
+"""
+
+from __future__ import annotations
+
+import os
+import sys
+from collections.abc import MutableMapping
+
+#: Environment variables that make numpy and OpenBLAS compute the same bits on every AVX2-or-better x86-64
+#: CPU (read when numpy is imported).
+NUMERIC_PINS = {
+    "NPY_DISABLE_CPU_FEATURES": "X86_V4 AVX512_ICL AVX512_SPR",
+    "OPENBLAS_CORETYPE": "Haswell",
+}
+
+
+def pin_numeric_kernels(environ: MutableMapping[str, str] = os.environ) -> None:
+    """Set :data:`NUMERIC_PINS` where unset (call before numpy is imported; afterwards it has no effect).
+
+    Raises:
+        RuntimeError: When numpy is already imported in this process (the pins would silently not apply).
+    """
+    if environ is os.environ and "numpy" in sys.modules:
+        raise RuntimeError("pin_numeric_kernels() must run before numpy is imported")
+    for key, value in NUMERIC_PINS.items():
+        environ.setdefault(key, value)
+
+
+def main() -> int:
+    """Pin the kernels, then run ``agri`` with the command line's arguments."""
+    pin_numeric_kernels()
+    from agri_training.cli import main as cli_main  # after the pins: this imports numpy
+
+    return cli_main()
+
+
+if __name__ == "__main__":
+    sys.exit(main())
