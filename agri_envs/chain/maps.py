@@ -83,6 +83,10 @@ class OfficeParams:
     door_width: float = 1.4
     n_furniture: int = 4
 
+    def bounds(self) -> tuple[float, float, float, float]:
+        """``(xmin, ymin, xmax, ymax)`` (m) of the floor and its outer walls."""
+        return (-WALL, -WALL, self.width + WALL, self.height + WALL)
+
 
 def generate_office(p: OfficeParams, rng: np.random.Generator) -> Geometry:
     """Outer walls, a corridor along x, rooms above and below it with jittered doors, furniture in the rooms."""
@@ -111,7 +115,7 @@ def generate_office(p: OfficeParams, rng: np.random.Generator) -> Geometry:
                     b.box(fx, WALL, fx + fw, WALL + fd, Kind.OBSTACLE)
                 else:
                     b.box(fx, h - WALL - fd, fx + fw, h - WALL, Kind.OBSTACLE)
-    return b.build((-WALL, -WALL, w + WALL, h + WALL))
+    return b.build(p.bounds())
 
 
 def office_map(p: OfficeParams, rng: np.random.Generator, inflation: float, resolution: float) -> ChainMap:

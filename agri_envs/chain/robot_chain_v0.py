@@ -32,6 +32,7 @@ from agri_envs.sim2d.diff_drive import DiffDriveSpec
 from agri_envs.sim2d.geometry import Kind
 from agri_envs.sim2d.raycast import sonar_ranges_many
 from agri_envs.sim2d.sensors import SonarSpec
+from agri_envs.sim2d.view import SceneView
 from agri_envs.sim2d.world import World2D
 
 #: Amigobot sonar directions (deg): six in front, two at the back.
@@ -242,8 +243,6 @@ class RobotChainEnv(ParallelEnv):  # type: ignore[misc]
     }
 
     def __init__(self, render_mode: str | None = None, **kwargs: Any) -> None:
-        if render_mode is not None and render_mode not in ("rgb_array", "human"):
-            raise ValueError(f"render_mode must be one of ['rgb_array', 'human'] or None, got {render_mode!r}")
         self.config = RobotChainConfig.from_kwargs(kwargs)
         self.render_mode = render_mode
         cfg = self.config
@@ -276,10 +275,14 @@ class RobotChainEnv(ParallelEnv):  # type: ignore[misc]
         self._static_map: ChainMap | None = None
         if cfg.scene == "map":
             self._static_map = ros_map(cfg.map_yaml, cfg.robot_radius + cfg.planning_margin)
+            canvas = self._static_map.geometry.bounds
+        elif cfg.scene == "office":
+            canvas = self._office_params().bounds()
+        else:
+            canvas = self._greenhouse_params().max_bounds()
+        self.view = SceneView(render_mode, canvas, cfg.render_width, fps=10)
         self.world: World2D | None = None
         self.chain_map: ChainMap | None = None
-        self._renderer: Any = None
-        self._renderer_geometry: Any = None
         n_dyn = cfg.n_dynamic_obstacles
         self.state_space = spaces.Box(-np.inf, np.inf, (5 * cfg.n_robots + 4 + 3 * n_dyn,), np.float32)
 
@@ -338,11 +341,9 @@ class RobotChainEnv(ParallelEnv):  # type: ignore[misc]
         if self._static_map is not None:
             cmap = self._static_map
         elif cfg.scene == "office":
-            params = OfficeParams(width=cfg.office_width, height=cfg.office_height, rooms_per_side=cfg.office_rooms)
-            cmap = office_map(params, layout_rng, inflation, cfg.map_resolution)
+            cmap = office_map(self._office_params(), layout_rng, inflation, cfg.map_resolution)
         else:
-            lp = LayoutParams(n_rows=cfg.n_rows, row_length=cfg.row_length)
-            cmap = greenhouse_map(lp, layout_rng, inflation, cfg.map_resolution)
+            cmap = greenhouse_map(self._greenhouse_params(), layout_rng, inflation, cfg.map_resolution)
         self.chain_map = cmap
         xmin, ymin, xmax, ymax = cmap.geometry.bounds
         self._bounds = np.array([xmin, ymin, xmax, ymax])
@@ -416,9 +417,7 @@ class RobotChainEnv(ParallelEnv):  # type: ignore[misc]
         self._sonar_out = np.empty((n, len(self.sonar_mounts)))
         self._trail = [self._poses[0, :2].copy()]
         self._last_collided = np.zeros(n, dtype=bool)
-        self._terms = dict.fromkeys(
-            ("progress", "spacing", "strip", "collision", "break", "success", "time"), 0.0
-        )
+        self._terms = dict.fromkeys(("progress", "spacing", "strip", "collision", "break", "success", "time"), 0.0)
         self._done_success = False
         self._leader_arrived = False
         obs = self._observe()
@@ -427,6 +426,13 @@ class RobotChainEnv(ParallelEnv):  # type: ignore[misc]
         if self.render_mode == "human":
             self.render()
         return obs, infos
+
+    def _office_params(self) -> OfficeParams:
+        cfg = self.config
+        return OfficeParams(width=cfg.office_width, height=cfg.office_height, rooms_per_side=cfg.office_rooms)
+
+    def _greenhouse_params(self) -> LayoutParams:
+        return LayoutParams(n_rows=self.config.n_rows, row_length=self.config.row_length)
 
     def _plan(self, cmap: ChainMap, rng: np.random.Generator) -> tuple[tuple[int, int], tuple[int, int], list]:
         """Start and goal cells (given or sampled) and the A* path between them."""
@@ -524,9 +530,7 @@ class RobotChainEnv(ParallelEnv):  # type: ignore[misc]
     # -- stepping --------------------------------------------------------------------------------------
     def step(
         self, actions: dict[str, Any]
-    ) -> tuple[
-        dict[str, np.ndarray], dict[str, float], dict[str, bool], dict[str, bool], dict[str, dict[str, Any]]
-    ]:
+    ) -> tuple[dict[str, np.ndarray], dict[str, float], dict[str, bool], dict[str, bool], dict[str, dict[str, Any]]]:
         """Apply every agent's ``[v, omega]`` for one control period (robots move in chain order)."""
         if self.world is None:
             raise RuntimeError("call reset() before step()")
@@ -603,9 +607,7 @@ class RobotChainEnv(ParallelEnv):  # type: ignore[misc]
         if len(actions) != len(agents) or any(a not in actions for a in agents):
             unknown = sorted(a for a in actions if a not in agents)
             missing = sorted(a for a in agents if a not in actions)
-            raise ValueError(
-                f"actions must name every live agent exactly once: unknown {unknown}, missing {missing}"
-            )
+            raise ValueError(f"actions must name every live agent exactly once: unknown {unknown}, missing {missing}")
         try:
             a = np.array([actions[name] for name in agents], dtype=np.float64)
         except (ValueError, TypeError):
@@ -755,24 +757,10 @@ class RobotChainEnv(ParallelEnv):  # type: ignore[misc]
     # -- rendering ---------------------------------------------------------------------------------------
     def render(self) -> np.ndarray | None:
         """Top-down frame: map, A* path, ghost, goal, strip, robots with sonar cones (``rgb_array``/``human``)."""
-        if self.render_mode is None:
-            import gymnasium
-
-            gymnasium.logger.warn("render() called with render_mode=None; pass render_mode='rgb_array'")
+        rd = self.view.begin(None if self.chain_map is None or self.world is None else self.chain_map.geometry)
+        if rd is None:
             return None
-        if self.world is None or self.chain_map is None:
-            raise RuntimeError("call reset() before render()")
-        from agri_envs.sim2d.render import TopDownRenderer
-
-        geometry = self.chain_map.geometry
-        if self._renderer is None or self._renderer_geometry is not geometry:
-            if self._renderer is not None:
-                self._renderer.close()
-            self._renderer = TopDownRenderer(geometry.bounds, self.config.render_width)
-            self._renderer.draw_geometry(geometry)
-            self._renderer_geometry = geometry
-        rd = self._renderer
-        rd.begin()
+        assert self.world is not None
         rd.polyline(self.path.points, (200, 60, 60), 1)
         rd.path(np.array(self._trail))
         movers = self.world.mover_circles
@@ -781,9 +769,7 @@ class RobotChainEnv(ParallelEnv):  # type: ignore[misc]
         if len(p) >= 3:
             rd.polyline(np.array([p[0, :2], p[-1, :2]]), (150, 60, 200), 2)
         for k in range(len(p)):
-            poses = np.array(
-                [[*self._sonar_origin(p[k], m), p[k, 2] + m[2]] for m in self.sonar_mounts]
-            ).reshape(-1, 3)
+            poses = np.array([[*self._sonar_origin(p[k], m), p[k, 2] + m[2]] for m in self.sonar_mounts]).reshape(-1, 3)
             rd.cones(poses, self._last_sonar[k], self.config.sonar_aperture)
         rd.round_robots(p, self.robot_radius)
         g = self.ghost.point
@@ -795,7 +781,7 @@ class RobotChainEnv(ParallelEnv):  # type: ignore[misc]
                 f"collisions {self._collisions}   max gap {self._max_gap:.2f} m"
             ]
         )
-        return rd.present(self.render_mode, self.metadata["render_fps"])
+        return self.view.present()
 
     @staticmethod
     def _sonar_origin(pose: np.ndarray, mount: np.ndarray) -> tuple[float, float]:
@@ -804,9 +790,7 @@ class RobotChainEnv(ParallelEnv):  # type: ignore[misc]
 
     def close(self) -> None:
         """Release the renderer and the pymunk world (idempotent; ``reset()`` builds a new world)."""
-        if self._renderer is not None:
-            self._renderer.close()
-            self._renderer = None
+        self.view.close()
         if self.world is not None:
             self.world.close()
             self.world = None

@@ -18,6 +18,7 @@ from agri_envs.rover.layout import Layout, LayoutParams, generate_layout
 from agri_envs.sim2d.geometry import Kind
 from agri_envs.sim2d.raycast import footprint_clearance
 from agri_envs.sim2d.sensors import SonarArray, SonarSpec
+from agri_envs.sim2d.view import SceneView
 from agri_envs.sim2d.world import World2D
 
 LOCALIZATION_MODES = ("odometry", "ground_truth")
@@ -281,11 +282,11 @@ class GreenhouseCoverageEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
     }
 
     def __init__(self, render_mode: str | None = None, **kwargs: Any) -> None:
-        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
-            raise ValueError(f"render_mode must be one of {self.metadata['render_modes']} or None, got {render_mode!r}")
         self.config = GreenhouseCoverageConfig.from_kwargs(kwargs)
-        self.render_mode = render_mode
         cfg = self.config
+        canvas = cfg.layout_params().max_bounds()
+        self.view = SceneView(render_mode, canvas, cfg.render_width, self.metadata["render_fps"])
+        self.render_mode = render_mode
         self.robot_spec = fito.fitorobot_spec(cfg.max_speed, cfg.max_turn_rate, cfg.max_accel, cfg.max_angular_accel)
         self.sonars = SonarArray(
             SonarSpec(
@@ -315,8 +316,6 @@ class GreenhouseCoverageEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
         self.action_space = spaces.Box(-1.0, 1.0, (2,), np.float32)
         self.layout: Layout | None = None
         self.world: World2D | None = None
-        self._renderer: Any = None
-        self._renderer_layout: Layout | None = None
         self._trail: list[tuple[float, float]] = []
 
     # -- episode set-up --------------------------------------------------------------------------------
@@ -324,14 +323,9 @@ class GreenhouseCoverageEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
         self, *, seed: int | None = None, options: dict[str, Any] | None = None
     ) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
         """Build a new greenhouse and place the robot before the first corridor (see Starting State)."""
+        # Checked before anything of the env changes, so a bad option leaves the env as it was.
+        cfg = self.config.with_options(options, ("growth", "layout_seed"))
         super().reset(seed=seed)
-        cfg = self.config
-        overrides = dict(options or {})
-        allowed = {"growth", "layout_seed"}
-        if set(overrides) - allowed:
-            raise ValueError(f"reset options {sorted(set(overrides) - allowed)} unknown; allowed: {sorted(allowed)}")
-        if overrides:
-            cfg = cfg.replace(**overrides)
         rng = self.np_random
         layout_rng = rng if cfg.layout_seed < 0 else np.random.default_rng(cfg.layout_seed)
         self.layout = generate_layout(cfg.layout_params(), layout_rng)
@@ -540,19 +534,9 @@ class GreenhouseCoverageEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
     # -- rendering ---------------------------------------------------------------------------------------
     def render(self) -> np.ndarray | None:
         """Top-down frame with sonar cones, corridor centre lines and the driven path."""
-        if self.render_mode is None:
-            gym.logger.warn("render() called with render_mode=None; pass render_mode='rgb_array' to gym.make")
+        rd = self.view.begin(None if self.layout is None or self.world is None else self.layout.geometry)
+        if rd is None:
             return None
-        if self.world is None or self.layout is None:
-            raise RuntimeError("call reset() before render()")
-        from agri_envs.sim2d.render import TopDownRenderer
-
-        if self._renderer is None or self._renderer_layout is not self.layout:
-            self._renderer = TopDownRenderer(self.layout.geometry.bounds, self.config.render_width)
-            self._renderer.draw_geometry(self.layout.geometry)
-            self._renderer_layout = self.layout
-        rd = self._renderer
-        rd.begin()
         rd.path(np.array(self._trail))
         rd.cones(self.sonars.poses_in_world(self.robot.pose), self._last_sonar, self.sonars.spec.aperture)
         rd.robot(self.robot.pose, self.robot_spec.length, self.robot_spec.width)
@@ -562,13 +546,11 @@ class GreenhouseCoverageEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
                 f"corridors {sum(bool(c.all()) for c in self.task.covered)}/{self.n_corridors}"
             ]
         )
-        return rd.present(self.render_mode, self.metadata["render_fps"])
+        return self.view.present()
 
     def close(self) -> None:
         """Release the renderer and the pymunk world (idempotent; ``reset()`` builds a new world)."""
-        if self._renderer is not None:
-            self._renderer.close()
-            self._renderer = None
+        self.view.close()
         if self.world is not None:
             self.world.close()
             self.world = None

@@ -26,6 +26,7 @@ from agri_envs.rover.task import RewardWeights, WaypointTask, mission_time_limit
 from agri_envs.sim2d.crowd import Crowd, CrowdSpec
 from agri_envs.sim2d.geometry import Kind
 from agri_envs.sim2d.sensors import Lidar, SonarArray, hc_sr04, tim561
+from agri_envs.sim2d.view import SceneView
 from agri_envs.sim2d.world import World2D
 
 LOCALIZATION_MODES = ("ground_truth", "odometry", "none")
@@ -397,10 +398,7 @@ class GreenhouseNavEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
     }
 
     def __init__(self, render_mode: str | None = None, **kwargs: Any) -> None:
-        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
-            raise ValueError(f"render_mode must be one of {self.metadata['render_modes']} or None, got {render_mode!r}")
         self.config = GreenhouseNavConfig.from_kwargs(kwargs)
-        self.render_mode = render_mode
         cfg = self.config
         self.robot_spec = rover.rover_spec(cfg.max_speed, cfg.max_turn_rate, cfg.max_accel, cfg.max_angular_accel)
         self.lidar = Lidar(
@@ -410,14 +408,19 @@ class GreenhouseNavEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
         if cfg.scene == "greenhouse":
             lp = cfg.layout_params()
             self.diagonal = math.hypot(lp.width, lp.height)
+            canvas = lp.max_bounds()
         elif cfg.scene == "corridor":
             self.diagonal = math.hypot(cfg.office_length, cfg.office_width)
+            canvas = cfg.office_params().bounds()
         else:
             from agri_envs.sim2d.gridmap import grid_to_geometry, load_ros_map
 
             self._map_geometry = grid_to_geometry(load_ros_map(cfg.map_yaml))
             xmin, ymin, xmax, ymax = self._map_geometry.bounds
             self.diagonal = math.hypot(xmax - xmin, ymax - ymin)
+            canvas = self._map_geometry.bounds
+        self.view = SceneView(render_mode, canvas, cfg.render_width, self.metadata["render_fps"])
+        self.render_mode = render_mode
         n = self.lidar.spec.n_beams
         # Equal sectors of the full scan for min-pooling to `lidar_beams` values.
         self._pool_edges = np.linspace(0, n, cfg.lidar_beams + 1).round().astype(np.int64)[:-1]
@@ -442,8 +445,6 @@ class GreenhouseNavEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
         self.explicit_max_episode_steps: int | None = None
         self.max_episode_steps = 0
         self.time_limit_source = ""
-        self._renderer: Any = None
-        self._renderer_layout: Layout | None = None
         self._trail: list[tuple[float, float]] = []
 
     # -- episode set-up --------------------------------------------------------------------------------
@@ -451,17 +452,15 @@ class GreenhouseNavEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
         self, *, seed: int | None = None, options: dict[str, Any] | None = None
     ) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
         """Build a new scene and mission, place robot and people (see Starting State)."""
-        super().reset(seed=seed)
-        cfg = self.config
         overrides = dict(options or {})
         start_waypoint = overrides.pop("start_waypoint", 0)
         if isinstance(start_waypoint, bool) or not isinstance(start_waypoint, (int, np.integer)):
-            raise ValueError(f"reset option start_waypoint must be an int, got {start_waypoint!r}")
-        allowed = {"growth", "n_trees", "layout_seed", "start_waypoint"}
-        if set(overrides) - allowed:
-            raise ValueError(f"reset options {sorted(set(overrides) - allowed)} unknown; allowed: {sorted(allowed)}")
-        if overrides:
-            cfg = cfg.replace(**overrides)
+            raise ValueError(
+                f"reset option start_waypoint={start_waypoint!r} ({type(start_waypoint).__name__}) must be an integer"
+            )
+        # Checked before anything of the env changes, so a bad option leaves the env as it was.
+        cfg = self.config.with_options(overrides, ("growth", "n_trees", "layout_seed", "start_waypoint"))
+        super().reset(seed=seed)
         layout_rng = self.np_random if cfg.layout_seed < 0 else np.random.default_rng(cfg.layout_seed)
         if cfg.scene == "greenhouse":
             layout = generate_layout(cfg.layout_params(), layout_rng)
@@ -687,19 +686,10 @@ class GreenhouseNavEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
     # -- rendering ---------------------------------------------------------------------------------------
     def render(self) -> np.ndarray | None:
         """Top-down frame with rays, sonar cones, waypoints and the path (``rgb_array``) or a window (``human``)."""
-        if self.render_mode is None:
-            gym.logger.warn("render() called with render_mode=None; pass render_mode='rgb_array' to gym.make")
+        rd = self.view.begin(None if self.layout is None or self.world is None else self.layout.geometry)
+        if rd is None:
             return None
-        if self.world is None or self.layout is None:
-            raise RuntimeError("call reset() before render()")
-        from agri_envs.sim2d.render import TopDownRenderer
-
-        if self._renderer is None or self._renderer_layout is not self.layout:
-            self._renderer = TopDownRenderer(self.layout.geometry.bounds, self.config.render_width)
-            self._renderer.draw_geometry(self.layout.geometry)
-            self._renderer_layout = self.layout
-        rd = self._renderer
-        rd.begin()
+        assert self.world is not None and self.layout is not None
         rd.path(np.array(self._trail))
         mission = self.layout.mission
         rd.waypoints(self.layout.waypoints, -1 if self.task.done else int(mission[self.task.index % len(mission)]))
@@ -718,19 +708,19 @@ class GreenhouseNavEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
                 f"{len(self.task.targets)}   clearance {self.world.clearance(self.robot):.2f} m"
             ]
         )
-        return rd.present(self.render_mode, self.metadata["render_fps"])
+        return self.view.present()
 
     def close(self) -> None:
         """Release the renderer and the pymunk world (idempotent; ``reset()`` builds a new world)."""
-        if self._renderer is not None:
-            self._renderer.close()
-            self._renderer = None
+        self.view.close()
         if self.world is not None:
             self.world.close()
             self.world = None
 
 
-class SyncTimeLimit(gym.Wrapper[dict[str, np.ndarray], np.ndarray, dict[str, np.ndarray], np.ndarray]):
+class SyncTimeLimit(
+    gym.Wrapper[dict[str, np.ndarray], np.ndarray, dict[str, np.ndarray], np.ndarray], gym.utils.RecordConstructorArgs
+):
     """Tell the env about an explicit ``gym.make(..., max_episode_steps=N)``, so that N wins over its own limit.
 
     ``gym.make`` applies this wrapper (the registration's ``additional_wrappers``) outside the ``TimeLimit``
@@ -740,7 +730,9 @@ class SyncTimeLimit(gym.Wrapper[dict[str, np.ndarray], np.ndarray, dict[str, np.
     """
 
     def __init__(self, env: gym.Env[dict[str, np.ndarray], np.ndarray]) -> None:
-        super().__init__(env)
+        # Recording the (no) arguments lets gym.make(env.spec) and check_env re-create the wrapper stack.
+        gym.utils.RecordConstructorArgs.__init__(self)
+        gym.Wrapper.__init__(self, env)
         limit: int | None = None
         inner: gym.Env[Any, Any] = env
         while isinstance(inner, gym.Wrapper):

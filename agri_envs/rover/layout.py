@@ -77,6 +77,11 @@ class LayoutParams:
         """Inner width of the greenhouse across the rows (m)."""
         return (self.n_rows + 1) * self.corridor_width + self.n_rows * self.row_width
 
+    def max_bounds(self) -> tuple[float, float, float, float]:
+        """``(xmin, ymin, xmax, ymax)`` (m) of the largest greenhouse these parameters generate (walls included)."""
+        height = self.height + (self.n_rows + 1) * self.corridor_width_jitter
+        return (-WALL_THICKNESS, -WALL_THICKNESS, self.width + WALL_THICKNESS, height + WALL_THICKNESS)
+
     def max_narrowing(self) -> float:
         """Worst-case loss of corridor width (m) from width jitter, inclined and bent rows (two rows per corridor)."""
         incline = 0.5 * self.row_length * math.tan(self.row_incline)
@@ -343,6 +348,11 @@ class OfficeParams:
     door_depth: float = 0.3
     route: str = "experiment"
 
+    def bounds(self) -> tuple[float, float, float, float]:
+        """``(xmin, ymin, xmax, ymax)`` (m) of the corridor, its walls and door recesses."""
+        t, d = WALL_THICKNESS, self.door_depth
+        return (-t - d, -t - d, self.length + t, self.width + t + d)
+
 
 #: The office-corridor missions (waypoint indices after the start at waypoint 0), Harik secs. 3.4 and 3.5.
 ROUTES: dict[str, tuple[int, ...]] = {"experiment": (1, 2, 3, 2, 0), "repeatability": (2, 3, 4, 0)}
@@ -388,13 +398,7 @@ def generate_office_corridor(p: OfficeParams, rng: np.random.Generator) -> Layou
         depth = 0.25
         y0, y1 = (0.0, depth) if side == 0 else (h - depth, h)
         b.box(cx - 0.3, y0, cx + 0.3, y1, Kind.OBSTACLE)
-    bounds = (
-        -WALL_THICKNESS - p.door_depth,
-        -WALL_THICKNESS - p.door_depth,
-        w + WALL_THICKNESS,
-        h + WALL_THICKNESS + p.door_depth,
-    )
-    geometry = b.build(bounds)
+    geometry = b.build(p.bounds())
     waypoints = np.array([[1.0, yc], [w - 1.0, yc], [0.55 * w, yc], [0.25 * w, yc], [0.8 * w, yc]])
     if p.route not in ROUTES:
         raise ValueError(f"OfficeParams.route={p.route!r} is invalid; expected one of {sorted(ROUTES)}")
