@@ -5,7 +5,7 @@ import pytest
 from pettingzoo.test import api_test, max_cycles_test, parallel_api_test, parallel_seed_test, render_test, seed_test
 
 from agri_envs.chain import robot_chain_v0
-from agri_envs.rover.layout import EXAMPLE_MAP
+from agri_envs.scenes import EXAMPLE_MAP
 
 COMBOS = [
     {"n_robots": 1},
@@ -164,7 +164,7 @@ def test_frames_keep_one_shape_across_episodes():
 
 def _to_goal(env):
     """Every robot's free-floor (A*) distance to the goal, leader first."""
-    from agri_baselines.grid_astar import distance_field
+    from agri_envs.sim2d.astar import distance_field
 
     raw = env.unwrapped
     cmap = raw.chain_map

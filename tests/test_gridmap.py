@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from agri_envs.rover.layout import LayoutParams, generate_layout
+from agri_envs.scenes.greenhouse import LayoutParams, generate_layout
 from agri_envs.sim2d.geometry import Geometry, GeometryBuilder, Kind
 from agri_envs.sim2d.gridmap import (
     OccupancyGrid,

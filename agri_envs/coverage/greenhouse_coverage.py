@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import dataclasses
 import math
 from typing import Any
 
@@ -11,96 +10,20 @@ import numpy as np
 from gymnasium import spaces
 
 from agri_envs._actions import checked_action
-from agri_envs._config import StrictConfig, param
 from agri_envs.coverage import robot as fito
-from agri_envs.coverage.task import CoverageTask, CoverageWeights
-from agri_envs.rover.layout import Layout, LayoutParams, generate_layout
+from agri_envs.coverage.config import GreenhouseCoverageConfig
+from agri_envs.coverage.task import CoverageTask
+from agri_envs.scenes.greenhouse import generate_layout
+from agri_envs.scenes.layout import Layout
 from agri_envs.sim2d.geometry import Kind
+from agri_envs.sim2d.odometry import Compass, TrackOdometry
 from agri_envs.sim2d.raycast import footprint_clearance
 from agri_envs.sim2d.sensors import SonarArray, SonarSpec
 from agri_envs.sim2d.view import SceneView
 from agri_envs.sim2d.world import World2D
 
-LOCALIZATION_MODES = ("odometry", "ground_truth")
+__all__ = ["GreenhouseCoverageConfig", "GreenhouseCoverageEnv"]
 _CROP = (int(Kind.PLANT), int(Kind.LEAF), int(Kind.TREE))
-
-
-@dataclasses.dataclass(frozen=True)
-class GreenhouseCoverageConfig(StrictConfig):
-    """Arguments of ``agri_envs/GreenhouseCoverage-v0`` (each one a ``gym.make`` keyword)."""
-
-    # Scene
-    n_rows: int = param(4, "rows of plants (the corridors are the n_rows + 1 spaces beside them)", low=1, high=12)
-    row_length: float = param(10.0, "length of each row", unit="m", low=3.0, high=50.0)
-    corridor_width: float = param(1.4, "mean free width of a corridor", unit="m", low=1.0, high=3.0)
-    corridor_width_jitter: float = param(
-        0.1, "each corridor is corridor_width + U(-jitter, jitter) wide", unit="m", low=0.0, high=0.4
-    )
-    row_incline: float = param(0.01, "each row is tilted by U(-incline, incline)", unit="rad", low=0.0, high=0.05)
-    row_bend: float = param(0.05, "each row bows sideways by U(-bend, bend) at mid-length", unit="m", low=0.0, high=0.3)
-    row_width: float = param(0.6, "width of a row bed", unit="m", low=0.2, high=1.5)
-    headland: float = param(2.6, "free space between row ends and the end walls", unit="m", low=2.2, high=6.0)
-    plant_spacing: float = param(0.4, "distance between plants along a row", unit="m", low=0.15, high=2.0)
-    plant_jitter: float = param(0.03, "uniform jitter of plant positions", unit="m", low=0.0, high=0.1)
-    growth: float = param(0.6, "season: plant size and leaves reaching into corridors", low=0.0, high=1.0)
-    post_spacing: float = param(
-        4.0, "distance between structural posts along rows and walls", unit="m", low=1.0, high=20.0
-    )
-    layout_seed: int = param(-1, "layout seed; -1: a new greenhouse every episode", low=-1, high=2**31 - 1)
-    # Robot (756 kg: low accelerations)
-    max_speed: float = param(0.5, "forward speed limit (reverse: half of it)", unit="m/s", low=0.1, high=1.5)
-    max_turn_rate: float = param(0.6, "angular speed limit", unit="rad/s", low=0.1, high=2.0)
-    max_accel: float = param(0.3, "linear acceleration limit", unit="m/s^2", low=0.05, high=2.0)
-    max_angular_accel: float = param(0.8, "angular acceleration limit", unit="rad/s^2", low=0.05, high=5.0)
-    control_period: float = param(0.1, "time between actions (the paper's 100 ms)", unit="s", low=0.02, high=0.5)
-    # Sensors
-    sonar_noise_std: float = param(0.01, "sonar Gaussian range noise", unit="m", low=0.0, high=0.5)
-    vegetation_echo_prob: float = param(
-        0.15, "chance that an echo off foliage slips through (reads long)", low=0.0, high=1.0
-    )
-    compass_noise_std: float = param(0.01, "compass Gaussian heading noise", unit="rad", low=0.0, high=0.5)
-    compass_bias: float = param(0.03, "constant compass heading bias", unit="rad", low=-0.5, high=0.5)
-    encoder_noise: float = param(0.02, "relative std of each track-speed measurement", low=0.0, high=0.5)
-    encoder_scale_std: float = param(
-        0.01, "per-episode scale error std of each track encoder (drift)", low=0.0, high=0.1
-    )
-    localization: str = param("odometry", "source of the 'pose' observation", choices=LOCALIZATION_MODES)
-    # Task and reward
-    bin_length: float = param(0.25, "length of a coverage bin along a corridor", unit="m", low=0.05, high=2.0)
-    terminate_on_contact: bool = param(True, "end the episode on touching the crop or anything else")
-    time_limit: float = param(0.0, "episode time limit; 0 sizes it to the mission", unit="s", low=0.0, high=36000.0)
-    reward_coverage: float = param(1.0, "reward per corridor covered (paid per bin)", low=0.0, high=100.0)
-    reward_success: float = param(10.0, "bonus when every corridor is covered", low=0.0, high=1000.0)
-    reward_contact: float = param(10.0, "penalty on contact", low=0.0, high=1000.0)
-    reward_cross_track: float = param(0.0, "penalty per step per metre of cross-track error", low=0.0, high=100.0)
-    reward_time: float = param(0.001, "penalty per step", low=0.0, high=10.0)
-    render_width: int = param(800, "width of rendered frames", unit="px", low=100, high=4000)
-
-    def validate(self) -> None:
-        """Check that the narrowest corridor still lets the 0.7 m wide robot pass with 0.2 m to spare."""
-        lp = self.layout_params()
-        free = self.corridor_width - lp.max_narrowing() - 2 * lp.max_intrusion()
-        if free < fito.WIDTH + 0.2:
-            raise ValueError(
-                f"GreenhouseCoverageConfig: the narrowest corridor keeps only {free:.2f} m free (corridor_width "
-                f"minus corridor_width_jitter, row_incline and row_bend narrowing, and leaves at "
-                f"growth={self.growth}); "
-                f"the {fito.WIDTH} m wide Fitorobot needs {fito.WIDTH + 0.2:.2f} m: increase corridor_width or "
-                f"lower the variation."
-            )
-
-    def layout_params(self) -> LayoutParams:
-        """The scene part of the config."""
-        return LayoutParams.from_config(self)
-
-    def mission_time(self) -> float:
-        """The episode time limit (s): ``time_limit``, or three times the serpentine at full speed plus turns."""
-        if self.time_limit > 0:
-            return self.time_limit
-        n = self.n_rows + 1
-        length = n * (self.row_length + self.headland) + self.n_rows * (self.corridor_width + self.row_width)
-        turns = 2 * self.n_rows * (math.pi / 2) / self.max_turn_rate
-        return 3.0 * (length / self.max_speed + turns) + 30.0
 
 
 class GreenhouseCoverageEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
@@ -298,6 +221,8 @@ class GreenhouseCoverageEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
             ),
             fito.SONAR_MOUNTS,
         )
+        self.compass = Compass(cfg.compass_noise_std, cfg.compass_bias)
+        self.encoders = TrackOdometry(fito.TRACK_GAUGE, cfg.encoder_noise, cfg.encoder_scale_std)
         lp = cfg.layout_params()
         #: Normalisation of the ``pose`` observation (m): the largest greenhouse the arguments allow.
         self.pose_scale = (lp.width, lp.height + (cfg.n_rows + 1) * cfg.corridor_width_jitter)
@@ -338,31 +263,17 @@ class GreenhouseCoverageEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
         first = self.layout.corridors[0]
         start = np.array([first[0, 0] - 1.0, first[0, 1], 0.0]) + rng.uniform([-0.03, -0.03, -0.02], [0.03, 0.03, 0.02])
         self.robot = self.world.add_robot(self.robot_spec, start)
-        self.task = CoverageTask(
-            self.layout.corridors,
-            cfg.bin_length,
-            CoverageWeights(
-                coverage=cfg.reward_coverage,
-                success=cfg.reward_success,
-                contact=cfg.reward_contact,
-                cross_track=cfg.reward_cross_track,
-                time=cfg.reward_time,
-            ),
-        )
-        self._encoder_scale = (
-            1.0 + cfg.encoder_scale_std * rng.standard_normal(2) if cfg.encoder_scale_std else np.ones(2)
-        )
-        self._estimate = start[:2].copy()
+        self.task = CoverageTask(self.layout.corridors, cfg.bin_length, cfg.weights())
+        self.encoders.draw_scale(rng)
+        self.encoders.reset(start)
         self._steps = 0
         self._path_length = 0.0
         self._crop_contacts = 0
         self._other_contacts = 0
         self._cross_sum = 0.0
         self._cross_n = 0
-        self._v_meas = 0.0
-        self._w_meas = 0.0
         self._trail = [(float(start[0]), float(start[1]))]
-        self._compass = self._read_compass()
+        self._compass = self.compass.read(self.robot.pose[2], self.np_random)
         self._min_clearance = math.inf
         outcome = self.task.evaluate(self.robot.pose, False, False)
         self._track(outcome)
@@ -393,8 +304,8 @@ class GreenhouseCoverageEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
         self._crop_contacts += int(crop_contact)
         self._other_contacts += int(other_contact)
         self._steps += 1
-        self._compass = self._read_compass()
-        self._update_odometry(dt)
+        self._compass = self.compass.read(self.robot.pose[2], self.np_random)
+        self.encoders.update(robot.v, robot.w, self._compass, dt, self.np_random)
         self._trail.append((float(robot.pose[0]), float(robot.pose[1])))
         outcome = self.task.evaluate(robot.pose, crop_contact, other_contact)
         self._track(outcome)
@@ -419,26 +330,6 @@ class GreenhouseCoverageEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
             self._cross_sum += float(outcome["cross_track"])
             self._cross_n += 1
 
-    def _read_compass(self) -> float:
-        cfg = self.config
-        h = float(self.robot.pose[2]) + cfg.compass_bias
-        if cfg.compass_noise_std > 0:
-            h += cfg.compass_noise_std * float(self.np_random.standard_normal())
-        return math.atan2(math.sin(h), math.cos(h))
-
-    def _update_odometry(self, dt: float) -> None:
-        """Track encoders -> travelled distance, integrated along the compass heading (the paper's sec. 3.3)."""
-        cfg = self.config
-        v, w = self.robot.v, self.robot.w
-        half = 0.5 * fito.TRACK_GAUGE
-        tracks = np.array([v - w * half, v + w * half]) * self._encoder_scale
-        if cfg.encoder_noise > 0:
-            tracks = tracks * (1.0 + cfg.encoder_noise * self.np_random.standard_normal(2))
-        self._v_meas = float(0.5 * (tracks[0] + tracks[1]))
-        self._w_meas = float((tracks[1] - tracks[0]) / fito.TRACK_GAUGE)
-        h = self._compass
-        self._estimate = self._estimate + self._v_meas * dt * np.array([math.cos(h), math.sin(h)])
-
     # -- observation and info ---------------------------------------------------------------------------
     def _observe(self) -> dict[str, np.ndarray]:
         assert self.world is not None
@@ -446,17 +337,18 @@ class GreenhouseCoverageEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
             self.robot.pose, self.world.circles, self.world.capsules, self.np_random, solid=self._solid
         )
         spec = self.robot_spec
+        enc = self.encoders
         h = self._compass
         if self.config.localization == "ground_truth":
             px, py, ph = (float(v) for v in self.robot.pose)
         else:
-            px, py, ph = float(self._estimate[0]), float(self._estimate[1]), h
+            px, py, ph = float(enc.estimate[0]), float(enc.estimate[1]), h
         half = np.float32(0.5)
         return {
             "sonar": (self._last_sonar / self.sonars.spec.max_range).astype(np.float32),
             "compass": np.array([0.5 + 0.5 * math.sin(h), 0.5 + 0.5 * math.cos(h)], np.float32),
             "velocity": np.clip(
-                half + half * np.array([self._v_meas / spec.max_speed, self._w_meas / spec.max_turn_rate], np.float32),
+                half + half * np.array([enc.v / spec.max_speed, enc.w / spec.max_turn_rate], np.float32),
                 0.0,
                 1.0,
             ),
@@ -492,8 +384,8 @@ class GreenhouseCoverageEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
             x=float(pose[0]),
             y=float(pose[1]),
             yaw=float(pose[2]),
-            est_x=float(self._estimate[0]),
-            est_y=float(self._estimate[1]),
+            est_x=float(self.encoders.estimate[0]),
+            est_y=float(self.encoders.estimate[1]),
             compass=self._compass,
             v=float(self.robot.v),
             w=float(self.robot.w),
