@@ -25,6 +25,7 @@ from agri_envs.chain.observation import ChainObservation
 from agri_envs.chain.task import ChainTask
 from agri_envs.sim2d.geometry import Kind
 from agri_envs.sim2d.polyline import Polyline
+from agri_envs.sim2d.render import TopDownRenderer
 from agri_envs.sim2d.view import SceneView
 from agri_envs.sim2d.world import World2D
 
@@ -138,7 +139,7 @@ class RobotChainEnv(ParallelEnv):  # type: ignore[misc]
     Field", Robotics 7(2):20, 2018.
     """
 
-    metadata = {
+    metadata: dict[str, Any] = {
         "name": "robot_chain_v0",
         "render_modes": ["rgb_array", "human"],
         "render_fps": 10,
@@ -178,7 +179,7 @@ class RobotChainEnv(ParallelEnv):  # type: ignore[misc]
             canvas = cfg.office_params().bounds()
         else:
             canvas = cfg.greenhouse_params().max_bounds()
-        self.view = SceneView(render_mode, canvas, cfg.render_width, fps=10)
+        self.view = SceneView(render_mode, canvas, cfg.render_width, self.metadata["render_fps"])
         self.render_mode = render_mode
         self.world: World2D | None = None
         self.chain_map: ChainMap | None = None
@@ -219,6 +220,11 @@ class RobotChainEnv(ParallelEnv):  # type: ignore[misc]
     def observation_layout(self) -> dict[str, Any]:
         """Where things sit in an observation and how to scale them back (for scripted policies)."""
         return self.observation.layout()
+
+    def close(self) -> None:
+        """Release the renderer and the pymunk world (idempotent; ``reset()`` builds a new world)."""
+        self.view.close(self.world)
+        self.world = None
 
     # -- episode set-up --------------------------------------------------------------------------------
     def reset(
@@ -408,9 +414,11 @@ class RobotChainEnv(ParallelEnv):  # type: ignore[misc]
     # -- rendering ---------------------------------------------------------------------------------------
     def render(self) -> np.ndarray | None:
         """Top-down frame: map, A* path, ghost, goal, strip, robots with sonar cones (``rgb_array``/``human``)."""
-        rd = self.view.begin(None if self.chain_map is None or self.world is None else self.chain_map.geometry)
-        if rd is None:
-            return None
+        return self.view.render(
+            None if self.world is None or self.chain_map is None else self.chain_map.geometry, self._draw
+        )
+
+    def _draw(self, rd: TopDownRenderer) -> list[str]:
         assert self.world is not None and self.task is not None
         cfg = self.config
         rd.polyline(self.task.path.points, (200, 60, 60), 1)
@@ -426,17 +434,5 @@ class RobotChainEnv(ParallelEnv):  # type: ignore[misc]
         g = self.task.ghost.point
         rd.ring(float(g[0]), float(g[1]), 0.12, (120, 120, 255))
         rd.ring(float(self.task.goal[0]), float(self.task.goal[1]), cfg.goal_radius, (30, 160, 30))
-        rd.text(
-            [
-                f"t = {self._steps * cfg.control_period:5.1f} s   robots {len(p)}   "
-                f"collisions {self.task.collisions}   max gap {self.task.max_gap:.2f} m"
-            ]
-        )
-        return self.view.present()
-
-    def close(self) -> None:
-        """Release the renderer and the pymunk world (idempotent; ``reset()`` builds a new world)."""
-        self.view.close()
-        if self.world is not None:
-            self.world.close()
-            self.world = None
+        t, task = self._steps * cfg.control_period, self.task
+        return [f"t = {t:5.1f} s   robots {len(p)}   collisions {task.collisions}   max gap {task.max_gap:.2f} m"]

@@ -16,14 +16,9 @@ SONAR_INSET = 0.005
 
 def body_spec(cfg: RobotChainConfig) -> DiffDriveSpec:
     """A round differential-drive body of radius ``robot_radius`` with the config's limits (same both ways)."""
-    return DiffDriveSpec(
-        length=2 * cfg.robot_radius,
-        width=2 * cfg.robot_radius,
-        max_speed=cfg.max_speed,
-        max_reverse_speed=cfg.max_speed,
-        max_turn_rate=cfg.max_turn_rate,
-        max_accel=cfg.max_accel,
-        max_angular_accel=cfg.max_angular_accel,
+    d = 2 * cfg.robot_radius
+    return DiffDriveSpec.with_limits(
+        d, d, cfg.max_speed, cfg.max_turn_rate, cfg.max_accel, cfg.max_angular_accel, reverse_fraction=1.0
     )
 
 

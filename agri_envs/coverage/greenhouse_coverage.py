@@ -9,7 +9,6 @@ import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
-from agri_envs._actions import checked_action
 from agri_envs.coverage import robot as fito
 from agri_envs.coverage.config import GreenhouseCoverageConfig
 from agri_envs.coverage.task import CoverageTask
@@ -18,6 +17,7 @@ from agri_envs.scenes.layout import Layout
 from agri_envs.sim2d.geometry import Kind
 from agri_envs.sim2d.odometry import Compass, TrackOdometry
 from agri_envs.sim2d.raycast import footprint_clearance
+from agri_envs.sim2d.render import TopDownRenderer
 from agri_envs.sim2d.sensors import SonarArray, SonarSpec
 from agri_envs.sim2d.view import SceneView
 from agri_envs.sim2d.world import World2D
@@ -205,11 +205,11 @@ class GreenhouseCoverageEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
     }
 
     def __init__(self, render_mode: str | None = None, **kwargs: Any) -> None:
-        self.config = GreenhouseCoverageConfig.from_kwargs(kwargs)
-        cfg = self.config
-        canvas = cfg.layout_params().max_bounds()
-        self.view = SceneView(render_mode, canvas, cfg.render_width, self.metadata["render_fps"])
         self.render_mode = render_mode
+        self.config = cfg = GreenhouseCoverageConfig.from_kwargs(kwargs)
+        self.view = SceneView(
+            render_mode, cfg.layout_params().max_bounds(), cfg.render_width, self.metadata["render_fps"]
+        )
         self.robot_spec = fito.fitorobot_spec(cfg.max_speed, cfg.max_turn_rate, cfg.max_accel, cfg.max_angular_accel)
         self.sonars = SonarArray(
             SonarSpec(
@@ -288,10 +288,7 @@ class GreenhouseCoverageEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
         """Apply ``[u, r]`` for one control period and return the Gymnasium 5-tuple."""
         if self.world is None:
             raise RuntimeError("call reset() before step()")
-        u, r = checked_action(action, 2).tolist()
-        spec = self.robot_spec
-        v_cmd = u * (spec.max_speed if u >= 0 else spec.max_reverse_speed)
-        w_cmd = r * spec.max_turn_rate
+        v_cmd, w_cmd = self.robot_spec.command(action)
         dt = self.config.control_period
         robot = self.robot
         before = robot.pose
@@ -426,23 +423,17 @@ class GreenhouseCoverageEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
     # -- rendering ---------------------------------------------------------------------------------------
     def render(self) -> np.ndarray | None:
         """Top-down frame with sonar cones, corridor centre lines and the driven path."""
-        rd = self.view.begin(None if self.layout is None or self.world is None else self.layout.geometry)
-        if rd is None:
-            return None
+        return self.view.render(None if self.world is None or self.layout is None else self.layout.geometry, self._draw)
+
+    def _draw(self, rd: TopDownRenderer) -> list[str]:
         rd.path(np.array(self._trail))
         rd.cones(self.sonars.poses_in_world(self.robot.pose), self._last_sonar, self.sonars.spec.aperture)
         rd.robot(self.robot.pose, self.robot_spec.length, self.robot_spec.width)
-        rd.text(
-            [
-                f"t = {self._steps * self.config.control_period:5.1f} s   coverage {self.task.coverage:4.0%}   "
-                f"corridors {sum(bool(c.all()) for c in self.task.covered)}/{self.n_corridors}"
-            ]
-        )
-        return self.view.present()
+        done = sum(bool(c.all()) for c in self.task.covered)
+        t = self._steps * self.config.control_period
+        return [f"t = {t:5.1f} s   coverage {self.task.coverage:4.0%}   corridors {done}/{self.n_corridors}"]
 
     def close(self) -> None:
         """Release the renderer and the pymunk world (idempotent; ``reset()`` builds a new world)."""
-        self.view.close()
-        if self.world is not None:
-            self.world.close()
-            self.world = None
+        self.view.close(self.world)
+        self.world = None

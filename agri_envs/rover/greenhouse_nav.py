@@ -9,7 +9,6 @@ import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
-from agri_envs._actions import checked_action
 from agri_envs.rover import robot as rover
 from agri_envs.rover.config import GreenhouseNavConfig
 from agri_envs.rover.task import WaypointTask, mission_time_limit
@@ -20,6 +19,7 @@ from agri_envs.scenes.rosmap import layout_from_map, map_geometry
 from agri_envs.sim2d.crowd import Crowd, CrowdSpec
 from agri_envs.sim2d.geometry import Kind
 from agri_envs.sim2d.odometry import WheelOdometry
+from agri_envs.sim2d.render import TopDownRenderer
 from agri_envs.sim2d.sensors import Lidar, SonarArray, hc_sr04, tim561
 from agri_envs.sim2d.view import SceneView
 from agri_envs.sim2d.world import World2D
@@ -365,15 +365,17 @@ class GreenhouseNavEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
             self.render()
         return obs, info
 
+    def close(self) -> None:
+        """Release the renderer and the pymunk world (idempotent; ``reset()`` builds a new world)."""
+        self.view.close(self.world)
+        self.world = None
+
     # -- stepping --------------------------------------------------------------------------------------
     def step(self, action: np.ndarray) -> tuple[dict[str, np.ndarray], float, bool, bool, dict[str, Any]]:
         """Apply ``[u, r]`` for ``frame_skip`` control periods and return the Gymnasium 5-tuple."""
         if self.world is None:
             raise RuntimeError("call reset() before step()")
-        u, r = checked_action(action, 2).tolist()
-        spec = self.robot_spec
-        v_cmd = u * (spec.max_speed if u >= 0 else spec.max_reverse_speed)
-        w_cmd = r * spec.max_turn_rate
+        v_cmd, w_cmd = self.robot_spec.command(action)
         terms: dict[str, float] = {}
         reached = False
         for _ in range(self.config.frame_skip):
@@ -536,9 +538,9 @@ class GreenhouseNavEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
     # -- rendering ---------------------------------------------------------------------------------------
     def render(self) -> np.ndarray | None:
         """Top-down frame with rays, sonar cones, waypoints and the path (``rgb_array``) or a window (``human``)."""
-        rd = self.view.begin(None if self.layout is None or self.world is None else self.layout.geometry)
-        if rd is None:
-            return None
+        return self.view.render(None if self.world is None or self.layout is None else self.layout.geometry, self._draw)
+
+    def _draw(self, rd: TopDownRenderer) -> list[str]:
         assert self.world is not None and self.layout is not None
         rd.path(np.array(self._trail))
         mission = self.layout.mission
@@ -552,20 +554,9 @@ class GreenhouseNavEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
         rd.cones(self.sonars.poses_in_world(self.robot.pose), self._last_sonar, self.sonars.spec.aperture)
         rd.circles(self.world.mover_circles[: self.crowd.n], Kind.PERSON)
         rd.robot(self.robot.pose, self.robot_spec.length, self.robot_spec.width)
-        rd.text(
-            [
-                f"t = {self._steps * self.config.control_period:5.1f} s   waypoint {self.task.index}/"
-                f"{len(self.task.targets)}   clearance {self.world.clearance(self.robot):.2f} m"
-            ]
-        )
-        return self.view.present()
-
-    def close(self) -> None:
-        """Release the renderer and the pymunk world (idempotent; ``reset()`` builds a new world)."""
-        self.view.close()
-        if self.world is not None:
-            self.world.close()
-            self.world = None
+        t = self._steps * self.config.control_period
+        clearance = self.world.clearance(self.robot)
+        return [f"t = {t:5.1f} s   waypoint {self.task.index}/{len(self.task.targets)}   clearance {clearance:.2f} m"]
 
 
 class SyncTimeLimit(

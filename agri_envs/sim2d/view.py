@@ -9,7 +9,7 @@ tiling and video writers need that); a smaller scene is letterboxed, centred in 
 from __future__ import annotations
 
 import warnings
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -46,8 +46,16 @@ class SceneView:
         self._renderer: TopDownRenderer | None = None
         self._scene: Geometry | None = None
 
-    def begin(self, geometry: Geometry | None) -> TopDownRenderer | None:
-        """Start a frame of ``geometry``'s scene; None (after a warning) when the env renders nothing.
+    def render(self, geometry: Geometry | None, draw: Callable[[TopDownRenderer], Sequence[str]]) -> np.ndarray | None:
+        """One frame: the scene ``geometry``, then ``draw(renderer)``'s moving parts and its status lines.
+
+        Args:
+            geometry: The episode's static scene; None before ``reset()``.
+            draw: Draws robots, sensors, paths on the renderer and returns the status lines to print.
+
+        Returns:
+            The ``(H, W, 3)`` frame (``rgb_array``); None after showing it (``human``) or, with a warning,
+            when the env was made without a render mode.
 
         Raises:
             RuntimeError: When there is no scene yet (``reset()`` was not called).
@@ -65,24 +73,28 @@ class SceneView:
             from agri_envs.sim2d.render import TopDownRenderer
 
             self._renderer = TopDownRenderer(self.canvas, self.width_px)
+        rd = self._renderer
         if self._scene is not geometry:  # a new episode's scene: letterbox it and draw its static part once
-            self._renderer.fit(geometry.bounds)
-            self._renderer.draw_geometry(geometry)
+            rd.fit(geometry.bounds)
+            rd.draw_geometry(geometry)
             self._scene = geometry
-        self._renderer.begin()
-        return self._renderer
+        rd.begin()
+        rd.text(draw(rd))
+        return rd.present(self.render_mode, self.fps)
 
-    def present(self) -> np.ndarray | None:
-        """Finish the frame: the ``(H, W, 3)`` array (``rgb_array``), or None after showing it (``human``)."""
-        assert self._renderer is not None, "begin() first"
-        return self._renderer.present(self.render_mode, self.fps)
+    def close(self, *others: Any) -> None:
+        """Close the window, drop the renderer, and close each of ``others`` that is not None (idempotent).
 
-    def close(self) -> None:
-        """Close the window and drop the renderer (idempotent)."""
+        Args:
+            others: What else the env releases with its view (its pymunk world, ...): objects with ``close()``.
+        """
         if self._renderer is not None:
             self._renderer.close()
             self._renderer = None
             self._scene = None
+        for other in others:
+            if other is not None:
+                other.close()
 
     def __getstate__(self) -> dict[str, Any]:
         """Pickle without the renderer (pygame surfaces do not pickle); a copy makes its own."""
