@@ -68,7 +68,7 @@ def office_map(p: OfficeFloorParams, rng: np.random.Generator, inflation: float,
 
 
 def greenhouse_map(p: LayoutParams, rng: np.random.Generator, inflation: float, resolution: float) -> ChainMap:
-    """The rover's generated greenhouse (rows of plants between walls) as a :class:`ChainMap`."""
+    """A generated greenhouse (rows of plants between walls, :mod:`agri_envs.scenes.greenhouse`) as a ChainMap."""
     geometry = generate_layout(p, rng).geometry
     return make_chain_map(geometry, rasterize(geometry, resolution), inflation)
 

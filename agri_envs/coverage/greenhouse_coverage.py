@@ -15,6 +15,7 @@ from agri_envs.coverage.task import CoverageTask
 from agri_envs.scenes.greenhouse import generate_layout
 from agri_envs.scenes.layout import Layout
 from agri_envs.sim2d.geometry import Kind
+from agri_envs.sim2d.gridmap import rasterize
 from agri_envs.sim2d.odometry import Compass, TrackOdometry
 from agri_envs.sim2d.raycast import footprint_clearance
 from agri_envs.sim2d.render import TopDownRenderer
@@ -407,8 +408,6 @@ class GreenhouseCoverageEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
             ``(occupancy, resolution, origin)``: a boolean grid (True = blocked) whose cell ``[i, j]``
             covers x in ``origin[0] + [j*res, (j+1)*res)`` and y in ``origin[1] + [i*res, (i+1)*res)``.
         """
-        from agri_envs.sim2d.gridmap import rasterize
-
         if self.layout is None:
             raise RuntimeError("call reset() before true_map()")
         grid = rasterize(self.layout.geometry, resolution)

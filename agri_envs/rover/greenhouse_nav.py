@@ -18,6 +18,7 @@ from agri_envs.scenes.office import generate_office_corridor
 from agri_envs.scenes.rosmap import layout_from_map, map_geometry
 from agri_envs.sim2d.crowd import Crowd, CrowdSpec
 from agri_envs.sim2d.geometry import Kind
+from agri_envs.sim2d.gridmap import rasterize
 from agri_envs.sim2d.odometry import WheelOdometry
 from agri_envs.sim2d.render import TopDownRenderer
 from agri_envs.sim2d.sensors import Lidar, SonarArray, hc_sr04, tim561
@@ -530,8 +531,6 @@ class GreenhouseNavEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
 
     def occupancy_grid(self, resolution: float = 0.05) -> Any:
         """Occupancy grid of the current static scene (see :mod:`agri_envs.sim2d.gridmap`)."""
-        from agri_envs.sim2d.gridmap import rasterize
-
         assert self.layout is not None
         return rasterize(self.layout.geometry, resolution)
 

@@ -10,14 +10,12 @@ from __future__ import annotations
 
 import warnings
 from collections.abc import Callable, Sequence
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 
 from agri_envs.sim2d.geometry import Geometry
-
-if TYPE_CHECKING:  # pygame loads only when a renderer is made
-    from agri_envs.sim2d.render import TopDownRenderer
+from agri_envs.sim2d.render import TopDownRenderer  # pygame loads only when a renderer is made
 
 RENDER_MODES = ("rgb_array", "human")
 
@@ -70,8 +68,6 @@ class SceneView:
         if geometry is None:
             raise RuntimeError("call reset() before render()")
         if self._renderer is None:
-            from agri_envs.sim2d.render import TopDownRenderer
-
             self._renderer = TopDownRenderer(self.canvas, self.width_px)
         rd = self._renderer
         if self._scene is not geometry:  # a new episode's scene: letterbox it and draw its static part once
