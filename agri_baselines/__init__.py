@@ -150,7 +150,7 @@ register_policy(
 )
 
 def astar(occupancy: np.ndarray, start: tuple[int, int], goal: tuple[int, int]) -> list[tuple[int, int]] | None:
-    """8-connected grid A* (Apoorva 2018, Alg. 1); see :func:`agri_baselines.grid_astar.astar`.
+    """8-connected grid A* (Apoorva 2018, Alg. 1); see :func:`agri_envs.sim2d.astar.astar`.
 
     Args:
         occupancy: ``(H, W)`` boolean array, True = blocked.
@@ -160,7 +160,7 @@ def astar(occupancy: np.ndarray, start: tuple[int, int], goal: tuple[int, int]) 
     Returns:
         The cells from start to goal, or None when there is no path.
     """
-    from agri_baselines.grid_astar import astar as _astar  # numba is compiled only when A* is used
+    from agri_envs.sim2d.astar import astar as _astar  # numba is compiled only when A* is used
 
     return _astar(occupancy, start, goal)
 

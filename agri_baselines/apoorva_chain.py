@@ -2,8 +2,9 @@
 
 The pure parts (no Gymnasium, no PettingZoo):
 
-* :class:`Polyline` and :class:`GhostRobot`: the ghost that runs along the A* path ahead of the leader
-  (sec. 4.4: pseudo speed ``v_F``, back speed ``v_B``, leash ``eta``, patience ``T``);
+The ghost robot (sec. 4.4) that runs along the A* path ahead of the leader belongs to the chain's task
+(:mod:`agri_envs.chain.task`); the leader reads it in its observation.
+
 * :func:`attractive_force` (eq. 2) and :func:`sonar_repulsion` (eq. 4 with the sonar form of Alg. 3);
 * :func:`leader_force` (Alg. 4), :func:`follower_force` (Alg. 5), :func:`strip_forces` (Alg. 6);
 * :func:`force_to_command`: the proportional controller of Alg. 2; the policy adds the equipotential
@@ -15,165 +16,13 @@ returns per-agent dicts (the central system of sec. 6.2 computes every robot's c
 
 from __future__ import annotations
 
-import bisect
 import dataclasses
 import math
 from typing import Any
 
-import numba
 import numpy as np
 
-
-@numba.njit(cache=True)
-def _project(
-    points: np.ndarray, cumulative: np.ndarray, x: float, y: float, k0: int, k1: int, s_from: float, s_to: float
-) -> float:
-    """Arc length in ``[s_from, s_to]`` of the path point nearest to ``(x, y)`` (segments ``k0 .. k1 - 1``)."""
-    best = math.inf
-    s_best = max(s_from, cumulative[k0])
-    for k in range(k0, k1):
-        ax, ay = points[k, 0], points[k, 1]
-        ex, ey = points[k + 1, 0] - ax, points[k + 1, 1] - ay
-        l2 = ex * ex + ey * ey
-        length = math.sqrt(l2)
-        if length <= 1e-12:
-            continue
-        t_lo = max(0.0, (s_from - cumulative[k]) / length)
-        t_hi = min(1.0, (s_to - cumulative[k]) / length)
-        if t_lo > t_hi:
-            continue
-        t = min(t_hi, max(t_lo, ((x - ax) * ex + (y - ay) * ey) / l2))
-        qx, qy = ax + t * ex - x, ay + t * ey - y
-        d = qx * qx + qy * qy
-        if d < best:
-            best = d
-            s_best = cumulative[k] + t * length
-    return s_best
-
-
-class Polyline:
-    """A path parametrised by arc length.
-
-    Args:
-        points: ``(k, 2)`` vertices (m), ``k >= 1``.
-    """
-
-    def __init__(self, points: np.ndarray) -> None:
-        p = np.asarray(points, dtype=np.float64).reshape(-1, 2)
-        if len(p) == 0:
-            raise ValueError("Polyline: needs at least one point")
-        if len(p) == 1:
-            p = np.vstack([p, p])
-        self.points = p
-        seg = np.hypot(*np.diff(p, axis=0).T)
-        self.cumulative = np.concatenate([[0.0], np.cumsum(seg)])
-        self.length = float(self.cumulative[-1])
-        self._cum = self.cumulative.tolist()
-        self._pts = [(float(a), float(b)) for a, b in p]
-
-    def at(self, s: float) -> np.ndarray:
-        """Point at arc length ``s`` (clamped to the ends)."""
-        x, y = self.xy_at(s)
-        return np.array([x, y])
-
-    def xy_at(self, s: float) -> tuple[float, float]:
-        """:meth:`at` as two floats."""
-        c = self._cum
-        s = min(max(s, 0.0), self.length)
-        k = min(max(bisect.bisect_right(c, s) - 1, 0), len(c) - 2)
-        span = c[k + 1] - c[k]
-        t = 0.0 if span <= 0 else (s - c[k]) / span
-        (ax, ay), (bx, by) = self._pts[k], self._pts[k + 1]
-        return ax + t * (bx - ax), ay + t * (by - ay)
-
-    def project(self, xy: np.ndarray, s_from: float, s_to: float) -> float:
-        """Arc length of the point of the path nearest to ``xy``, searched between ``s_from`` and ``s_to``."""
-        c = self._cum
-        k0 = max(0, bisect.bisect_right(c, s_from) - 1)
-        k1 = min(len(c) - 1, bisect.bisect_left(c, s_to) + 1)
-        if k1 <= k0:
-            return min(max(s_from, 0.0), self.length)
-        s = _project(self.points, self.cumulative, float(xy[0]), float(xy[1]), k0, k1, s_from, s_to)
-        return min(max(s, s_from), s_to)
-
-
-@dataclasses.dataclass(frozen=True)
-class GhostParams:
-    """The ghost robot of sec. 4.4.
-
-    Attributes:
-        v_forward: ``v_F``, pseudo speed along the A* path (m/s).
-        v_back: ``v_B``, speed at which the ghost comes back when the leader is stuck (m/s).
-        eta: ``eta``, the ghost waits while the leader is farther than this (m).
-        patience: ``T``, time the leader may stay beyond ``eta`` before the ghost comes back (s).
-        window: How far ahead of its last projection the leader's nearest path point is searched (m).
-    """
-
-    v_forward: float = 0.4
-    v_back: float = 0.2
-    eta: float = 0.8
-    patience: float = 2.0
-    window: float = 1.5
-
-    def __post_init__(self) -> None:
-        for name in ("v_forward", "eta", "window"):
-            if not getattr(self, name) > 0:
-                raise ValueError(f"GhostParams: {name} must be > 0, got {getattr(self, name)}")
-        if self.v_back < 0 or self.patience < 0:
-            raise ValueError("GhostParams: v_back and patience must be >= 0")
-
-
-class GhostRobot:
-    """A point that runs along the A* path ahead of the leader (Alg. 4, part a).
-
-    Args:
-        path: The A* path.
-        params: Speeds and thresholds.
-        dt: Control period (s).
-    """
-
-    def __init__(self, path: Polyline, params: GhostParams, dt: float) -> None:
-        self.path = path
-        self.params = params
-        self.dt = dt
-        self.s = 0.0
-        self.s_leader = 0.0
-        self._waited = 0.0
-
-    def reset(self, leader_xy: np.ndarray) -> None:
-        """Put the ghost on the path point nearest to the leader (``s = argmin d(tau_A(s), q_1)``)."""
-        self.s_leader = self.path.project(np.asarray(leader_xy, dtype=np.float64), 0.0, self.params.window)
-        self.s = self.s_leader
-        self._waited = 0.0
-
-    @property
-    def point(self) -> np.ndarray:
-        """The ghost's position ``g = tau_A(s)``."""
-        return self.path.at(self.s)
-
-    @property
-    def xy(self) -> tuple[float, float]:
-        """:attr:`point` as two floats."""
-        return self.path.xy_at(self.s)
-
-    def update(self, leader_xy: np.ndarray) -> np.ndarray:
-        """Advance (``+v_F``), hold, or come back (``-v_B`` after ``T``), and return the new ``g``."""
-        p = self.params
-        xy = np.asarray(leader_xy, dtype=np.float64)
-        # The leader's own place on the path, searched forward from where it was (delta(s) > 0).
-        self.s_leader = self.path.project(xy, self.s_leader, self.s_leader + p.window)
-        gx, gy = self.path.xy_at(self.s)
-        if math.hypot(gx - xy[0], gy - xy[1]) > p.eta:
-            if self._waited > p.patience:
-                self.s -= p.v_back * self.dt
-            else:
-                self._waited += self.dt
-        else:
-            self.s += p.v_forward * self.dt
-            self._waited = 0.0
-        self.s = min(max(self.s, self.s_leader), self.path.length)
-        return self.path.at(self.s)
-
+from agri_envs.sim2d.polyline import Polyline
 
 # ----------------------------------------------------------------------------------------------------
 # Potential field (eqs. 1-4, Algs. 2-3)

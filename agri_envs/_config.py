@@ -11,10 +11,65 @@ from __future__ import annotations
 import dataclasses
 import difflib
 import math
-from collections.abc import Mapping, Sequence
+import numbers
+from collections.abc import Iterator, Mapping, Sequence
 from typing import Any, TypeVar
 
+import numpy as np
+
 T = TypeVar("T", bound="StrictConfig")
+
+
+def _expected_type(default: Any) -> str | None:
+    """What a field with this default accepts, in words (None: no type check)."""
+    if isinstance(default, bool):
+        return "a bool (True or False)"
+    if isinstance(default, int):
+        return "an integer"
+    if isinstance(default, float):
+        return "a number"
+    if isinstance(default, str):
+        return "a string"
+    if isinstance(default, tuple):
+        return "a tuple (or list) of numbers"
+    return None
+
+
+def _flat(value: tuple[Any, ...]) -> Iterator[Any]:
+    """The leaves of a nested tuple."""
+    for v in value:
+        if isinstance(v, tuple):
+            yield from _flat(v)
+        else:
+            yield v
+
+
+def _is_number(v: Any) -> bool:
+    return isinstance(v, numbers.Real) and not isinstance(v, (bool, np.bool_))
+
+
+def _has_type(value: Any, default: Any) -> bool:
+    """Whether ``value`` has the type of the field whose default is ``default``."""
+    if isinstance(default, bool):
+        return isinstance(value, bool)
+    if isinstance(default, int):
+        return isinstance(value, int) and not isinstance(value, bool)
+    if isinstance(default, float):
+        return _is_number(value)
+    if isinstance(default, str):
+        return isinstance(value, str)
+    if isinstance(default, tuple):
+        return isinstance(value, tuple) and all(_is_number(v) for v in _flat(value))
+    return True
+
+
+def _converted(default: Any, value: Any) -> Any:
+    """A ``gym.make`` value in the field's own type: lists to tuples, numbers to float for float fields."""
+    if isinstance(default, tuple) and isinstance(value, list):
+        return tuple(tuple(v) if isinstance(v, list) else v for v in value)
+    if isinstance(default, float) and _is_number(value) and type(value) is not float:
+        return float(value)
+    return value
 
 
 def param(
@@ -88,11 +143,18 @@ class StrictConfig:
             if value not in choices:
                 raise ValueError(f"{cls.__name__}: {name}={value!r} is invalid; expected {_range_text(meta)}.")
             return
-        values = value if isinstance(value, tuple) else (value,)
+        expected = _expected_type(f.default)
+        if expected is not None and not _has_type(value, f.default):
+            valid = "" if isinstance(f.default, bool) else f" {_range_text(meta)}"
+            got = type(value).__name__
+            if isinstance(value, tuple):
+                got = "a tuple holding " + next(type(v).__name__ for v in _flat(value) if not _is_number(v))
+            raise ValueError(f"{cls.__name__}: {name}={value!r} must be {expected}{valid}, not {got}.")
+        values = _flat(value) if isinstance(value, tuple) else (value,)
         for v in values:
-            if isinstance(v, bool) or v is None or isinstance(v, str):
+            if isinstance(v, (bool, np.bool_)) or v is None or isinstance(v, str):
                 continue
-            if isinstance(v, (int, float)):
+            if isinstance(v, numbers.Real):
                 if not math.isfinite(float(v)):
                     raise ValueError(f"{cls.__name__}: {name}={value!r} must be finite ({_range_text(meta)}).")
                 low, high = meta.get("low"), meta.get("high")
@@ -101,12 +163,6 @@ class StrictConfig:
                     raise ValueError(
                         f"{cls.__name__}: {name}={value!r}{unit} is out of range; expected {_range_text(meta)}."
                     )
-        default = f.default
-        if isinstance(default, bool) and not isinstance(value, bool):
-            raise ValueError(f"{cls.__name__}: {name}={value!r} must be a bool.")
-        if isinstance(default, int) and not isinstance(default, bool):
-            if isinstance(value, bool) or not isinstance(value, int):
-                raise ValueError(f"{cls.__name__}: {name}={value!r} must be an integer ({_range_text(meta)}).")
 
     @classmethod
     def field_names(cls) -> tuple[str, ...]:
@@ -137,17 +193,34 @@ class StrictConfig:
             raise ValueError(
                 f"{cls.__name__}: unknown argument(s) {', '.join(hints)}. Valid arguments: {', '.join(valid)}."
             )
-        converted: dict[str, Any] = {}
-        for f in dataclasses.fields(cls):
-            if f.name not in kwargs:
-                continue
-            value = kwargs[f.name]
-            if isinstance(f.default, tuple) and isinstance(value, list):
-                value = tuple(tuple(v) if isinstance(v, list) else v for v in value)
-            if isinstance(f.default, float) and isinstance(value, int) and not isinstance(value, bool):
-                value = float(value)
-            converted[f.name] = value
-        return cls(**converted)
+        fields = dataclasses.fields(cls)
+        return cls(**{f.name: _converted(f.default, kwargs[f.name]) for f in fields if f.name in kwargs})
+
+    def with_options(self: T, options: Mapping[str, Any] | None, allowed: Sequence[str]) -> T:
+        """This config with the per-episode overrides of ``reset(options=...)`` applied and validated.
+
+        Args:
+            options: The ``reset`` options that override config fields (other options removed first).
+            allowed: Names of the fields that ``reset`` lets an episode override.
+
+        Returns:
+            The config itself when there is nothing to override, else a validated copy.
+
+        Raises:
+            ValueError: For an option not in ``allowed`` (the message lists them), or a value of the wrong
+                type or out of range (the message names the option and what it accepts).
+        """
+        if not options:
+            return self
+        unknown = sorted(k for k in options if k not in allowed)
+        if unknown:
+            raise ValueError(f"reset options {unknown} unknown; allowed: {sorted(allowed)}")
+        fields = {f.name: f for f in dataclasses.fields(self)}
+        changes = {k: _converted(fields[k].default, v) for k, v in options.items()}
+        try:
+            return dataclasses.replace(self, **changes)
+        except ValueError as exc:
+            raise ValueError(f"reset option: {exc}") from None
 
     def describe(self) -> list[tuple[str, Any, str, str, str]]:
         """Rows (name, default, unit, valid range, description) for documentation tables."""

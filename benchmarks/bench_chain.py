@@ -23,8 +23,8 @@ from collections.abc import Callable, Iterator
 import numpy as np
 
 from agri_baselines import astar
-from agri_baselines.grid_astar import path_cost
 from agri_envs.chain import robot_chain_v0
+from agri_envs.sim2d.astar import path_cost
 
 
 def _rate(step: Callable[[int], None], seconds: float, runs: int) -> float:

@@ -24,7 +24,7 @@ from skimage.morphology import skeletonize
 
 import agri_envs  # noqa: F401
 from agri_baselines import coverage_path
-from agri_envs.rover.layout import LayoutParams, generate_layout
+from agri_envs.scenes.greenhouse import LayoutParams, generate_layout
 from agri_envs.sim2d.gridmap import rasterize
 
 

@@ -8,6 +8,8 @@ import pytest
 from agri_baselines import apoorva_chain as ac
 from agri_baselines import make_policy
 from agri_envs.chain import robot_chain_v0
+from agri_envs.chain.task import GhostParams, GhostRobot
+from agri_envs.sim2d.polyline import Polyline
 
 
 def test_attractive_force_eq2_quadratic_then_conic():
@@ -51,8 +53,8 @@ def test_elastic_strip_pulls_middle_robots_onto_the_line():
 
 
 def test_ghost_runs_ahead_waits_and_comes_back():
-    path = ac.Polyline(np.array([[0.0, 0.0], [10.0, 0.0]]))
-    ghost = ac.GhostRobot(path, ac.GhostParams(v_forward=1.0, v_back=0.5, eta=0.8, patience=0.3), dt=0.1)
+    path = Polyline(np.array([[0.0, 0.0], [10.0, 0.0]]))
+    ghost = GhostRobot(path, GhostParams(v_forward=1.0, v_back=0.5, eta=0.8, patience=0.3), dt=0.1)
     ghost.reset(np.array([0.0, 0.2]))
     for _ in range(5):
         ghost.update(np.array([0.0, 0.0]))
@@ -71,7 +73,7 @@ def test_ghost_runs_ahead_waits_and_comes_back():
 
 
 def test_polyline_at_and_project():
-    line = ac.Polyline(np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 2.0]]))
+    line = Polyline(np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 2.0]]))
     assert line.length == pytest.approx(3.0)
     np.testing.assert_allclose(line.at(2.0), [1.0, 1.0])
     assert line.project(np.array([1.5, 1.5]), 0.0, 3.0) == pytest.approx(2.5)

@@ -8,7 +8,7 @@ from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import dijkstra
 
 from agri_baselines import astar
-from agri_baselines.grid_astar import distance_field, path_cost
+from agri_envs.sim2d.astar import distance_field, path_cost
 
 
 def _graph(occ: np.ndarray) -> csr_matrix:

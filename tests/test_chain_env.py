@@ -5,7 +5,7 @@ import pytest
 from pettingzoo.test import api_test, max_cycles_test, parallel_api_test, parallel_seed_test, render_test, seed_test
 
 from agri_envs.chain import robot_chain_v0
-from agri_envs.rover.layout import EXAMPLE_MAP
+from agri_envs.scenes import EXAMPLE_MAP
 
 COMBOS = [
     {"n_robots": 1},
@@ -125,9 +125,46 @@ def test_bad_arguments_and_actions():
     assert set(rewards) == {"robot_0", "robot_1"}
 
 
+def test_wrong_types_are_named_and_leave_the_env_working():
+    """Wrong argument types name the argument and type; a malformed action names the agent and the shape."""
+    for name, bad, expected in (
+        ("n_robots", "3", "an integer"),
+        ("spacing", None, "a number"),
+        ("terminate_on_collision", 1, "a bool"),
+        ("start", ("a", 1.0), "a tuple"),
+        ("scene", None, "one of"),
+    ):
+        with pytest.raises(ValueError, match=rf"{name}=.*{expected}"):
+            robot_chain_v0.parallel_env(**{name: bad})
+    env, fresh = robot_chain_v0.parallel_env(n_robots=3), robot_chain_v0.parallel_env(n_robots=3)
+    env.reset(seed=0)
+    fresh.reset(seed=0)
+    ok = np.zeros(2, np.float32)
+    for bad in ({"v": 0.0}, "ab", [0.0, 0.0, 0.0], np.zeros((2, 1)), None):
+        with pytest.raises(ValueError, match=r"robot_1: action must .*\(2,\)"):
+            env.step({"robot_0": ok, "robot_1": bad, "robot_2": ok})
+    actions = {a: np.array([0.5, 0.1], np.float32) for a in env.agents}
+    for _ in range(3):
+        a, b = env.step(actions), fresh.step(actions)
+        for x, y in zip(a, b, strict=True):
+            assert x.keys() == y.keys()
+            assert all(np.array_equal(x[k], y[k]) if isinstance(x[k], np.ndarray) else x[k] == y[k] for k in x)
+
+
+def test_frames_keep_one_shape_across_episodes():
+    for kwargs in ({"n_robots": 2}, {"n_robots": 2, "scene": "greenhouse"}):
+        env = robot_chain_v0.parallel_env(render_mode="rgb_array", render_width=200, **kwargs)
+        shapes = set()
+        for seed in range(3):
+            env.reset(seed=seed)
+            shapes.add(env.render().shape)
+        env.close()
+        assert len(shapes) == 1, shapes
+
+
 def _to_goal(env):
     """Every robot's free-floor (A*) distance to the goal, leader first."""
-    from agri_baselines.grid_astar import distance_field
+    from agri_envs.sim2d.astar import distance_field
 
     raw = env.unwrapped
     cmap = raw.chain_map

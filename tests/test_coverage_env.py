@@ -10,7 +10,7 @@ from gymnasium.utils.env_checker import check_env
 from rollouts import assert_same, rollout
 
 import agri_envs  # noqa: F401
-from agri_envs.coverage.greenhouse_coverage import GreenhouseCoverageConfig
+from agri_envs.coverage.config import GreenhouseCoverageConfig
 from agri_envs.coverage.task import CoverageTask, CoverageWeights
 
 ENV_ID = "agri_envs/GreenhouseCoverage-v0"

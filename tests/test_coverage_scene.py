@@ -5,7 +5,7 @@ import math
 import numpy as np
 import pytest
 
-from agri_envs.rover.layout import PLANT_RADIUS, LayoutParams, generate_layout, row_shapes, serpentine_waypoints
+from agri_envs.scenes.greenhouse import PLANT_RADIUS, LayoutParams, generate_layout, row_shapes, serpentine_waypoints
 from agri_envs.sim2d.geometry import Kind
 from agri_envs.sim2d.sensors import SonarArray, SonarSpec
 

@@ -4,12 +4,16 @@ The ids come from ``gym.registry`` (every ``agri_envs/`` id), so an env added la
 editing this file; each runs with its defaults and, where listed in ``EXTRA_KWARGS``, with more argument
 sets. Checks: the env checkers of Gymnasium and SB3 with the render check on, the determinism rollout
 (two envs, same seed, same actions), pickling (the copy continues identically), every declared render
-mode, ``render()`` warning under ``render_mode=None``, reset after ``close()``, and a clean interpreter
-exit for a script that never closes its env.
+mode, ``render()`` warning under ``render_mode=None``, reset after ``close()``, a clean interpreter
+exit for a script that never closes its env, Gymnasium's conventions on the made env (``gym.make(spec)``,
+``check_env`` on the wrapped env), frames of one shape across episodes, and bad inputs (wrong types for
+every argument and reset option, malformed actions) refused with errors that name them, leaving the env
+working.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import pickle
 import subprocess
 import sys
@@ -36,6 +40,12 @@ EXTRA_KWARGS: dict[str, list[dict[str, Any]]] = {
     "agri_envs/GreenhouseCoverage-v0": [
         {"row_bend": 0.15, "corridor_width": 1.6, "corridor_width_jitter": 0.1, "vegetation_echo_prob": 0.2}
     ],
+}
+
+#: ``reset(options=...)`` keys that override config fields, per env id (wrong types must be named).
+RESET_OPTIONS: dict[str, tuple[str, ...]] = {
+    "agri_envs/GreenhouseNav-v2": ("growth", "n_trees", "layout_seed", "start_waypoint"),
+    "agri_envs/GreenhouseCoverage-v0": ("growth", "layout_seed"),
 }
 
 #: Known failures that another branch fixes; strict, so the merge that fixes them flips the mark.
@@ -74,6 +84,7 @@ def env_ids(check: str) -> list[Any]:
 def test_every_env_of_the_package_is_covered():
     assert {"agri_envs/GreenhouseNav-v2", "agri_envs/GrapeHarvest-v1"} <= set(ENV_IDS)
     assert set(EXTRA_KWARGS) <= set(ENV_IDS), "EXTRA_KWARGS names an env that is not registered"
+    assert set(RESET_OPTIONS) <= set(ENV_IDS), "RESET_OPTIONS names an env that is not registered"
 
 
 @pytest.mark.parametrize(("env_id", "kwargs"), cases("checkers"))
@@ -210,3 +221,102 @@ def test_script_that_never_closes_its_env_exits_cleanly(env_id):
     # pybullet announces itself on stderr at import; anything else is noise.
     noise = [line for line in out.stderr.splitlines() if line.strip() and not line.startswith("pybullet build time")]
     assert not noise, out.stderr
+
+
+@pytest.mark.parametrize(("env_id", "kwargs"), cases("make_from_spec"))
+def test_make_from_spec(env_id, kwargs):
+    """``gym.make(env.spec)`` rebuilds the same env, wrappers and explicit time limit included."""
+    for extra in ({}, {"max_episode_steps": 7}):
+        env = gym.make(env_id, **kwargs, **extra)
+        again = gym.make(env.spec)
+        assert again.spec == env.spec
+        assert str(again) == str(env)
+        assert data_equivalence(env.reset(seed=SEED), again.reset(seed=SEED), exact=True)
+        action = env.action_space.sample()
+        assert data_equivalence(env.step(action), again.step(action), exact=True)
+        env.close()
+        again.close()
+
+
+@pytest.mark.parametrize(("env_id", "kwargs"), cases("check_made_env"))
+def test_check_env_on_the_made_env(env_id, kwargs):
+    """Gymnasium's checker accepts the env as ``gym.make`` returns it (wrappers and all), not only unwrapped."""
+    env = gym.make(env_id, render_mode="rgb_array", **kwargs)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        check_env(env, skip_render_check=False)
+    # The only expected warning is the checker's advice to pass the unwrapped env.
+    other = [str(w.message) for w in caught if "different from the unwrapped version" not in str(w.message)]
+    assert not other, "Gymnasium's checker warned"
+    env.close()
+
+
+@pytest.mark.parametrize(("env_id", "kwargs"), cases("fixed_frame_size"))
+def test_frames_keep_one_shape_across_episodes(env_id, kwargs):
+    """Every episode's frame has the env's one shape (vector-env tiling and video writers need it)."""
+    env = gym.make(env_id, render_mode="rgb_array", **kwargs)
+    shapes = set()
+    for seed in range(4):
+        env.reset(seed=seed)
+        shapes.add(env.render().shape)
+        env.step(env.action_space.sample())
+        shapes.add(env.render().shape)
+    env.close()
+    assert len(shapes) == 1, f"frame shapes differ between episodes: {sorted(shapes)}"
+
+
+def _numeric_fields(env_id):
+    """``(name, expected type word)`` of every int, float and bool argument of ``env_id``'s config."""
+    config = gym.make(env_id, disable_env_checker=True).unwrapped.config
+    out = []
+    for f in dataclasses.fields(config):
+        if isinstance(f.default, bool):
+            out.append((f.name, "bool"))
+        elif isinstance(f.default, int):
+            out.append((f.name, "integer"))
+        elif isinstance(f.default, float):
+            out.append((f.name, "number"))
+    return out
+
+
+@pytest.mark.parametrize("env_id", env_ids("bad_argument_types"))
+def test_wrong_argument_types_are_named(env_id):
+    """A string or None for any numeric ``gym.make`` argument: a ValueError naming it and the expected type."""
+    fields = _numeric_fields(env_id)
+    assert fields
+    for name, expected in fields:
+        for bad in ("a", None, [1.0]):
+            with pytest.raises(ValueError, match=rf"{name}=.*must be (a|an) {expected}"):
+                gym.make(env_id, disable_env_checker=True, **{name: bad})
+
+
+@pytest.mark.parametrize("env_id", sorted(RESET_OPTIONS))
+def test_wrong_reset_option_types_are_named_and_leave_the_env_working(env_id):
+    env = gym.make(env_id, disable_env_checker=True)
+    fresh = gym.make(env_id, disable_env_checker=True)
+    env.reset(seed=SEED)
+    for name in RESET_OPTIONS[env_id]:
+        for bad in ("a", None, 0.5j):
+            with pytest.raises(ValueError, match=rf"reset option.*{name}=.*must be (a|an) (number|integer)"):
+                env.reset(seed=SEED + 1, options={name: bad})
+    # Nothing was corrupted: the env goes on exactly like a fresh one.
+    assert data_equivalence(env.reset(seed=SEED), fresh.reset(seed=SEED), exact=True)
+    for _ in range(3):
+        action = env.action_space.sample()
+        assert data_equivalence(env.step(action), fresh.step(action), exact=True)
+
+
+@pytest.mark.parametrize("env_id", env_ids("bad_actions"))
+def test_malformed_actions_are_named_and_leave_the_env_working(env_id):
+    """A dict, a string, a wrong shape or NaN as the action: a ValueError saying what was expected."""
+    env = gym.make(env_id, disable_env_checker=True)
+    fresh = gym.make(env_id, disable_env_checker=True)
+    env.reset(seed=SEED)
+    fresh.reset(seed=SEED)
+    size = env.action_space.shape[0]
+    for bad in ({"v": 0.0}, "ab", np.zeros(size + 1), np.zeros((size, 1)), np.full(size, np.nan)):
+        with pytest.raises(ValueError, match=rf"action (must|contains).*(\({size},\)|NaN)"):
+            env.step(bad)
+    for _ in range(3):
+        action = env.action_space.sample()
+        assert data_equivalence(env.step(action), fresh.step(action), exact=True)

@@ -10,7 +10,7 @@ import agri_envs  # noqa: F401
 from agri_baselines import coverage_path, make_policy
 from agri_baselines.gonzalez import PeakFilter, PurePursuit, SensoryMap, peak_filter
 from agri_baselines.gonzalez_planner import CoveragePlannerParams, plan_coverage
-from agri_envs.rover.layout import LayoutParams, generate_layout
+from agri_envs.scenes.greenhouse import LayoutParams, generate_layout
 from agri_envs.sim2d.gridmap import rasterize
 
 RES = 0.05

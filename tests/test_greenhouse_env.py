@@ -12,7 +12,7 @@ from gymnasium.utils.env_checker import check_env
 from rollouts import assert_same, rollout
 
 import agri_envs  # noqa: F401
-from agri_envs.rover.greenhouse_nav import GreenhouseNavConfig
+from agri_envs.rover.config import GreenhouseNavConfig
 
 ENV_ID = "agri_envs/GreenhouseNav-v2"
 SMALL = {"n_rows": 1, "row_length": 3.0}
@@ -205,7 +205,7 @@ def test_reset_options_change_the_scene():
 
 
 def test_map_scene_from_ros_map():
-    from agri_envs.rover.layout import EXAMPLE_MAP
+    from agri_envs.scenes import EXAMPLE_MAP
 
     wps = [[1.0, 0.6], [8.6, 0.6], [8.6, 2.2], [1.0, 2.2]]
     env = gym.make(ENV_ID, scene="map", map_yaml=str(EXAMPLE_MAP), waypoints=wps, n_people=1)

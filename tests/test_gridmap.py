@@ -7,7 +7,8 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from agri_envs.rover.layout import LayoutParams, generate_layout
+from agri_envs.scenes import EXAMPLE_MAP
+from agri_envs.scenes.greenhouse import LayoutParams, generate_layout
 from agri_envs.sim2d.geometry import Geometry, GeometryBuilder, Kind
 from agri_envs.sim2d.gridmap import (
     OccupancyGrid,
@@ -19,8 +20,6 @@ from agri_envs.sim2d.gridmap import (
 )
 from agri_envs.sim2d.raycast import footprint_clearance
 from agri_envs.sim2d.sensors import Lidar, tim561
-
-EXAMPLE_MAP = Path(__file__).resolve().parents[1] / "agri_envs" / "rover" / "maps" / "example_greenhouse.yaml"
 
 
 def greenhouse(growth: float = 0.5) -> Geometry:

@@ -9,16 +9,14 @@ blocked for planning.
 from __future__ import annotations
 
 import dataclasses
-import math
 
 import numpy as np
 from scipy import ndimage
 
-from agri_envs.rover.layout import LayoutParams, generate_layout
-from agri_envs.sim2d.geometry import Geometry, GeometryBuilder, Kind
+from agri_envs.scenes.greenhouse import LayoutParams, generate_layout
+from agri_envs.scenes.office import OfficeFloorParams, generate_office_floor
+from agri_envs.sim2d.geometry import Geometry
 from agri_envs.sim2d.gridmap import OccupancyGrid, grid_to_geometry, load_ros_map, rasterize
-
-WALL = 0.05  # half thickness of office walls (m)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -63,65 +61,14 @@ def make_chain_map(geometry: Geometry, grid: OccupancyGrid, inflation: float) ->
     return ChainMap(geometry=geometry, grid=grid, blocked=distance <= inflation, wall_distance=distance)
 
 
-@dataclasses.dataclass(frozen=True)
-class OfficeParams:
-    """A generated office floor: a central corridor with rooms on both sides, each with one door.
-
-    Attributes:
-        width: Floor length along x (m).
-        height: Floor depth along y (m).
-        rooms_per_side: Rooms along each side of the corridor.
-        corridor_width: Free width of the corridor (m).
-        door_width: Width of each room's door (m).
-        n_furniture: Boxes (desks, cabinets) placed in the rooms.
-    """
-
-    width: float = 14.0
-    height: float = 9.0
-    rooms_per_side: int = 3
-    corridor_width: float = 2.2
-    door_width: float = 1.4
-    n_furniture: int = 4
-
-
-def generate_office(p: OfficeParams, rng: np.random.Generator) -> Geometry:
-    """Outer walls, a corridor along x, rooms above and below it with jittered doors, furniture in the rooms."""
-    b = GeometryBuilder()
-    w, h = p.width, p.height
-    for x0, y0, x1, y1 in ((0, 0, w, 0), (w, 0, w, h), (w, h, 0, h), (0, h, 0, 0)):
-        b.capsule(x0, y0, x1, y1, WALL, Kind.WALL)
-    y_lo = 0.5 * (h - p.corridor_width)
-    y_hi = 0.5 * (h + p.corridor_width)
-    room_w = w / p.rooms_per_side
-    for y_wall, y_far in ((y_lo, 0.0), (y_hi, h)):
-        for k in range(p.rooms_per_side):
-            x0, x1 = k * room_w, (k + 1) * room_w
-            if k > 0:
-                b.capsule(x0, y_wall, x0, y_far, WALL, Kind.WALL)
-            margin = 0.35 + WALL
-            d0 = rng.uniform(x0 + margin, x1 - margin - p.door_width)
-            if d0 > x0:
-                b.capsule(x0, y_wall, d0, y_wall, WALL, Kind.WALL)
-            b.capsule(d0 + p.door_width, y_wall, x1, y_wall, WALL, Kind.WALL)
-            # Furniture against the far wall, clear of the door's line.
-            for _ in range(max(0, p.n_furniture // (2 * p.rooms_per_side) + int(rng.random() < 0.5))):
-                fw, fd = rng.uniform(0.5, 1.0), rng.uniform(0.4, 0.6)
-                fx = rng.uniform(x0 + 0.2, x1 - 0.2 - fw)
-                if y_far == 0.0:
-                    b.box(fx, WALL, fx + fw, WALL + fd, Kind.OBSTACLE)
-                else:
-                    b.box(fx, h - WALL - fd, fx + fw, h - WALL, Kind.OBSTACLE)
-    return b.build((-WALL, -WALL, w + WALL, h + WALL))
-
-
-def office_map(p: OfficeParams, rng: np.random.Generator, inflation: float, resolution: float) -> ChainMap:
+def office_map(p: OfficeFloorParams, rng: np.random.Generator, inflation: float, resolution: float) -> ChainMap:
     """A generated office as a :class:`ChainMap`."""
-    geometry = generate_office(p, rng)
+    geometry = generate_office_floor(p, rng)
     return make_chain_map(geometry, rasterize(geometry, resolution), inflation)
 
 
 def greenhouse_map(p: LayoutParams, rng: np.random.Generator, inflation: float, resolution: float) -> ChainMap:
-    """The rover's generated greenhouse (rows of plants between walls) as a :class:`ChainMap`."""
+    """A generated greenhouse (rows of plants between walls, :mod:`agri_envs.scenes.greenhouse`) as a ChainMap."""
     geometry = generate_layout(p, rng).geometry
     return make_chain_map(geometry, rasterize(geometry, resolution), inflation)
 
@@ -134,16 +81,3 @@ def ros_map(yaml_path: str, inflation: float) -> ChainMap:
     grid = load_ros_map(yaml_path)
     geometry = grid_to_geometry(grid, unknown_occupied=True)
     return make_chain_map(geometry, grid, inflation)
-
-
-def geodesic_distance(blocked: np.ndarray, start: tuple[int, int]) -> np.ndarray:
-    """Shortest 8-connected path length (cells) from ``start`` to every cell (inf where unreachable)."""
-    from agri_baselines.grid_astar import distance_field
-
-    return distance_field(blocked, start)
-
-
-def diagonal(chain_map: ChainMap) -> float:
-    """Diagonal of the scene's bounds (m)."""
-    xmin, ymin, xmax, ymax = chain_map.geometry.bounds
-    return math.hypot(xmax - xmin, ymax - ymin)

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import dataclasses
 import math
 from typing import Any
 
@@ -10,96 +9,22 @@ import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
-from agri_envs._actions import checked_action
-from agri_envs._config import StrictConfig, param
 from agri_envs.coverage import robot as fito
-from agri_envs.coverage.task import CoverageTask, CoverageWeights
-from agri_envs.rover.layout import Layout, LayoutParams, generate_layout
+from agri_envs.coverage.config import GreenhouseCoverageConfig
+from agri_envs.coverage.task import CoverageTask
+from agri_envs.scenes.greenhouse import generate_layout
+from agri_envs.scenes.layout import Layout
 from agri_envs.sim2d.geometry import Kind
+from agri_envs.sim2d.gridmap import rasterize
+from agri_envs.sim2d.odometry import Compass, TrackOdometry
 from agri_envs.sim2d.raycast import footprint_clearance
+from agri_envs.sim2d.render import TopDownRenderer
 from agri_envs.sim2d.sensors import SonarArray, SonarSpec
+from agri_envs.sim2d.view import SceneView
 from agri_envs.sim2d.world import World2D
 
-LOCALIZATION_MODES = ("odometry", "ground_truth")
+__all__ = ["GreenhouseCoverageConfig", "GreenhouseCoverageEnv"]
 _CROP = (int(Kind.PLANT), int(Kind.LEAF), int(Kind.TREE))
-
-
-@dataclasses.dataclass(frozen=True)
-class GreenhouseCoverageConfig(StrictConfig):
-    """Arguments of ``agri_envs/GreenhouseCoverage-v0`` (each one a ``gym.make`` keyword)."""
-
-    # Scene
-    n_rows: int = param(4, "rows of plants (the corridors are the n_rows + 1 spaces beside them)", low=1, high=12)
-    row_length: float = param(10.0, "length of each row", unit="m", low=3.0, high=50.0)
-    corridor_width: float = param(1.4, "mean free width of a corridor", unit="m", low=1.0, high=3.0)
-    corridor_width_jitter: float = param(
-        0.1, "each corridor is corridor_width + U(-jitter, jitter) wide", unit="m", low=0.0, high=0.4
-    )
-    row_incline: float = param(0.01, "each row is tilted by U(-incline, incline)", unit="rad", low=0.0, high=0.05)
-    row_bend: float = param(0.05, "each row bows sideways by U(-bend, bend) at mid-length", unit="m", low=0.0, high=0.3)
-    row_width: float = param(0.6, "width of a row bed", unit="m", low=0.2, high=1.5)
-    headland: float = param(2.6, "free space between row ends and the end walls", unit="m", low=2.2, high=6.0)
-    plant_spacing: float = param(0.4, "distance between plants along a row", unit="m", low=0.15, high=2.0)
-    plant_jitter: float = param(0.03, "uniform jitter of plant positions", unit="m", low=0.0, high=0.1)
-    growth: float = param(0.6, "season: plant size and leaves reaching into corridors", low=0.0, high=1.0)
-    post_spacing: float = param(
-        4.0, "distance between structural posts along rows and walls", unit="m", low=1.0, high=20.0
-    )
-    layout_seed: int = param(-1, "layout seed; -1: a new greenhouse every episode", low=-1, high=2**31 - 1)
-    # Robot (756 kg: low accelerations)
-    max_speed: float = param(0.5, "forward speed limit (reverse: half of it)", unit="m/s", low=0.1, high=1.5)
-    max_turn_rate: float = param(0.6, "angular speed limit", unit="rad/s", low=0.1, high=2.0)
-    max_accel: float = param(0.3, "linear acceleration limit", unit="m/s^2", low=0.05, high=2.0)
-    max_angular_accel: float = param(0.8, "angular acceleration limit", unit="rad/s^2", low=0.05, high=5.0)
-    control_period: float = param(0.1, "time between actions (the paper's 100 ms)", unit="s", low=0.02, high=0.5)
-    # Sensors
-    sonar_noise_std: float = param(0.01, "sonar Gaussian range noise", unit="m", low=0.0, high=0.5)
-    vegetation_echo_prob: float = param(
-        0.15, "chance that an echo off foliage slips through (reads long)", low=0.0, high=1.0
-    )
-    compass_noise_std: float = param(0.01, "compass Gaussian heading noise", unit="rad", low=0.0, high=0.5)
-    compass_bias: float = param(0.03, "constant compass heading bias", unit="rad", low=-0.5, high=0.5)
-    encoder_noise: float = param(0.02, "relative std of each track-speed measurement", low=0.0, high=0.5)
-    encoder_scale_std: float = param(
-        0.01, "per-episode scale error std of each track encoder (drift)", low=0.0, high=0.1
-    )
-    localization: str = param("odometry", "source of the 'pose' observation", choices=LOCALIZATION_MODES)
-    # Task and reward
-    bin_length: float = param(0.25, "length of a coverage bin along a corridor", unit="m", low=0.05, high=2.0)
-    terminate_on_contact: bool = param(True, "end the episode on touching the crop or anything else")
-    time_limit: float = param(0.0, "episode time limit; 0 sizes it to the mission", unit="s", low=0.0, high=36000.0)
-    reward_coverage: float = param(1.0, "reward per corridor covered (paid per bin)", low=0.0, high=100.0)
-    reward_success: float = param(10.0, "bonus when every corridor is covered", low=0.0, high=1000.0)
-    reward_contact: float = param(10.0, "penalty on contact", low=0.0, high=1000.0)
-    reward_cross_track: float = param(0.0, "penalty per step per metre of cross-track error", low=0.0, high=100.0)
-    reward_time: float = param(0.001, "penalty per step", low=0.0, high=10.0)
-    render_width: int = param(800, "width of rendered frames", unit="px", low=100, high=4000)
-
-    def validate(self) -> None:
-        """Check that the narrowest corridor still lets the 0.7 m wide robot pass with 0.2 m to spare."""
-        lp = self.layout_params()
-        free = self.corridor_width - lp.max_narrowing() - 2 * lp.max_intrusion()
-        if free < fito.WIDTH + 0.2:
-            raise ValueError(
-                f"GreenhouseCoverageConfig: the narrowest corridor keeps only {free:.2f} m free (corridor_width "
-                f"minus corridor_width_jitter, row_incline and row_bend narrowing, and leaves at "
-                f"growth={self.growth}); "
-                f"the {fito.WIDTH} m wide Fitorobot needs {fito.WIDTH + 0.2:.2f} m: increase corridor_width or "
-                f"lower the variation."
-            )
-
-    def layout_params(self) -> LayoutParams:
-        """The scene part of the config."""
-        return LayoutParams.from_config(self)
-
-    def mission_time(self) -> float:
-        """The episode time limit (s): ``time_limit``, or three times the serpentine at full speed plus turns."""
-        if self.time_limit > 0:
-            return self.time_limit
-        n = self.n_rows + 1
-        length = n * (self.row_length + self.headland) + self.n_rows * (self.corridor_width + self.row_width)
-        turns = 2 * self.n_rows * (math.pi / 2) / self.max_turn_rate
-        return 3.0 * (length / self.max_speed + turns) + 30.0
 
 
 class GreenhouseCoverageEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
@@ -281,11 +206,11 @@ class GreenhouseCoverageEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
     }
 
     def __init__(self, render_mode: str | None = None, **kwargs: Any) -> None:
-        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
-            raise ValueError(f"render_mode must be one of {self.metadata['render_modes']} or None, got {render_mode!r}")
-        self.config = GreenhouseCoverageConfig.from_kwargs(kwargs)
         self.render_mode = render_mode
-        cfg = self.config
+        self.config = cfg = GreenhouseCoverageConfig.from_kwargs(kwargs)
+        self.view = SceneView(
+            render_mode, cfg.layout_params().max_bounds(), cfg.render_width, self.metadata["render_fps"]
+        )
         self.robot_spec = fito.fitorobot_spec(cfg.max_speed, cfg.max_turn_rate, cfg.max_accel, cfg.max_angular_accel)
         self.sonars = SonarArray(
             SonarSpec(
@@ -297,6 +222,8 @@ class GreenhouseCoverageEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
             ),
             fito.SONAR_MOUNTS,
         )
+        self.compass = Compass(cfg.compass_noise_std, cfg.compass_bias)
+        self.encoders = TrackOdometry(fito.TRACK_GAUGE, cfg.encoder_noise, cfg.encoder_scale_std)
         lp = cfg.layout_params()
         #: Normalisation of the ``pose`` observation (m): the largest greenhouse the arguments allow.
         self.pose_scale = (lp.width, lp.height + (cfg.n_rows + 1) * cfg.corridor_width_jitter)
@@ -315,8 +242,6 @@ class GreenhouseCoverageEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
         self.action_space = spaces.Box(-1.0, 1.0, (2,), np.float32)
         self.layout: Layout | None = None
         self.world: World2D | None = None
-        self._renderer: Any = None
-        self._renderer_layout: Layout | None = None
         self._trail: list[tuple[float, float]] = []
 
     # -- episode set-up --------------------------------------------------------------------------------
@@ -324,14 +249,9 @@ class GreenhouseCoverageEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
         self, *, seed: int | None = None, options: dict[str, Any] | None = None
     ) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
         """Build a new greenhouse and place the robot before the first corridor (see Starting State)."""
+        # Checked before anything of the env changes, so a bad option leaves the env as it was.
+        cfg = self.config.with_options(options, ("growth", "layout_seed"))
         super().reset(seed=seed)
-        cfg = self.config
-        overrides = dict(options or {})
-        allowed = {"growth", "layout_seed"}
-        if set(overrides) - allowed:
-            raise ValueError(f"reset options {sorted(set(overrides) - allowed)} unknown; allowed: {sorted(allowed)}")
-        if overrides:
-            cfg = cfg.replace(**overrides)
         rng = self.np_random
         layout_rng = rng if cfg.layout_seed < 0 else np.random.default_rng(cfg.layout_seed)
         self.layout = generate_layout(cfg.layout_params(), layout_rng)
@@ -344,31 +264,17 @@ class GreenhouseCoverageEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
         first = self.layout.corridors[0]
         start = np.array([first[0, 0] - 1.0, first[0, 1], 0.0]) + rng.uniform([-0.03, -0.03, -0.02], [0.03, 0.03, 0.02])
         self.robot = self.world.add_robot(self.robot_spec, start)
-        self.task = CoverageTask(
-            self.layout.corridors,
-            cfg.bin_length,
-            CoverageWeights(
-                coverage=cfg.reward_coverage,
-                success=cfg.reward_success,
-                contact=cfg.reward_contact,
-                cross_track=cfg.reward_cross_track,
-                time=cfg.reward_time,
-            ),
-        )
-        self._encoder_scale = (
-            1.0 + cfg.encoder_scale_std * rng.standard_normal(2) if cfg.encoder_scale_std else np.ones(2)
-        )
-        self._estimate = start[:2].copy()
+        self.task = CoverageTask(self.layout.corridors, cfg.bin_length, cfg.weights())
+        self.encoders.draw_scale(rng)
+        self.encoders.reset(start)
         self._steps = 0
         self._path_length = 0.0
         self._crop_contacts = 0
         self._other_contacts = 0
         self._cross_sum = 0.0
         self._cross_n = 0
-        self._v_meas = 0.0
-        self._w_meas = 0.0
         self._trail = [(float(start[0]), float(start[1]))]
-        self._compass = self._read_compass()
+        self._compass = self.compass.read(self.robot.pose[2], self.np_random)
         self._min_clearance = math.inf
         outcome = self.task.evaluate(self.robot.pose, False, False)
         self._track(outcome)
@@ -383,10 +289,7 @@ class GreenhouseCoverageEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
         """Apply ``[u, r]`` for one control period and return the Gymnasium 5-tuple."""
         if self.world is None:
             raise RuntimeError("call reset() before step()")
-        u, r = checked_action(action, 2).tolist()
-        spec = self.robot_spec
-        v_cmd = u * (spec.max_speed if u >= 0 else spec.max_reverse_speed)
-        w_cmd = r * spec.max_turn_rate
+        v_cmd, w_cmd = self.robot_spec.command(action)
         dt = self.config.control_period
         robot = self.robot
         before = robot.pose
@@ -399,8 +302,8 @@ class GreenhouseCoverageEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
         self._crop_contacts += int(crop_contact)
         self._other_contacts += int(other_contact)
         self._steps += 1
-        self._compass = self._read_compass()
-        self._update_odometry(dt)
+        self._compass = self.compass.read(self.robot.pose[2], self.np_random)
+        self.encoders.update(robot.v, robot.w, self._compass, dt, self.np_random)
         self._trail.append((float(robot.pose[0]), float(robot.pose[1])))
         outcome = self.task.evaluate(robot.pose, crop_contact, other_contact)
         self._track(outcome)
@@ -425,26 +328,6 @@ class GreenhouseCoverageEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
             self._cross_sum += float(outcome["cross_track"])
             self._cross_n += 1
 
-    def _read_compass(self) -> float:
-        cfg = self.config
-        h = float(self.robot.pose[2]) + cfg.compass_bias
-        if cfg.compass_noise_std > 0:
-            h += cfg.compass_noise_std * float(self.np_random.standard_normal())
-        return math.atan2(math.sin(h), math.cos(h))
-
-    def _update_odometry(self, dt: float) -> None:
-        """Track encoders -> travelled distance, integrated along the compass heading (the paper's sec. 3.3)."""
-        cfg = self.config
-        v, w = self.robot.v, self.robot.w
-        half = 0.5 * fito.TRACK_GAUGE
-        tracks = np.array([v - w * half, v + w * half]) * self._encoder_scale
-        if cfg.encoder_noise > 0:
-            tracks = tracks * (1.0 + cfg.encoder_noise * self.np_random.standard_normal(2))
-        self._v_meas = float(0.5 * (tracks[0] + tracks[1]))
-        self._w_meas = float((tracks[1] - tracks[0]) / fito.TRACK_GAUGE)
-        h = self._compass
-        self._estimate = self._estimate + self._v_meas * dt * np.array([math.cos(h), math.sin(h)])
-
     # -- observation and info ---------------------------------------------------------------------------
     def _observe(self) -> dict[str, np.ndarray]:
         assert self.world is not None
@@ -452,17 +335,18 @@ class GreenhouseCoverageEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
             self.robot.pose, self.world.circles, self.world.capsules, self.np_random, solid=self._solid
         )
         spec = self.robot_spec
+        enc = self.encoders
         h = self._compass
         if self.config.localization == "ground_truth":
             px, py, ph = (float(v) for v in self.robot.pose)
         else:
-            px, py, ph = float(self._estimate[0]), float(self._estimate[1]), h
+            px, py, ph = float(enc.estimate[0]), float(enc.estimate[1]), h
         half = np.float32(0.5)
         return {
             "sonar": (self._last_sonar / self.sonars.spec.max_range).astype(np.float32),
             "compass": np.array([0.5 + 0.5 * math.sin(h), 0.5 + 0.5 * math.cos(h)], np.float32),
             "velocity": np.clip(
-                half + half * np.array([self._v_meas / spec.max_speed, self._w_meas / spec.max_turn_rate], np.float32),
+                half + half * np.array([enc.v / spec.max_speed, enc.w / spec.max_turn_rate], np.float32),
                 0.0,
                 1.0,
             ),
@@ -498,8 +382,8 @@ class GreenhouseCoverageEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
             x=float(pose[0]),
             y=float(pose[1]),
             yaw=float(pose[2]),
-            est_x=float(self._estimate[0]),
-            est_y=float(self._estimate[1]),
+            est_x=float(self.encoders.estimate[0]),
+            est_y=float(self.encoders.estimate[1]),
             compass=self._compass,
             v=float(self.robot.v),
             w=float(self.robot.w),
@@ -524,8 +408,6 @@ class GreenhouseCoverageEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
             ``(occupancy, resolution, origin)``: a boolean grid (True = blocked) whose cell ``[i, j]``
             covers x in ``origin[0] + [j*res, (j+1)*res)`` and y in ``origin[1] + [i*res, (i+1)*res)``.
         """
-        from agri_envs.sim2d.gridmap import rasterize
-
         if self.layout is None:
             raise RuntimeError("call reset() before true_map()")
         grid = rasterize(self.layout.geometry, resolution)
@@ -540,35 +422,17 @@ class GreenhouseCoverageEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
     # -- rendering ---------------------------------------------------------------------------------------
     def render(self) -> np.ndarray | None:
         """Top-down frame with sonar cones, corridor centre lines and the driven path."""
-        if self.render_mode is None:
-            gym.logger.warn("render() called with render_mode=None; pass render_mode='rgb_array' to gym.make")
-            return None
-        if self.world is None or self.layout is None:
-            raise RuntimeError("call reset() before render()")
-        from agri_envs.sim2d.render import TopDownRenderer
+        return self.view.render(None if self.world is None or self.layout is None else self.layout.geometry, self._draw)
 
-        if self._renderer is None or self._renderer_layout is not self.layout:
-            self._renderer = TopDownRenderer(self.layout.geometry.bounds, self.config.render_width)
-            self._renderer.draw_geometry(self.layout.geometry)
-            self._renderer_layout = self.layout
-        rd = self._renderer
-        rd.begin()
+    def _draw(self, rd: TopDownRenderer) -> list[str]:
         rd.path(np.array(self._trail))
         rd.cones(self.sonars.poses_in_world(self.robot.pose), self._last_sonar, self.sonars.spec.aperture)
         rd.robot(self.robot.pose, self.robot_spec.length, self.robot_spec.width)
-        rd.text(
-            [
-                f"t = {self._steps * self.config.control_period:5.1f} s   coverage {self.task.coverage:4.0%}   "
-                f"corridors {sum(bool(c.all()) for c in self.task.covered)}/{self.n_corridors}"
-            ]
-        )
-        return rd.present(self.render_mode, self.metadata["render_fps"])
+        done = sum(bool(c.all()) for c in self.task.covered)
+        t = self._steps * self.config.control_period
+        return [f"t = {t:5.1f} s   coverage {self.task.coverage:4.0%}   corridors {done}/{self.n_corridors}"]
 
     def close(self) -> None:
         """Release the renderer and the pymunk world (idempotent; ``reset()`` builds a new world)."""
-        if self._renderer is not None:
-            self._renderer.close()
-            self._renderer = None
-        if self.world is not None:
-            self.world.close()
-            self.world = None
+        self.view.close(self.world)
+        self.world = None

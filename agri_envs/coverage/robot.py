@@ -38,12 +38,4 @@ SONAR_APERTURE = math.radians(20.0)
 
 def fitorobot_spec(max_speed: float, max_turn_rate: float, max_accel: float, max_angular_accel: float) -> DiffDriveSpec:
     """The Fitorobot's footprint with the given limits (it reverses at half its forward speed)."""
-    return DiffDriveSpec(
-        length=LENGTH,
-        width=WIDTH,
-        max_speed=max_speed,
-        max_reverse_speed=0.5 * max_speed,
-        max_turn_rate=max_turn_rate,
-        max_accel=max_accel,
-        max_angular_accel=max_angular_accel,
-    )
+    return DiffDriveSpec.with_limits(LENGTH, WIDTH, max_speed, max_turn_rate, max_accel, max_angular_accel, 0.5)

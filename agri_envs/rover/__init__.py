@@ -1,1 +1,4 @@
-"""Greenhouse row navigation (Harik 2018): layout generator, rover, waypoint task and the env."""
+"""Greenhouse row navigation (Harik 2018): ``config``, ``robot``, ``task`` (waypoints), ``greenhouse_nav`` (the env).
+
+Its scenes come from :mod:`agri_envs.scenes`.
+"""

@@ -2,165 +2,30 @@
 
 from __future__ import annotations
 
-import dataclasses
 import math
-from pathlib import Path
 from typing import Any
 
 import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
-from agri_envs._actions import checked_action
-from agri_envs._config import StrictConfig, param
 from agri_envs.rover import robot as rover
-from agri_envs.rover.layout import (
-    Layout,
-    LayoutParams,
-    OfficeParams,
-    generate_layout,
-    generate_office_corridor,
-    layout_from_map,
-)
-from agri_envs.rover.task import RewardWeights, WaypointTask, mission_time_limit
+from agri_envs.rover.config import GreenhouseNavConfig
+from agri_envs.rover.task import WaypointTask, mission_time_limit
+from agri_envs.scenes.greenhouse import generate_layout
+from agri_envs.scenes.layout import Layout
+from agri_envs.scenes.office import generate_office_corridor
+from agri_envs.scenes.rosmap import layout_from_map, map_geometry
 from agri_envs.sim2d.crowd import Crowd, CrowdSpec
 from agri_envs.sim2d.geometry import Kind
+from agri_envs.sim2d.gridmap import rasterize
+from agri_envs.sim2d.odometry import WheelOdometry
+from agri_envs.sim2d.render import TopDownRenderer
 from agri_envs.sim2d.sensors import Lidar, SonarArray, hc_sr04, tim561
+from agri_envs.sim2d.view import SceneView
 from agri_envs.sim2d.world import World2D
 
-LOCALIZATION_MODES = ("ground_truth", "odometry", "none")
-
-
-@dataclasses.dataclass(frozen=True)
-class GreenhouseNavConfig(StrictConfig):
-    """Arguments of ``agri_envs/GreenhouseNav-v2`` (each one a ``gym.make`` keyword)."""
-
-    # Scene
-    scene: str = param(
-        "greenhouse",
-        "kind of scene",
-        choices=("greenhouse", "corridor", "map"),
-    )
-    map_yaml: str = param("", "ROS map_server map to load (scene='map')", valid="YAML path, e.g. EXAMPLE_MAP")
-    waypoints: tuple = param((), "loop of waypoints in the map frame (scene='map')", unit="m", valid=">= 2 (x, y)")
-    n_rows: int = param(3, "rows of plants", low=1, high=12)
-    row_length: float = param(6.0, "length of each row", unit="m", low=2.0, high=40.0)
-    corridor_width: float = param(
-        1.2, "free width between rows (and between outer rows and walls)", unit="m", low=0.8, high=3.0
-    )
-    row_width: float = param(0.4, "width of a row bed", unit="m", low=0.2, high=1.5)
-    headland: float = param(1.8, "free space between row ends and the end walls", unit="m", low=1.2, high=5.0)
-    plant_spacing: float = param(0.4, "distance between plants along a row", unit="m", low=0.15, high=2.0)
-    plant_jitter: float = param(0.03, "uniform jitter of plant positions", unit="m", low=0.0, high=0.1)
-    growth: float = param(0.0, "season: plant size and leaves reaching into corridors", low=0.0, high=1.0)
-    post_spacing: float = param(
-        3.0, "distance between structural posts along rows and walls", unit="m", low=1.0, high=20.0
-    )
-    n_trees: int = param(0, "trees placed at random plant positions (Harik Fig. 10)", low=0, high=50)
-    layout_seed: int = param(
-        -1, "seed of the scene layout; -1 draws a new layout every episode", low=-1, high=2**31 - 1
-    )
-    office_length: float = param(14.0, "corridor length (scene='corridor')", unit="m", low=6.0, high=60.0)
-    office_width: float = param(1.6, "corridor width (scene='corridor')", unit="m", low=1.0, high=4.0)
-    office_route: str = param(
-        "experiment",
-        "corridor mission: Harik 3.4 or 3.5",
-        choices=("experiment", "repeatability"),
-    )
-    n_people: int = param(2, "people walking the corridors and headlands", low=0, high=20)
-    people_tease_prob: float = param(
-        0.3, "chance that a person stands in the robot's way for a while", low=0.0, high=1.0
-    )
-    # Robot
-    max_speed: float = param(0.6, "forward speed limit (reverse: half of it)", unit="m/s", low=0.1, high=2.0)
-    max_turn_rate: float = param(1.2, "angular speed limit", unit="rad/s", low=0.2, high=4.0)
-    max_accel: float = param(1.0, "linear acceleration limit", unit="m/s^2", low=0.1, high=10.0)
-    max_angular_accel: float = param(3.0, "angular acceleration limit", unit="rad/s^2", low=0.1, high=20.0)
-    control_period: float = param(1 / 15, "time between actions (the LIDAR's 15 Hz)", unit="s", low=0.01, high=0.5)
-    frame_skip: int = param(1, "control periods per step (action held, observed once at the end)", low=1, high=16)
-    # Sensors
-    lidar_beams: int = param(90, "LIDAR beams in the observation (min-pooled from the full scan)", low=1, high=811)
-    full_scan: bool = param(False, "add the full-resolution 811-beam scan as observation key 'scan'")
-    lidar_noise_std: float = param(
-        0.02, "LIDAR Gaussian range noise (TiM561 statistical error)", unit="m", low=0.0, high=0.5
-    )
-    lidar_dropout: float = param(0.01, "probability that a LIDAR beam returns no echo (max range)", low=0.0, high=0.5)
-    sonar_noise_std: float = param(0.01, "sonar Gaussian range noise", unit="m", low=0.0, high=0.5)
-    # Localization
-    localization: str = param("ground_truth", "pose source", choices=LOCALIZATION_MODES)
-    odometry_noise: float = param(0.05, "relative std of wheel-odometry speed errors", low=0.0, high=0.5)
-    odometry_gyro_bias: float = param(
-        0.01, "std of the per-episode turn-rate bias of odometry", unit="rad/s", low=0.0, high=0.2
-    )
-    # Task and reward
-    waypoint_radius: float = param(
-        0.3, "d_min: a waypoint is reached within this distance", unit="m", low=0.05, high=2.0
-    )
-    mission_cycles: int = param(1, "times the mission is driven in one episode (Harik sec. 3.5: 10)", low=1, high=100)
-    terminate_on_collision: bool = param(True, "end the episode when the robot touches anything")
-    safety_margin: float = param(
-        0.25, "clearance below which the clearance penalty applies", unit="m", low=0.0, high=1.0
-    )
-    reward_progress: float = param(3.0, "weight of progress toward the waypoint (per metre)", low=0.0, high=100.0)
-    reward_waypoint: float = param(1.0, "bonus per waypoint reached", low=0.0, high=100.0)
-    reward_success: float = param(10.0, "bonus when the mission is complete", low=0.0, high=1000.0)
-    reward_collision: float = param(20.0, "fixed part of the crash penalty (see Rewards)", low=0.0, high=1000.0)
-    reward_clearance: float = param(
-        6.0, "penalty per metre driven at zero clearance (linear in shortfall)", low=0.0, high=100.0
-    )
-    reward_time: float = param(0.01, "penalty per step", low=0.0, high=10.0)
-    time_limit_speed_fraction: float = param(
-        0.5, "time limit: mission at this fraction of speed limits", low=0.05, high=1.0
-    )
-    time_limit_wait: float = param(
-        6.0, "default time limit: extra time per person per mission cycle", unit="s", low=0.0, high=120.0
-    )
-    render_width: int = param(800, "width of rendered frames", unit="px", low=100, high=4000)
-
-    def validate(self) -> None:
-        """Check the scene arguments fit together and corridors stay passable at this growth."""
-        if self.scene == "map":
-            if not self.map_yaml or not Path(self.map_yaml).is_file():
-                raise ValueError(
-                    f"GreenhouseNavConfig: scene='map' needs map_yaml, an existing ROS map YAML file "
-                    f"(got {self.map_yaml!r}); e.g. map_yaml=str(agri_envs.rover.layout.EXAMPLE_MAP)."
-                )
-            pts = np.asarray(self.waypoints, dtype=np.float64)
-            if pts.ndim != 2 or pts.shape[1] != 2 or len(pts) < 2 or not np.all(np.isfinite(pts)):
-                raise ValueError(
-                    f"GreenhouseNavConfig: scene='map' needs waypoints as >= 2 (x, y) pairs, got {self.waypoints!r}."
-                )
-            return
-        if self.map_yaml or self.waypoints:
-            raise ValueError("GreenhouseNavConfig: map_yaml and waypoints apply only to scene='map'.")
-        if self.scene != "greenhouse":
-            return
-        free = self.corridor_width - 2 * self.layout_params().max_intrusion()
-        if free < rover.WIDTH + 0.2:
-            raise ValueError(
-                f"GreenhouseNavConfig: at growth={self.growth} the corridors keep only {free:.2f} m free; "
-                f"the {rover.WIDTH} m wide robot needs {rover.WIDTH + 0.2:.2f} m: increase corridor_width "
-                f"or row_width, or lower growth."
-            )
-
-    def layout_params(self) -> LayoutParams:
-        """The scene part of the config."""
-        return LayoutParams.from_config(self)
-
-    def office_params(self) -> OfficeParams:
-        """The office-corridor scene part of the config."""
-        return OfficeParams(length=self.office_length, width=self.office_width, route=self.office_route)
-
-    def reward_weights(self) -> RewardWeights:
-        """The reward part of the config."""
-        return RewardWeights(
-            progress=self.reward_progress,
-            waypoint=self.reward_waypoint,
-            success=self.reward_success,
-            collision=self.reward_collision,
-            clearance=self.reward_clearance,
-            time=self.reward_time,
-        )
+__all__ = ["GreenhouseNavConfig", "GreenhouseNavEnv", "SyncTimeLimit"]
 
 
 class GreenhouseNavEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
@@ -397,27 +262,28 @@ class GreenhouseNavEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
     }
 
     def __init__(self, render_mode: str | None = None, **kwargs: Any) -> None:
-        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
-            raise ValueError(f"render_mode must be one of {self.metadata['render_modes']} or None, got {render_mode!r}")
         self.config = GreenhouseNavConfig.from_kwargs(kwargs)
-        self.render_mode = render_mode
         cfg = self.config
         self.robot_spec = rover.rover_spec(cfg.max_speed, cfg.max_turn_rate, cfg.max_accel, cfg.max_angular_accel)
         self.lidar = Lidar(
             tim561(noise_std=cfg.lidar_noise_std, dropout_prob=cfg.lidar_dropout, mount=rover.LIDAR_MOUNT)
         )
         self.sonars = SonarArray(hc_sr04(noise_std=cfg.sonar_noise_std), rover.SONAR_MOUNTS)
+        self.odometry = WheelOdometry(cfg.odometry_noise, cfg.odometry_gyro_bias)
         if cfg.scene == "greenhouse":
             lp = cfg.layout_params()
             self.diagonal = math.hypot(lp.width, lp.height)
+            canvas = lp.max_bounds()
         elif cfg.scene == "corridor":
             self.diagonal = math.hypot(cfg.office_length, cfg.office_width)
+            canvas = cfg.office_params().bounds()
         else:
-            from agri_envs.sim2d.gridmap import grid_to_geometry, load_ros_map
-
-            self._map_geometry = grid_to_geometry(load_ros_map(cfg.map_yaml))
+            self._map_geometry = map_geometry(cfg.map_yaml)
             xmin, ymin, xmax, ymax = self._map_geometry.bounds
             self.diagonal = math.hypot(xmax - xmin, ymax - ymin)
+            canvas = self._map_geometry.bounds
+        self.view = SceneView(render_mode, canvas, cfg.render_width, self.metadata["render_fps"])
+        self.render_mode = render_mode
         n = self.lidar.spec.n_beams
         # Equal sectors of the full scan for min-pooling to `lidar_beams` values.
         self._pool_edges = np.linspace(0, n, cfg.lidar_beams + 1).round().astype(np.int64)[:-1]
@@ -442,8 +308,6 @@ class GreenhouseNavEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
         self.explicit_max_episode_steps: int | None = None
         self.max_episode_steps = 0
         self.time_limit_source = ""
-        self._renderer: Any = None
-        self._renderer_layout: Layout | None = None
         self._trail: list[tuple[float, float]] = []
 
     # -- episode set-up --------------------------------------------------------------------------------
@@ -451,17 +315,15 @@ class GreenhouseNavEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
         self, *, seed: int | None = None, options: dict[str, Any] | None = None
     ) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
         """Build a new scene and mission, place robot and people (see Starting State)."""
-        super().reset(seed=seed)
-        cfg = self.config
         overrides = dict(options or {})
         start_waypoint = overrides.pop("start_waypoint", 0)
         if isinstance(start_waypoint, bool) or not isinstance(start_waypoint, (int, np.integer)):
-            raise ValueError(f"reset option start_waypoint must be an int, got {start_waypoint!r}")
-        allowed = {"growth", "n_trees", "layout_seed", "start_waypoint"}
-        if set(overrides) - allowed:
-            raise ValueError(f"reset options {sorted(set(overrides) - allowed)} unknown; allowed: {sorted(allowed)}")
-        if overrides:
-            cfg = cfg.replace(**overrides)
+            raise ValueError(
+                f"reset option start_waypoint={start_waypoint!r} ({type(start_waypoint).__name__}) must be an integer"
+            )
+        # Checked before anything of the env changes, so a bad option leaves the env as it was.
+        cfg = self.config.with_options(overrides, ("growth", "n_trees", "layout_seed", "start_waypoint"))
+        super().reset(seed=seed)
         layout_rng = self.np_random if cfg.layout_seed < 0 else np.random.default_rng(cfg.layout_seed)
         if cfg.scene == "greenhouse":
             layout = generate_layout(cfg.layout_params(), layout_rng)
@@ -491,7 +353,7 @@ class GreenhouseNavEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
         self.task.reset(start, index=int(start_waypoint))
         self._start_pose = start.copy()
         self._estimate = start.copy()
-        self._gyro_bias = float(self.np_random.normal(0.0, cfg.odometry_gyro_bias)) if cfg.odometry_gyro_bias else 0.0
+        self.odometry.draw_bias(self.np_random)
         self._steps = 0
         self._path_length = 0.0
         clearance = self.world.clearance(self.robot)
@@ -504,15 +366,17 @@ class GreenhouseNavEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
             self.render()
         return obs, info
 
+    def close(self) -> None:
+        """Release the renderer and the pymunk world (idempotent; ``reset()`` builds a new world)."""
+        self.view.close(self.world)
+        self.world = None
+
     # -- stepping --------------------------------------------------------------------------------------
     def step(self, action: np.ndarray) -> tuple[dict[str, np.ndarray], float, bool, bool, dict[str, Any]]:
         """Apply ``[u, r]`` for ``frame_skip`` control periods and return the Gymnasium 5-tuple."""
         if self.world is None:
             raise RuntimeError("call reset() before step()")
-        u, r = checked_action(action, 2).tolist()
-        spec = self.robot_spec
-        v_cmd = u * (spec.max_speed if u >= 0 else spec.max_reverse_speed)
-        w_cmd = r * spec.max_turn_rate
+        v_cmd, w_cmd = self.robot_spec.command(action)
         terms: dict[str, float] = {}
         reached = False
         for _ in range(self.config.frame_skip):
@@ -589,22 +453,10 @@ class GreenhouseNavEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
         return steps, f"mission at {cfg.time_limit_speed_fraction:g} of the speed limits"
 
     def _update_estimate(self, dt: float) -> None:
-        cfg = self.config
-        if cfg.localization == "ground_truth":
+        if self.config.localization == "ground_truth":
             self._estimate = self.robot.pose.copy()
-        elif cfg.localization == "odometry":
-            rng = self.np_random
-            v = self.robot.v * (1.0 + cfg.odometry_noise * rng.standard_normal())
-            w = self.robot.w * (1.0 + cfg.odometry_noise * rng.standard_normal()) + self._gyro_bias
-            x, y, th = self._estimate
-            th_mid = th + 0.5 * w * dt
-            self._estimate = np.array(
-                [
-                    x + v * dt * math.cos(th_mid),
-                    y + v * dt * math.sin(th_mid),
-                    math.atan2(math.sin(th + w * dt), math.cos(th + w * dt)),
-                ]
-            )
+        elif self.config.localization == "odometry":
+            self._estimate = self.odometry.integrate(self._estimate, self.robot.v, self.robot.w, dt, self.np_random)
 
     # -- observation and info ---------------------------------------------------------------------------
     def _observe(self) -> dict[str, np.ndarray]:
@@ -679,27 +531,16 @@ class GreenhouseNavEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
 
     def occupancy_grid(self, resolution: float = 0.05) -> Any:
         """Occupancy grid of the current static scene (see :mod:`agri_envs.sim2d.gridmap`)."""
-        from agri_envs.sim2d.gridmap import rasterize
-
         assert self.layout is not None
         return rasterize(self.layout.geometry, resolution)
 
     # -- rendering ---------------------------------------------------------------------------------------
     def render(self) -> np.ndarray | None:
         """Top-down frame with rays, sonar cones, waypoints and the path (``rgb_array``) or a window (``human``)."""
-        if self.render_mode is None:
-            gym.logger.warn("render() called with render_mode=None; pass render_mode='rgb_array' to gym.make")
-            return None
-        if self.world is None or self.layout is None:
-            raise RuntimeError("call reset() before render()")
-        from agri_envs.sim2d.render import TopDownRenderer
+        return self.view.render(None if self.world is None or self.layout is None else self.layout.geometry, self._draw)
 
-        if self._renderer is None or self._renderer_layout is not self.layout:
-            self._renderer = TopDownRenderer(self.layout.geometry.bounds, self.config.render_width)
-            self._renderer.draw_geometry(self.layout.geometry)
-            self._renderer_layout = self.layout
-        rd = self._renderer
-        rd.begin()
+    def _draw(self, rd: TopDownRenderer) -> list[str]:
+        assert self.world is not None and self.layout is not None
         rd.path(np.array(self._trail))
         mission = self.layout.mission
         rd.waypoints(self.layout.waypoints, -1 if self.task.done else int(mission[self.task.index % len(mission)]))
@@ -712,25 +553,14 @@ class GreenhouseNavEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
         rd.cones(self.sonars.poses_in_world(self.robot.pose), self._last_sonar, self.sonars.spec.aperture)
         rd.circles(self.world.mover_circles[: self.crowd.n], Kind.PERSON)
         rd.robot(self.robot.pose, self.robot_spec.length, self.robot_spec.width)
-        rd.text(
-            [
-                f"t = {self._steps * self.config.control_period:5.1f} s   waypoint {self.task.index}/"
-                f"{len(self.task.targets)}   clearance {self.world.clearance(self.robot):.2f} m"
-            ]
-        )
-        return rd.present(self.render_mode, self.metadata["render_fps"])
-
-    def close(self) -> None:
-        """Release the renderer and the pymunk world (idempotent; ``reset()`` builds a new world)."""
-        if self._renderer is not None:
-            self._renderer.close()
-            self._renderer = None
-        if self.world is not None:
-            self.world.close()
-            self.world = None
+        t = self._steps * self.config.control_period
+        clearance = self.world.clearance(self.robot)
+        return [f"t = {t:5.1f} s   waypoint {self.task.index}/{len(self.task.targets)}   clearance {clearance:.2f} m"]
 
 
-class SyncTimeLimit(gym.Wrapper[dict[str, np.ndarray], np.ndarray, dict[str, np.ndarray], np.ndarray]):
+class SyncTimeLimit(
+    gym.Wrapper[dict[str, np.ndarray], np.ndarray, dict[str, np.ndarray], np.ndarray], gym.utils.RecordConstructorArgs
+):
     """Tell the env about an explicit ``gym.make(..., max_episode_steps=N)``, so that N wins over its own limit.
 
     ``gym.make`` applies this wrapper (the registration's ``additional_wrappers``) outside the ``TimeLimit``
@@ -740,7 +570,9 @@ class SyncTimeLimit(gym.Wrapper[dict[str, np.ndarray], np.ndarray, dict[str, np.
     """
 
     def __init__(self, env: gym.Env[dict[str, np.ndarray], np.ndarray]) -> None:
-        super().__init__(env)
+        # Recording the (no) arguments lets gym.make(env.spec) and check_env re-create the wrapper stack.
+        gym.utils.RecordConstructorArgs.__init__(self)
+        gym.Wrapper.__init__(self, env)
         limit: int | None = None
         inner: gym.Env[Any, Any] = env
         while isinstance(inner, gym.Wrapper):

@@ -29,12 +29,4 @@ SONAR_NAMES = ("front", "left_front", "left_rear", "back", "right_rear", "right_
 
 def rover_spec(max_speed: float, max_turn_rate: float, max_accel: float, max_angular_accel: float) -> DiffDriveSpec:
     """The rover's footprint with the given limits (reverse speed is half the forward speed)."""
-    return DiffDriveSpec(
-        length=LENGTH,
-        width=WIDTH,
-        max_speed=max_speed,
-        max_reverse_speed=0.5 * max_speed,
-        max_turn_rate=max_turn_rate,
-        max_accel=max_accel,
-        max_angular_accel=max_angular_accel,
-    )
+    return DiffDriveSpec.with_limits(LENGTH, WIDTH, max_speed, max_turn_rate, max_accel, max_angular_accel, 0.5)

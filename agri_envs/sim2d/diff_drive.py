@@ -9,8 +9,11 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from typing import Any
 
 import numpy as np
+
+from agri_envs._actions import checked_action
 
 
 @dataclasses.dataclass(frozen=True)
@@ -34,6 +37,39 @@ class DiffDriveSpec:
     max_turn_rate: float = 1.2
     max_accel: float = 1.0
     max_angular_accel: float = 3.0
+
+    @classmethod
+    def with_limits(
+        cls,
+        length: float,
+        width: float,
+        max_speed: float,
+        max_turn_rate: float,
+        max_accel: float,
+        max_angular_accel: float,
+        reverse_fraction: float,
+    ) -> DiffDriveSpec:
+        """A body of this footprint whose reverse speed limit is ``reverse_fraction`` of the forward one."""
+        return cls(
+            length=length,
+            width=width,
+            max_speed=max_speed,
+            max_reverse_speed=reverse_fraction * max_speed,
+            max_turn_rate=max_turn_rate,
+            max_accel=max_accel,
+            max_angular_accel=max_angular_accel,
+        )
+
+    def command(self, action: Any) -> tuple[float, float]:
+        """The velocities ``(v, w)`` (m/s, rad/s) commanded by an action ``[u, r]`` in [-1, 1]^2 (checked, clipped).
+
+        ``u >= 0`` scales the forward limit, ``u < 0`` the reverse one; ``r`` scales the turn-rate limit.
+
+        Raises:
+            ValueError: For an action that is not two finite numbers (see :func:`agri_envs._actions.checked_action`).
+        """
+        u, r = checked_action(action, 2).tolist()
+        return u * (self.max_speed if u >= 0 else self.max_reverse_speed), r * self.max_turn_rate
 
     def __post_init__(self) -> None:
         for name in ("length", "width", "max_speed", "max_turn_rate", "max_accel", "max_angular_accel"):

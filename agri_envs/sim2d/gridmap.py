@@ -13,11 +13,11 @@ Conventions (those of ROS ``map_server`` / ``nav_msgs/OccupancyGrid``):
   ``H - 1``: :func:`save_ros_map` and :func:`load_ros_map` flip the rows, exactly as ``map_saver`` and
   ``map_server`` do.
 
-The sample map ``agri_envs/rover/maps/example_greenhouse.yaml`` was made from the default greenhouse::
+The sample map ``agri_envs/scenes/maps/example_greenhouse.yaml`` was made from the default greenhouse::
 
-    from agri_envs.rover.layout import LayoutParams, generate_layout
+    from agri_envs.scenes.greenhouse import LayoutParams, generate_layout
     layout = generate_layout(LayoutParams(), np.random.default_rng(0))
-    save_ros_map(rasterize(layout.geometry, 0.05), "agri_envs/rover/maps/example_greenhouse.yaml")
+    save_ros_map(rasterize(layout.geometry, 0.05), "agri_envs/scenes/maps/example_greenhouse.yaml")
 """
 
 from __future__ import annotations

@@ -39,7 +39,8 @@ class TopDownRenderer:
     """Draws a 2D world seen from above.
 
     Args:
-        bounds: ``(xmin, ymin, xmax, ymax)`` of the area to draw (m).
+        bounds: ``(xmin, ymin, xmax, ymax)`` of the area to draw (m); with the margin it sets the canvas's
+            aspect ratio, fixed for the renderer's life (see :meth:`fit` for other areas).
         width_px: Image width; the height follows the aspect ratio.
         margin: Extra border around ``bounds`` (m).
     """
@@ -51,15 +52,28 @@ class TopDownRenderer:
         if not pygame.font.get_init():
             pygame.font.init()
         xmin, ymin, xmax, ymax = (float(b) for b in bounds)
-        self.xmin, self.ymin = xmin - margin, ymin - margin
+        self.margin = margin
         span_x, span_y = xmax - xmin + 2 * margin, ymax - ymin + 2 * margin
-        self.scale = width_px / span_x
-        self.size = (int(width_px), int(math.ceil(span_y * self.scale)))
+        self.size = (int(width_px), int(math.ceil(span_y * width_px / span_x)))
+        self.fit(bounds)
         self.surface = pygame.Surface(self.size)
         self._overlay = pygame.Surface(self.size, pygame.SRCALPHA)
         self._font = pygame.font.Font(None, max(14, int(0.035 * self.size[1])))
         self._static: Any = None
         self._window: Any = None
+
+    def fit(self, bounds: Sequence[float]) -> None:
+        """Show the area ``bounds`` (m, plus the margin) as large as the fixed canvas allows, centred in it.
+
+        Later drawing calls use this mapping; the canvas keeps its size, so frames of areas of other shapes
+        (another episode's scene) have the same shape, letterboxed.
+        """
+        xmin, ymin, xmax, ymax = (float(b) for b in bounds)
+        m = self.margin
+        span_x, span_y = xmax - xmin + 2 * m, ymax - ymin + 2 * m
+        self.scale = min(self.size[0] / span_x, self.size[1] / span_y)
+        self.xmin = xmin - m - 0.5 * (self.size[0] / self.scale - span_x)
+        self.ymin = ymin - m - 0.5 * (self.size[1] / self.scale - span_y)
 
     def to_px(self, x: float, y: float) -> tuple[int, int]:
         """World point (m) to pixel (y up in the world, down in the image)."""

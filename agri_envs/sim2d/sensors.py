@@ -13,7 +13,7 @@ from typing import Any
 
 import numpy as np
 
-from agri_envs.sim2d.raycast import cast_scan, sonar_ranges
+from agri_envs.sim2d.raycast import cast_scan, sonar_ranges, sonar_ranges_many
 
 
 @dataclasses.dataclass(frozen=True)
@@ -238,4 +238,36 @@ class SonarArray:
         if self.spec.noise_std > 0:
             out += self.spec.noise_std * rng.standard_normal(len(out))
             np.clip(out, self.spec.min_range, self.spec.max_range, out=out)
+        return out
+
+    def ranges_many(
+        self,
+        poses: np.ndarray,
+        circles: np.ndarray,
+        capsules: np.ndarray,
+        skip: np.ndarray,
+        rng: np.random.Generator,
+        out: np.ndarray,
+    ) -> np.ndarray:
+        """Distances (m) of the sonars of many bodies that carry this same array (a robot team), in one call.
+
+        Args:
+            poses: ``(n, 3)`` body poses.
+            circles: Every circle the sonars see (the bodies themselves among them).
+            capsules: Every capsule the sonars see.
+            skip: ``(n,)`` row of ``circles`` that is body ``b`` itself (its own sonars never see it), -1: none.
+            rng: Source of the Gaussian noise (one ``(n, k)`` draw).
+            out: ``(n, k)`` buffer for the noise-free ranges.
+
+        Returns:
+            ``(n, k)`` ranges clipped to ``[min_range, max_range]``: ``out`` itself without noise, else a
+            fresh array.
+        """
+        spec = self.spec
+        sonar_ranges_many(poses, self.mounts, 0.5 * spec.aperture, spec.max_range, circles, capsules, skip, out)
+        if spec.noise_std > 0:
+            ranges = out + spec.noise_std * rng.standard_normal(out.shape)
+            np.clip(ranges, spec.min_range, spec.max_range, out=ranges)
+            return ranges
+        np.maximum(out, spec.min_range, out=out)
         return out

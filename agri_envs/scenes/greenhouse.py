@@ -15,16 +15,13 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from pathlib import Path
 
 import numpy as np
 
+from agri_envs.scenes.layout import WALL_THICKNESS, Layout, start_facing
 from agri_envs.sim2d.crowd import RouteGraph
-from agri_envs.sim2d.geometry import Geometry, GeometryBuilder, Kind
+from agri_envs.sim2d.geometry import GeometryBuilder, Kind
 
-#: A ROS map_server map of the default greenhouse, shipped as an example for ``scene="map"``.
-EXAMPLE_MAP = Path(__file__).parent / "maps" / "example_greenhouse.yaml"
-WALL_THICKNESS = 0.1
 # Plant and leaf sizes across the season (growth 0 -> 1), metres.
 PLANT_RADIUS = (0.06, 0.14)
 LEAF_REACH = 0.18
@@ -77,6 +74,11 @@ class LayoutParams:
         """Inner width of the greenhouse across the rows (m)."""
         return (self.n_rows + 1) * self.corridor_width + self.n_rows * self.row_width
 
+    def max_bounds(self) -> tuple[float, float, float, float]:
+        """``(xmin, ymin, xmax, ymax)`` (m) of the largest greenhouse these parameters generate (walls included)."""
+        height = self.height + (self.n_rows + 1) * self.corridor_width_jitter
+        return (-WALL_THICKNESS, -WALL_THICKNESS, self.width + WALL_THICKNESS, height + WALL_THICKNESS)
+
     def max_narrowing(self) -> float:
         """Worst-case loss of corridor width (m) from width jitter, inclined and bent rows (two rows per corridor)."""
         incline = 0.5 * self.row_length * math.tan(self.row_incline)
@@ -91,33 +93,6 @@ class LayoutParams:
         """Y of each row's centre line (m)."""
         pitch = self.corridor_width + self.row_width
         return self.corridor_width + 0.5 * self.row_width + pitch * np.arange(self.n_rows)
-
-
-@dataclasses.dataclass(frozen=True)
-class Layout:
-    """A generated (or loaded) scene with its mission.
-
-    Attributes:
-        geometry: Static obstacles.
-        waypoints: ``(k, 2)`` numbered waypoints (m); the robot starts at waypoint 0.
-        mission: Indices of the waypoints to visit, in order (by default 1, 2, ..., k-1, 0: the loop).
-        start_pose: Robot start ``(x, y, yaw)``.
-        routes: Where people walk.
-        corridors: Centre line of every corridor as a ``(k, 2)`` polyline from its low-x to its high-x end
-            (generated greenhouses only; empty otherwise).
-    """
-
-    geometry: Geometry
-    waypoints: np.ndarray
-    mission: np.ndarray
-    start_pose: np.ndarray
-    routes: RouteGraph
-    corridors: tuple[np.ndarray, ...] = ()
-
-    @property
-    def targets(self) -> np.ndarray:
-        """``(len(mission), 2)`` positions to visit, in order."""
-        return self.waypoints[self.mission]
 
 
 def _corridor_end_ys(p: LayoutParams, corridors: tuple[np.ndarray, ...] | None) -> tuple[np.ndarray, np.ndarray]:
@@ -310,123 +285,7 @@ def generate_layout(p: LayoutParams, rng: np.random.Generator) -> Layout:
         geometry=geometry,
         waypoints=waypoints,
         mission=mission,
-        start_pose=_start_facing(waypoints, 1),
+        start_pose=start_facing(waypoints, 1),
         routes=route_graph(p, ends),
         corridors=corridors,
-    )
-
-
-def _start_facing(waypoints: np.ndarray, target: int) -> np.ndarray:
-    """Pose at waypoint 0 facing waypoint ``target``."""
-    d = waypoints[target] - waypoints[0]
-    return np.array([waypoints[0, 0], waypoints[0, 1], math.atan2(d[1], d[0])])
-
-
-@dataclasses.dataclass(frozen=True)
-class OfficeParams:
-    """An office corridor like Harik's experiments (sec. 2.4, Figs. 13-16): walls with door recesses.
-
-    Attributes:
-        length: Corridor length (m).
-        width: Corridor width between the walls (m).
-        door_spacing: Distance between door recesses along each wall (m).
-        door_width: Width of a recess (m).
-        door_depth: Depth of a recess (m).
-        route: ``"experiment"``: the mission 0 -> 1 -> 2 -> 3 -> 2 -> 0 of sec. 3.4 (Figs. 14-16);
-            ``"repeatability"``: 0 -> 2 -> 3 -> 4 -> 0 of sec. 3.5 (Fig. 17).
-    """
-
-    length: float = 14.0
-    width: float = 1.6
-    door_spacing: float = 3.5
-    door_width: float = 0.9
-    door_depth: float = 0.3
-    route: str = "experiment"
-
-
-#: The office-corridor missions (waypoint indices after the start at waypoint 0), Harik secs. 3.4 and 3.5.
-ROUTES: dict[str, tuple[int, ...]] = {"experiment": (1, 2, 3, 2, 0), "repeatability": (2, 3, 4, 0)}
-
-
-def generate_office_corridor(p: OfficeParams, rng: np.random.Generator) -> Layout:
-    """A straight office corridor with door recesses and cabinets; waypoints force 180 deg turns.
-
-    The ``experiment`` mission is the paper's 0 -> 1 -> 2 -> 3 -> 2 -> 0 along the corridor: waypoint 1 lies
-    at the far end and 3 near the start, so the robot turns around at 1 and at 3 (and again at 2 on the way
-    back). The ``repeatability`` mission is sec. 3.5's 0 -> 2 -> 3 -> 4 -> 0, with waypoint 4 between 2 and
-    the far end: the robot turns around at every waypoint. The paper gives the waypoints only on a map
-    (Fig. 13) whose scale the text does not state; these positions are ours, chosen so that both missions
-    have the 180 deg turns the text describes.
-    """
-    b = GeometryBuilder()
-    t = 0.5 * WALL_THICKNESS
-    w, h = p.length, p.width
-    b.capsule(-t, -t, -t, h + t, t, Kind.WALL)
-    b.capsule(w + t, -t, w + t, h + t, t, Kind.WALL)
-    yc = 0.5 * h
-    door_nodes: list[tuple[float, float]] = []  # people come out of and go into the doors
-    for y_wall, outward in ((-t, -1.0), (h + t, 1.0)):
-        offset = rng.uniform(0.8, 1.6)
-        x = 0.0
-        doors = np.arange(offset, w - p.door_width - 0.5, p.door_spacing)
-        for d0 in doors:
-            d0 += rng.uniform(-0.3, 0.3)
-            d1 = d0 + p.door_width
-            door_nodes.append((0.5 * (d0 + d1), (0.0 if outward < 0 else h) + outward * 0.5 * p.door_depth))
-            b.capsule(x - t, y_wall, d0, y_wall, t, Kind.WALL)
-            # The recess: a door set back into the wall, with its frame.
-            y_back = y_wall + outward * p.door_depth
-            b.capsule(d0, y_wall, d0, y_back, t, Kind.WALL)
-            b.capsule(d1, y_wall, d1, y_back, t, Kind.WALL)
-            b.capsule(d0, y_back, d1, y_back, t, Kind.WALL)
-            x = d1
-        b.capsule(x - t, y_wall, w + t, y_wall, t, Kind.WALL)
-    # A few cabinets along the walls between doors: features for the LIDAR, obstacles for the sides.
-    for _ in range(3):
-        cx = rng.uniform(2.0, w - 2.0)
-        side = rng.integers(2)
-        depth = 0.25
-        y0, y1 = (0.0, depth) if side == 0 else (h - depth, h)
-        b.box(cx - 0.3, y0, cx + 0.3, y1, Kind.OBSTACLE)
-    bounds = (
-        -WALL_THICKNESS - p.door_depth,
-        -WALL_THICKNESS - p.door_depth,
-        w + WALL_THICKNESS,
-        h + WALL_THICKNESS + p.door_depth,
-    )
-    geometry = b.build(bounds)
-    waypoints = np.array([[1.0, yc], [w - 1.0, yc], [0.55 * w, yc], [0.25 * w, yc], [0.8 * w, yc]])
-    if p.route not in ROUTES:
-        raise ValueError(f"OfficeParams.route={p.route!r} is invalid; expected one of {sorted(ROUTES)}")
-    mission = np.array(ROUTES[p.route])
-    # People walk the centre line between doors and step into doorways: every dead end is a recess, so
-    # someone who turns back from the robot can always get out of its way.
-    door_nodes.sort()
-    nodes = [(x, yc) for x, _ in door_nodes] + door_nodes
-    k = len(door_nodes)
-    edges = [(i, i + 1) for i in range(k - 1)] + [(i, k + i) for i in range(k)]
-    routes = RouteGraph(nodes=np.array(nodes, dtype=np.float64), edges=np.array(edges, dtype=np.int64))
-    return Layout(
-        geometry=geometry,
-        waypoints=waypoints,
-        mission=mission,
-        start_pose=_start_facing(waypoints, int(mission[0])),
-        routes=routes,
-    )
-
-
-def layout_from_map(geometry: Geometry, waypoints: np.ndarray) -> Layout:
-    """A scene loaded from an occupancy map, with the user's waypoints as the loop mission.
-
-    People walk the waypoint loop (the user picked those points on free floor, as on Harik's Fig. 13).
-    """
-    pts = np.asarray(waypoints, dtype=np.float64).reshape(-1, 2)
-    k = len(pts)
-    routes = RouteGraph(nodes=pts.copy(), edges=np.array([(i, (i + 1) % k) for i in range(k)], dtype=np.int64))
-    return Layout(
-        geometry=geometry,
-        waypoints=pts,
-        mission=np.array([*range(1, k), 0]),
-        start_pose=_start_facing(pts, 1),
-        routes=routes,
     )

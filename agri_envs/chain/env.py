@@ -1,0 +1,438 @@
+"""The robot chain env (Apoorva, Gautam & Kala 2018): composition of map, robots, sensors and task, and the API.
+
+The parts live beside it: :mod:`~agri_envs.chain.config` (arguments), :mod:`~agri_envs.chain.robot` (body,
+limits, sonar mounts), :mod:`~agri_envs.chain.mission` (start, goal, A* path, formation, obstacle drops),
+:mod:`~agri_envs.chain.task` (the ghost robot and one ``evaluate()`` for reward, success and termination),
+:mod:`~agri_envs.chain.observation` (the 23-value observation). Users import the versioned module
+:mod:`agri_envs.chain.robot_chain_v0`.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+from gymnasium import spaces
+from pettingzoo import ParallelEnv
+
+from agri_envs._actions import checked_agent_actions
+from agri_envs.chain import robot
+from agri_envs.chain.config import RobotChainConfig
+from agri_envs.chain.maps import ChainMap, greenhouse_map, office_map, ros_map
+from agri_envs.chain.mission import drop_spot, plan_mission
+from agri_envs.chain.observation import ChainObservation
+from agri_envs.chain.task import ChainTask
+from agri_envs.sim2d.geometry import Kind
+from agri_envs.sim2d.polyline import Polyline
+from agri_envs.sim2d.render import TopDownRenderer
+from agri_envs.sim2d.view import SceneView
+from agri_envs.sim2d.world import World2D
+
+_PARK = 1.0e6  # where dynamic obstacles wait before they are dropped (far outside any map)
+
+
+class RobotChainEnv(ParallelEnv):  # type: ignore[misc]
+    """A leader and its followers cross a mapped floor as a chain, around obstacles dropped in their way.
+
+    ## Description
+
+    ``n_robots`` round robots like the Amigobots of Apoorva et al. (2018) (radius ``robot_radius``, eight
+    sonars) stand in a chain: ``robot_0`` leads, ``robot_k`` follows ``robot_{k-1}``. The leader must reach
+    the goal; the others must follow at about ``spacing`` (d_s) from each other without a gap above
+    ``max_gap`` (Delta), in as straight a line as possible (the elastic strip between the first and last
+    robot), without touching walls, furniture, obstacles or each other. The map (an office floor, a
+    greenhouse or a ROS map) is inflated by the robot radius plus ``planning_margin``, and A* plans the
+    leader's path from start to goal on it; a ghost robot runs along that path ahead of the leader (sec.
+    4.4). While the leader advances, ``n_dynamic_obstacles`` boxes drop onto the path ahead of it (Fig. 8d).
+    Robots are solid pymunk bodies of the shared 2D world: they see and block each other.
+
+    ## Action Space
+
+    Every agent: ``Box(-1, 1, (2,), float32)``: ``[v, omega]`` scaled by ``max_speed`` (both directions) and
+    ``max_turn_rate``; the achieved velocities follow within the acceleration limits. Values outside the
+    box are clipped; NaN or inf, a wrong shape or an unknown agent raise ``ValueError``.
+
+    ## Observation Space
+
+    Every agent: ``Box(low, high, (23,), float32)`` (one space shared by all, for parameter sharing):
+
+    | index | meaning | bounds |
+    |---|---|---|
+    | 0-7 | sonar ranges / ``sonar_range`` at 90, 41, 15, -15, -41, -90, -145, 145 deg | [0, 1] |
+    | 8-9 | position ``(x, y)`` normalised by the map's bounds | [0, 1] |
+    | 10-11 | ``sin(yaw)``, ``cos(yaw)`` | [-1, 1] |
+    | 12-13 | predecessor in the robot's frame / 3 m (leader: the ghost) | [-1, 1] |
+    | 14-15 | successor in the robot's frame / 3 m (0 for the last robot) | [-1, 1] |
+    | 16 | 1 if there is a successor, else 0 | [0, 1] |
+    | 17 | signed distance to the strip (first-last line; + on its left) / 3 m | [-1, 1] |
+    | 18 | 1 for the leader, else 0 | [0, 1] |
+    | 19-20 | achieved ``v / max_speed``, ``omega / max_turn_rate`` | [-1, 1] |
+    | 21-22 | goal in the robot's frame / map diagonal | [-1, 1] |
+
+    Positions come from each robot's localization and inter-robot communication as in the paper (exact here).
+
+    ## Sensors
+
+    Eight sonars per robot at the Amigobot's directions 90, 41, 15, -15, -41, -90, -145 and 145 deg, just
+    inside the body's outline; each reports the nearest echo in its cone (``sonar_aperture``) up to
+    ``sonar_range``, with Gaussian noise ``sonar_noise_std``. Other robots are obstacles to them.
+
+    ## Rewards
+
+    One cooperative reward, the same for every agent, the sum of these terms (each in ``info``):
+
+    | term | formula |
+    |---|---|
+    | ``reward_progress`` | ``reward_progress * (s - s_prev)``, s the leader's arc length along the A* path |
+    | ``reward_spacing`` | ``-reward_spacing * mean_k min(1, abs(gap_k - d_s) / d_s)`` |
+    | ``reward_strip`` | ``-reward_strip * mean distance (m) of the robots to the strip`` |
+    | ``reward_collision`` | ``-reward_collision * robots in contact this step`` |
+    | ``reward_break`` | ``-reward_break * gaps larger than Delta`` |
+    | ``reward_success`` | ``+reward_success`` when the episode ends in success |
+    | ``reward_time`` | ``-reward_time`` every step |
+
+    ## Starting State
+
+    The map is generated from the episode seed (``layout_seed=-1``) or from ``layout_seed``. Start and goal
+    are sampled on free floor at least 0.35 m from obstacles and ``min_goal_distance`` apart along the A*
+    path (or given). The followers stand behind the leader along a free path away from the goal, ``spacing``
+    apart and facing their predecessor; when no such path is long enough they fill the free floor nearest
+    to the leader. A sampled start that leaves followers nearer to the goal than the leader (a room's far
+    corner with the door toward the goal) is drawn again, up to 10 times. Obstacles drop when the leader
+    has covered random fractions (0.15-0.7) of the path, onto the path 1.2-3 m ahead of it, only where at
+    least a robot's width stays free beside them.
+
+    ## Episode End
+
+    Every agent terminates when the leader is within ``goal_radius`` of the goal (success if no robot ever
+    touched anything and no gap exceeds Delta), or when any robot touches anything and
+    ``terminate_on_collision``. Every agent is truncated after ``max_cycles`` steps.
+
+    ## Info
+
+    Per agent: true ``x``, ``y``, ``yaw``, ``v``, ``w`` and ``collision`` (this robot touched something this
+    step). Shared by all agents: ``is_success``, ``leader_at_goal``, ``chain_intact``, ``collisions`` (robot
+    contacts so far), ``max_gap`` (m, this episode), ``mean_strip_distance`` and ``max_strip_distance`` (m, this
+    episode), ``leader_path_length``, ``astar_length`` (m), ``path_ratio``, ``episode_time`` (s) and the
+    reward terms.
+
+    ## Arguments
+
+    Every argument is a field of :class:`RobotChainConfig`; unknown names and values out of range raise
+    ``ValueError`` naming the argument and its valid range. Example::
+
+        env = robot_chain_v0.parallel_env(n_robots=8, scene="greenhouse", n_dynamic_obstacles=2)
+
+    ## Baselines
+
+    ``apoorva-chain`` (A* + ghost + sonar potential field + elastic strip) and ``apoorva-chain-no-strip``.
+
+    ## Version History
+
+    * v0: initial release. Fixed since: the followers' start no longer lies between the leader and the
+      goal when another sampled start avoids it (the documented starting state; spaces and reward unchanged).
+
+    ## References
+
+    Apoorva, R. Gautam and R. Kala, "Motion Planning for a Chain of Mobile Robots Using A* and Potential
+    Field", Robotics 7(2):20, 2018.
+    """
+
+    metadata: dict[str, Any] = {
+        "name": "robot_chain_v0",
+        "render_modes": ["rgb_array", "human"],
+        "render_fps": 10,
+        "is_parallelizable": True,
+        "episode_metric_keys": (
+            "collision",
+            "collisions",
+            "leader_at_goal",
+            "chain_intact",
+            "episode_time",
+            "leader_path_length",
+            "astar_length",
+            "path_ratio",
+            "mean_strip_distance",
+            "max_strip_distance",
+            "max_gap",
+        ),
+        "trace_keys": ("positions", "mean_strip_distance_now", "max_gap_now", "ghost_x", "ghost_y"),
+    }
+
+    def __init__(self, render_mode: str | None = None, **kwargs: Any) -> None:
+        self.config = RobotChainConfig.from_kwargs(kwargs)
+        cfg = self.config
+        self.robot_radius = cfg.robot_radius
+        self.possible_agents = [f"robot_{k}" for k in range(cfg.n_robots)]
+        self.agents: list[str] = []
+        #: The robots' body (kept under the name ``spec`` that earlier versions used).
+        self.spec = robot.body_spec(cfg)
+        self.sonars = robot.sonar_array(cfg)
+        self.observation = ChainObservation(cfg, self.sonars)
+        self._act_space = spaces.Box(-1.0, 1.0, (2,), np.float32)
+        self._static_map: ChainMap | None = None
+        if cfg.scene == "map":
+            self._static_map = ros_map(cfg.map_yaml, cfg.robot_radius + cfg.planning_margin)
+            canvas = self._static_map.geometry.bounds
+        elif cfg.scene == "office":
+            canvas = cfg.office_params().bounds()
+        else:
+            canvas = cfg.greenhouse_params().max_bounds()
+        self.view = SceneView(render_mode, canvas, cfg.render_width, self.metadata["render_fps"])
+        self.render_mode = render_mode
+        self.world: World2D | None = None
+        self.chain_map: ChainMap | None = None
+        self.task: ChainTask | None = None
+        n_dyn = cfg.n_dynamic_obstacles
+        self.state_space = spaces.Box(-np.inf, np.inf, (5 * cfg.n_robots + 4 + 3 * n_dyn,), np.float32)
+
+    # -- spaces ----------------------------------------------------------------------------------------
+    def observation_space(self, agent: str) -> spaces.Box:
+        """The observation space, the same object for every agent (parameter sharing)."""
+        return self.observation.space
+
+    def action_space(self, agent: str) -> spaces.Box:
+        """The action space, the same object for every agent."""
+        return self._act_space
+
+    @property
+    def map_bounds(self) -> np.ndarray:
+        """``(xmin, ymin, xmax, ymax)`` of the current map (m): observation 8-9 is the position scaled by it."""
+        if self.chain_map is None:
+            raise RuntimeError("call reset() first")
+        return self._bounds.copy()
+
+    @property
+    def path(self) -> Polyline:
+        """The leader's A* path of this episode (m)."""
+        if self.task is None:
+            raise RuntimeError("call reset() first")
+        return self.task.path
+
+    @property
+    def goal(self) -> np.ndarray:
+        """The leader's goal (m), the last point of :attr:`path`."""
+        if self.task is None:
+            raise RuntimeError("call reset() first")
+        return self.task.goal
+
+    def observation_layout(self) -> dict[str, Any]:
+        """Where things sit in an observation and how to scale them back (for scripted policies)."""
+        return self.observation.layout()
+
+    def close(self) -> None:
+        """Release the renderer and the pymunk world (idempotent; ``reset()`` builds a new world)."""
+        self.view.close(self.world)
+        self.world = None
+
+    # -- episode set-up --------------------------------------------------------------------------------
+    def reset(
+        self, seed: int | None = None, options: dict[str, Any] | None = None
+    ) -> tuple[dict[str, np.ndarray], dict[str, dict[str, Any]]]:
+        """New map (unless fixed), start, goal, A* path, chain placement and obstacle schedule.
+
+        ``options`` is accepted for API compatibility and unused (PettingZoo's API test passes some).
+        """
+        if seed is not None or not hasattr(self, "np_random"):
+            self.np_random = np.random.default_rng(seed)
+        cfg = self.config
+        rng = self.np_random
+        inflation = cfg.robot_radius + cfg.planning_margin
+        layout_rng = rng if cfg.layout_seed < 0 else np.random.default_rng(cfg.layout_seed)
+        if self._static_map is not None:
+            cmap = self._static_map
+        elif cfg.scene == "office":
+            cmap = office_map(cfg.office_params(), layout_rng, inflation, cfg.map_resolution)
+        else:
+            cmap = greenhouse_map(cfg.greenhouse_params(), layout_rng, inflation, cfg.map_resolution)
+        self.chain_map = cmap
+        xmin, ymin, xmax, ymax = cmap.geometry.bounds
+        self._bounds = np.array([xmin, ymin, xmax, ymax])
+        self.diagonal = math.hypot(xmax - xmin, ymax - ymin)
+        mission = plan_mission(cmap, cfg, rng)
+        positions = mission.positions
+        self.astar_cells = mission.path_cells
+        self.astar_length = mission.astar_length
+        self.world = World2D(cmap.geometry, n_movers=cfg.n_dynamic_obstacles)
+        for k in range(cfg.n_dynamic_obstacles):
+            self.world.place_mover(k, _PARK + 10.0 * k, _PARK, cfg.obstacle_radius)
+        yaw = mission.start_yaws()
+        self.robots = [
+            self.world.add_robot(self.spec, np.array([positions[k, 0], positions[k, 1], yaw[k]]), cfg.robot_radius)
+            for k in range(cfg.n_robots)
+        ]
+        self._robot_rows = np.array([r.circle_index for r in self.robots], dtype=np.int64)
+        task = ChainTask(
+            mission.path,
+            cfg.ghost_params(),
+            cfg.weights(),
+            cfg.control_period,
+            cfg.goal_radius,
+            cfg.terminate_on_collision,
+        )
+        task.reset(positions[0])
+        self.task = task
+        # Obstacle schedule: drop k when the leader has covered fraction f_k of the path.
+        self._drop_at = np.sort(rng.uniform(0.15, 0.7, cfg.n_dynamic_obstacles)) * self.astar_length
+        self._next_drop = 0
+        self._n_dropped = 0
+        self.agents = list(self.possible_agents)
+        self._poses = np.array([r.pose for r in self.robots])
+        self._vel = np.zeros((cfg.n_robots, 2))
+        self._steps = 0
+        self._cmd_scale = np.array([cfg.max_speed, cfg.max_turn_rate])
+        self._leader_path = 0.0
+        self._trail = [self._poses[0, :2].copy()]
+        self._last_collided = np.zeros(cfg.n_robots, dtype=bool)
+        obs = self._observe()
+        task.max_gap = float(self.observation.stats[2])
+        infos = self._infos()
+        if self.render_mode == "human":
+            self.render()
+        return obs, infos
+
+    # -- stepping --------------------------------------------------------------------------------------
+    def step(
+        self, actions: dict[str, Any]
+    ) -> tuple[dict[str, np.ndarray], dict[str, float], dict[str, bool], dict[str, bool], dict[str, dict[str, Any]]]:
+        """Apply every agent's ``[v, omega]`` for one control period (robots move in chain order)."""
+        if self.world is None or self.task is None:
+            raise RuntimeError("call reset() before step()")
+        if not self.agents:
+            raise RuntimeError("the episode is over: call reset()")
+        cfg = self.config
+        dt = cfg.control_period
+        cmd = checked_agent_actions(actions, self.agents, 2)
+        cmd *= self._cmd_scale
+        world, task = self.world, self.task
+        if self._next_drop < len(self._drop_at) and task.ghost.s_leader >= self._drop_at[self._next_drop]:
+            self._drop_obstacle()
+        if self._n_dropped:
+            world.step(dt)
+        poses = self._poses
+        lx, ly = poses[0, 0], poses[0, 1]
+        collided = world.drive_discs(self.robots, cmd, dt, poses, self._vel)
+        self._steps += 1
+        self._leader_path += math.hypot(poses[0, 0] - lx, poses[0, 1] - ly)
+        if self.render_mode is not None:
+            self._trail.append(poses[0, :2].copy())
+        self._last_collided = collided
+        task.move_ghost(poses[0, :2])
+        obs = self._observe()
+        outcome = task.evaluate(poses[0, :2], int(collided.sum()), self.observation.stats.tolist())
+        terminated = bool(outcome["terminated"])
+        truncated = (not terminated) and self._steps >= cfg.max_cycles
+        infos = self._infos()
+        agents = self.agents
+        rewards = dict.fromkeys(agents, outcome["reward"])
+        terminations = dict.fromkeys(agents, terminated)
+        truncations = dict.fromkeys(agents, bool(truncated))
+        if terminated or truncated:
+            self.agents = []
+        if self.render_mode == "human":
+            self.render()
+        return obs, rewards, terminations, truncations, infos
+
+    def _drop_obstacle(self) -> None:
+        """Drop the next scheduled obstacle onto the path ahead of the leader (retried each step until it fits)."""
+        assert self.world is not None and self.task is not None and self.chain_map is not None
+        spot = drop_spot(self.chain_map, self.config, self.task.path, self.task.ghost.s_leader, self._poses)
+        if spot is not None:
+            self.world.place_mover(self._next_drop, float(spot[0]), float(spot[1]), self.config.obstacle_radius)
+            self._next_drop += 1
+            self._n_dropped += 1
+
+    # -- observations, infos, state -------------------------------------------------------------------
+    def _observe(self) -> dict[str, np.ndarray]:
+        assert self.world is not None and self.task is not None
+        obs = self.observation(
+            self._poses,
+            self._vel,
+            self.world,
+            self._robot_rows,
+            self.task.ghost_xy,
+            self.task.goal,
+            self._bounds,
+            self.diagonal,
+            self.np_random,
+        )
+        return dict(zip(self.agents, obs, strict=True))
+
+    def _infos(self) -> dict[str, dict[str, Any]]:
+        task = self.task
+        assert task is not None
+        stats = self.observation.stats
+        gx, gy = task.ghost_xy
+        shared = {
+            "is_success": bool(task.success),
+            "leader_at_goal": bool(task.leader_arrived),
+            "chain_intact": bool(stats[3] == 0),
+            "collisions": int(task.collisions),
+            "max_gap": float(task.max_gap),
+            "mean_strip_distance": float(task.strip_sum / task.strip_count) if task.strip_count else 0.0,
+            "max_strip_distance": float(task.strip_max),
+            "leader_path_length": float(self._leader_path),
+            "astar_length": float(self.astar_length),
+            "path_ratio": float(self._leader_path / self.astar_length) if self.astar_length > 0 else 1.0,
+            "episode_time": self._steps * self.config.control_period,
+            "ghost_x": gx,
+            "ghost_y": gy,
+            "mean_strip_distance_now": float(stats[0]),
+            "max_gap_now": float(stats[2]),
+        }
+        for name, value in task.terms.items():
+            shared["reward_" + name] = float(value)
+        rows = self._poses.tolist()
+        vel = self._vel.tolist()
+        col = self._last_collided.tolist()
+        return {
+            a: {
+                **shared,
+                "x": rows[k][0],
+                "y": rows[k][1],
+                "yaw": rows[k][2],
+                "v": vel[k][0],
+                "w": vel[k][1],
+                "collision": col[k],
+            }
+            for k, a in enumerate(self.agents)
+        }
+
+    def state(self) -> np.ndarray:
+        """Global state: every robot's ``x, y, yaw, v, omega``, the ghost and the goal, the obstacles' ``x, y, r``."""
+        if self.world is None or self.task is None:
+            raise RuntimeError("call reset() before state()")
+        parts = [
+            np.hstack([self._poses, self._vel]).ravel(),
+            self.task.ghost.point,
+            self.task.goal,
+            self.world.mover_circles.ravel(),
+        ]
+        return np.concatenate(parts).astype(np.float32)
+
+    # -- rendering ---------------------------------------------------------------------------------------
+    def render(self) -> np.ndarray | None:
+        """Top-down frame: map, A* path, ghost, goal, strip, robots with sonar cones (``rgb_array``/``human``)."""
+        return self.view.render(
+            None if self.world is None or self.chain_map is None else self.chain_map.geometry, self._draw
+        )
+
+    def _draw(self, rd: TopDownRenderer) -> list[str]:
+        assert self.world is not None and self.task is not None
+        cfg = self.config
+        rd.polyline(self.task.path.points, (200, 60, 60), 1)
+        rd.path(np.array(self._trail))
+        movers = self.world.mover_circles
+        rd.circles(movers[movers[:, 0] < _PARK / 2], Kind.OBSTACLE)
+        p = self._poses
+        if len(p) >= 3:
+            rd.polyline(np.array([p[0, :2], p[-1, :2]]), (150, 60, 200), 2)
+        for k in range(len(p)):
+            rd.cones(self.sonars.poses_in_world(p[k]), self.observation.last_sonar[k], cfg.sonar_aperture)
+        rd.round_robots(p, self.robot_radius)
+        g = self.task.ghost.point
+        rd.ring(float(g[0]), float(g[1]), 0.12, (120, 120, 255))
+        rd.ring(float(self.task.goal[0]), float(self.task.goal[1]), cfg.goal_radius, (30, 160, 30))
+        t, task = self._steps * cfg.control_period, self.task
+        return [f"t = {t:5.1f} s   robots {len(p)}   collisions {task.collisions}   max gap {task.max_gap:.2f} m"]

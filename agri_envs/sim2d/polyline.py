@@ -1,0 +1,82 @@
+"""Polylines parametrised by arc length: planned paths, the ghost's track, the chain's start line."""
+
+from __future__ import annotations
+
+import bisect
+import math
+
+import numba
+import numpy as np
+
+
+@numba.njit(cache=True)
+def _project(
+    points: np.ndarray, cumulative: np.ndarray, x: float, y: float, k0: int, k1: int, s_from: float, s_to: float
+) -> float:
+    """Arc length in ``[s_from, s_to]`` of the path point nearest to ``(x, y)`` (segments ``k0 .. k1 - 1``)."""
+    best = math.inf
+    s_best = max(s_from, cumulative[k0])
+    for k in range(k0, k1):
+        ax, ay = points[k, 0], points[k, 1]
+        ex, ey = points[k + 1, 0] - ax, points[k + 1, 1] - ay
+        l2 = ex * ex + ey * ey
+        length = math.sqrt(l2)
+        if length <= 1e-12:
+            continue
+        t_lo = max(0.0, (s_from - cumulative[k]) / length)
+        t_hi = min(1.0, (s_to - cumulative[k]) / length)
+        if t_lo > t_hi:
+            continue
+        t = min(t_hi, max(t_lo, ((x - ax) * ex + (y - ay) * ey) / l2))
+        qx, qy = ax + t * ex - x, ay + t * ey - y
+        d = qx * qx + qy * qy
+        if d < best:
+            best = d
+            s_best = cumulative[k] + t * length
+    return s_best
+
+
+class Polyline:
+    """A path parametrised by arc length.
+
+    Args:
+        points: ``(k, 2)`` vertices (m), ``k >= 1``.
+    """
+
+    def __init__(self, points: np.ndarray) -> None:
+        p = np.asarray(points, dtype=np.float64).reshape(-1, 2)
+        if len(p) == 0:
+            raise ValueError("Polyline: needs at least one point")
+        if len(p) == 1:
+            p = np.vstack([p, p])
+        self.points = p
+        seg = np.hypot(*np.diff(p, axis=0).T)
+        self.cumulative = np.concatenate([[0.0], np.cumsum(seg)])
+        self.length = float(self.cumulative[-1])
+        self._cum = self.cumulative.tolist()
+        self._pts = [(float(a), float(b)) for a, b in p]
+
+    def at(self, s: float) -> np.ndarray:
+        """Point at arc length ``s`` (clamped to the ends)."""
+        x, y = self.xy_at(s)
+        return np.array([x, y])
+
+    def xy_at(self, s: float) -> tuple[float, float]:
+        """:meth:`at` as two floats."""
+        c = self._cum
+        s = min(max(s, 0.0), self.length)
+        k = min(max(bisect.bisect_right(c, s) - 1, 0), len(c) - 2)
+        span = c[k + 1] - c[k]
+        t = 0.0 if span <= 0 else (s - c[k]) / span
+        (ax, ay), (bx, by) = self._pts[k], self._pts[k + 1]
+        return ax + t * (bx - ax), ay + t * (by - ay)
+
+    def project(self, xy: np.ndarray, s_from: float, s_to: float) -> float:
+        """Arc length of the point of the path nearest to ``xy``, searched between ``s_from`` and ``s_to``."""
+        c = self._cum
+        k0 = max(0, bisect.bisect_right(c, s_from) - 1)
+        k1 = min(len(c) - 1, bisect.bisect_left(c, s_to) + 1)
+        if k1 <= k0:
+            return min(max(s_from, 0.0), self.length)
+        s = _project(self.points, self.cumulative, float(xy[0]), float(xy[1]), k0, k1, s_from, s_to)
+        return min(max(s, s_from), s_to)
