@@ -13,6 +13,8 @@ from __future__ import annotations
 
 from gymnasium.envs.registration import WrapperSpec, register, registry
 
+from agri_envs.arm.presets import REACH_PRESET  # pure data: no pybullet
+
 __version__ = "0.1.0"
 
 __all__ = ["__version__", "register_envs"]
@@ -34,8 +36,6 @@ def register_envs() -> None:
     if "agri_envs/GrapeHarvest-v1" not in registry:
         register(id="agri_envs/GrapeHarvest-v1", entry_point="agri_envs.arm.grape_harvest:GrapeHarvestEnv")
     if "agri_envs/GrapeHarvestReach-v1" not in registry:
-        from agri_envs.arm.presets import REACH_PRESET  # pure data: no pybullet
-
         register(
             id="agri_envs/GrapeHarvestReach-v1",
             entry_point="agri_envs.arm.grape_harvest:GrapeHarvestEnv",

@@ -12,6 +12,8 @@ import dataclasses
 from collections.abc import Mapping
 from typing import Any
 
+from agri_envs.arm.presets import REACH_PRESET
+
 
 @dataclasses.dataclass(frozen=True)
 class Scenario:
@@ -200,8 +202,6 @@ register_scenario(
 
 
 def _grape_reach() -> dict[str, Any]:
-    from agri_envs.arm.presets import REACH_PRESET  # pure data
-
     return dict(REACH_PRESET)
 
 

@@ -178,13 +178,19 @@ def heavy(module: str) -> bool:
     return False
 
 
+#: Late imports of light project modules that must stay late, and why.
+LATE_ON_PURPOSE = {
+    ("agri_training.__main__", "agri_training.cli"): "the numeric kernel pins must be set before numpy is imported",
+}
+
+
 def test_project_imports_inside_functions_only_defer_heavy_modules():
     """A function may import one of the project's modules late only to defer what that module pulls in."""
     wrong = [
         f"{src}:{line} imports {dst} inside a function"
         for src, out in GRAPH.items()
         for dst, line, inside, _ in out
-        if inside and not heavy(dst)
+        if inside and not heavy(dst) and (src, dst) not in LATE_ON_PURPOSE
     ]
     assert not wrong, "\n".join(wrong)
 
