@@ -37,8 +37,6 @@ from typing import Any
 import numba
 import numpy as np
 
-from agri_envs.sim2d.gridmap import UNKNOWN, OccupancyGrid
-
 # Cells of unknown occupancy have log-odds 0, i.e. probability 0.5, as in hector_mapping.
 _UNKNOWN_PROBABILITY = 0.5
 
@@ -500,6 +498,8 @@ class HectorSlam:
             start_pose: World pose of the map frame's origin (the robot's start pose), so the grid can be
                 compared with the scene; the default keeps the map frame.
         """
+        from agri_envs.sim2d.gridmap import UNKNOWN, OccupancyGrid  # no Gymnasium until a grid is asked for
+
         lo = self.log_odds[level]
         data = np.rint(100.0 * self.prob[level]).astype(np.int8)
         data[lo == 0.0] = UNKNOWN

@@ -181,6 +181,8 @@ def heavy(module: str) -> bool:
 #: Late imports of light project modules that must stay late, and why.
 LATE_ON_PURPOSE = {
     ("agri_training.__main__", "agri_training.cli"): "the numeric kernel pins must be set before numpy is imported",
+    ("agri_baselines.hector_slam", "agri_envs.sim2d.gridmap"): "the SLAM algorithm imports no Gymnasium (which "
+    "importing agri_envs brings) unless a caller asks for an OccupancyGrid",
 }
 
 
