@@ -350,3 +350,55 @@ def test_importing_the_sim_prints_nothing():
         [sys.executable, "-c", "import agri_envs.arm.sim"], capture_output=True, text=True, check=True, timeout=120
     )
     assert out.stdout == "" and out.stderr == ""
+
+
+@pytest.mark.parametrize(
+    ("name", "value", "expected"),
+    [
+        ("cluster_tilt", "0.1", "must be a number"),
+        ("position_tolerance", None, "must be a number"),
+        ("time_slack", True, "must be a number"),
+        ("orientation_weight", [0.1], "must be a number"),
+        ("min_clusters", "2", "must be an integer"),
+        ("n_leaves", None, "must be an integer"),
+        ("n_canes", 1.5, "must be an integer"),
+        ("feasible_scenes", "yes", "must be a bool"),
+        ("return_home", None, "must be a bool"),
+        ("control", None, "is invalid; expected one of 'joint', 'ee'"),
+        ("reward_type", 1, "is invalid; expected one of 'sparse', 'dense'"),
+    ],
+)
+def test_wrong_argument_types_are_named(name, value, expected):
+    with pytest.raises(ValueError, match=rf"{name}=.*{expected}"):
+        gym.make(ENV_ID, **{name: value})
+    env = gym.make(ENV_ID, cluster_tilt=0.2)  # numbers of either kind still pass
+    env.reset(seed=0)
+    env.step(np.zeros(6))
+    env.close()
+
+
+def test_wrong_reset_options_are_named_and_leave_the_env_usable():
+    env = gym.make(ENV_ID)
+    obs, _ = env.reset(seed=5)
+    for bad in (3, "scene", [1, 2], env.unwrapped.scene.clusters):
+        with pytest.raises(TypeError, match=r"reset option 'scene' must be an agri_envs.arm.scene.Scene"):
+            env.reset(options={"scene": bad})
+    with pytest.raises(TypeError, match="reset options must be a dict"):
+        env.reset(options="scene")
+    with pytest.raises(ValueError, match=r"reset options \['n_clusters'\] unknown"):
+        env.reset(options={"n_clusters": 2})
+    big = gym.make(ENV_ID, min_clusters=5, max_clusters=5)
+    big.reset(seed=0)
+    small = gym.make(ENV_ID, max_clusters=3)
+    with pytest.raises(ValueError, match=r"'scene' has 5 clusters.*max_clusters >= 5"):
+        small.reset(options={"scene": big.unwrapped.scene})
+    # The env is still usable: the same seed gives the same episode, and a fitting scene is placed.
+    again, _ = env.reset(seed=5)
+    assert all(np.array_equal(obs[k], again[k]) for k in obs)
+    env.step(np.zeros(6))
+    two = gym.make(ENV_ID, min_clusters=2, max_clusters=2)
+    two.reset(seed=1)
+    placed, info = small.reset(options={"scene": two.unwrapped.scene})
+    assert small.observation_space.contains(placed) and info["n_clusters"] == 2
+    for e in (env, big, small, two):
+        e.close()

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import numbers
+from collections.abc import Mapping
 from typing import Any
 
 import gymnasium as gym
@@ -75,6 +77,17 @@ class GrapeHarvestConfig(StrictConfig):
     show_boxes: bool = param(True, "draw the clusters' anti-collision boxes in rendered frames")
     render_width: int = param(480, "width of rendered frames", unit="px", low=64, high=4000)
     render_height: int = param(360, "height of rendered frames", unit="px", low=64, high=4000)
+
+    @classmethod
+    def _check_field(cls, f: dataclasses.Field[Any], value: Any) -> None:
+        """The base checks, after making sure a numeric argument got a number (not a string or None)."""
+        default = f.default
+        if isinstance(default, float) and (isinstance(value, bool) or not isinstance(value, numbers.Real)):
+            raise ValueError(
+                f"{cls.__name__}: {f.name}={value!r} must be a number (float in "
+                f"[{f.metadata['low']}, {f.metadata['high']}]), got {type(value).__name__}."
+            )
+        super()._check_field(f, value)
 
     def validate(self) -> None:
         """Check the cluster counts fit together."""
@@ -311,7 +324,7 @@ class GrapeHarvestEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
             cfg.return_home,
             cfg.terminate_on_collision,
         )
-        self.sim = ArmSim(show_boxes=cfg.show_boxes)
+        self.sim = self._new_sim()
         self._window: Any = None
         home = tip_pose(HOME_Q)
         self.home_goal = goal_vector(home[:3, 3], home[:3, :3]).astype(np.float32).astype(np.float64)
@@ -327,12 +340,9 @@ class GrapeHarvestEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
     ) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
         """Draw a new scene (or place ``options["scene"]``) and put the arm home; reopens a closed sim."""
         super().reset(seed=seed)
-        options = dict(options or {})
-        scene = options.pop("scene", None)
-        if options:
-            raise ValueError(f"reset options {sorted(options)} unknown; allowed: ['scene']")
+        scene = self._scene_option(options)
         if self.sim.closed:  # Gymnasium's and SB3's checkers reset after close()
-            self.sim = ArmSim(show_boxes=self.config.show_boxes)
+            self.sim = self._new_sim()
         self.scene = scene if scene is not None else sample_scene(self.np_random, self.config.scene_params())
         self.sim.load_scene(self.scene)
         self.q = HOME_Q.copy()
@@ -432,7 +442,7 @@ class GrapeHarvestEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
         harvested = state.pop("_harvested_bodies")
         self.__dict__.update(state)
         self._window = None
-        self.sim = ArmSim(show_boxes=self.config.show_boxes)
+        self.sim = self._new_sim()
         if self.scene is not None:
             self.sim.load_scene(self.scene)
             for i in np.flatnonzero(harvested):
@@ -440,6 +450,34 @@ class GrapeHarvestEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
         self.sim.set_joints(self.q)
 
     # -------------------------------------------------------------------------------------- helpers
+
+    def _scene_option(self, options: Any) -> Scene | None:
+        """The ``scene`` reset option, checked: a :class:`Scene` of at most ``max_clusters`` clusters, or None."""
+        if options is None:
+            return None
+        if not isinstance(options, Mapping):
+            raise TypeError(f"reset options must be a dict (or None), got {type(options).__name__}: {options!r}")
+        unknown = sorted(str(k) for k in options if k != "scene")
+        if unknown:
+            raise ValueError(f"reset options {unknown} unknown; allowed: ['scene']")
+        scene = options.get("scene")
+        if scene is None:
+            return None
+        if not isinstance(scene, Scene):
+            raise TypeError(
+                f"reset option 'scene' must be an agri_envs.arm.scene.Scene (or None), got {type(scene).__name__}"
+            )
+        n = len(scene.clusters)
+        if n > self.config.max_clusters:
+            raise ValueError(
+                f"reset option 'scene' has {n} clusters; this env observes at most max_clusters="
+                f"{self.config.max_clusters} (make it with max_clusters >= {n})"
+            )
+        return scene
+
+    def _new_sim(self) -> ArmSim:
+        """A pybullet client for this env; visual shapes only when it renders (they cost time and memory)."""
+        return ArmSim(show_boxes=self.config.show_boxes, visuals=self.render_mode is not None)
 
     def _time_limit(self, scene: Scene) -> int:
         """Steps of the episode: ``time_slack`` x the straight tour at full speed, plus approaches."""
