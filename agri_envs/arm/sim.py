@@ -262,7 +262,7 @@ class ArmSim:
         return [(np.array(s[4]), np.array(pb.getMatrixFromQuaternion(s[5])).reshape(3, 3)) for s in states]
 
     def _closest(self, distance: float) -> list[Any]:
-        """pybullet's closest points between the arm and the scene's boxes within ``distance`` (m)."""
+        """Closest points (pybullet's) between the arm and the scene's boxes within ``distance`` (m)."""
         if self._boxes_body < 0:
             return []
         return list(pb.getClosestPoints(self.robot, self._boxes_body, distance=distance, physicsClientId=self._c))
