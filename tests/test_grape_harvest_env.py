@@ -402,3 +402,33 @@ def test_wrong_reset_options_are_named_and_leave_the_env_usable():
     assert small.observation_space.contains(placed) and info["n_clusters"] == 2
     for e in (env, big, small, two):
         e.close()
+
+
+def test_episodes_equal_the_digests_recorded_before_resets_were_made_fast():
+    import json
+    from pathlib import Path
+
+    from grape_reference import digests
+
+    recorded = json.loads((Path(__file__).parent / "data" / "grape_harvest_digests.json").read_text())
+    assert digests() == recorded
+
+
+@pytest.mark.parametrize("kwargs", [{}, {"min_clusters": 5, "n_leaves": 8, "n_canes": 4, "control": "ee"}])
+def test_a_long_lived_env_equals_a_fresh_one_for_every_seed(kwargs):
+    """The reused pybullet client (bodies replaced, reconnected when shapes pile up) is a fresh env's."""
+    env = gym.make(ENV_ID, **kwargs)
+    env.unwrapped.sim.SHAPES_PER_CLIENT = 40  # reconnect every few resets
+    actions = np.random.default_rng(0).uniform(-1, 1, (5, 6)).astype(np.float32)
+    for seed in range(12):
+        fresh = gym.make(ENV_ID, **kwargs)
+        a = [env.reset(seed=seed)] + [env.step(x) for x in actions]
+        b = [fresh.reset(seed=seed)] + [fresh.step(x) for x in actions]
+        assert_same(
+            [(o[0], 0.0 if len(o) == 2 else o[1], o[-1]) for o in a],
+            [(o[0], 0.0 if len(o) == 2 else o[1], o[-1]) for o in b],
+        )
+        assert env.unwrapped.sim.min_distance(0.3) == fresh.unwrapped.sim.min_distance(0.3)
+        assert env.unwrapped.sim.collisions(0.1) == fresh.unwrapped.sim.collisions(0.1)
+        fresh.close()
+    env.close()
