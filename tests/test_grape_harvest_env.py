@@ -432,3 +432,49 @@ def test_a_long_lived_env_equals_a_fresh_one_for_every_seed(kwargs):
         assert env.unwrapped.sim.collisions(0.1) == fresh.unwrapped.sim.collisions(0.1)
         fresh.close()
     env.close()
+
+
+def _numpy_make_cluster(rng, cut, tilt_max):
+    """make_cluster as first written, in numpy: the reference for the scalar version."""
+    import math
+
+    from agri_envs.arm.scene import BOX_MARGIN, PEDUNCLE_GAP, Cluster
+
+    def rotate(v, axis, angle):
+        c, s = math.cos(angle), math.sin(angle)
+        return v * c + np.cross(axis, v) * s + axis * np.dot(axis, v) * (1 - c)
+
+    yaw = math.atan2(cut[1], cut[0]) + rng.uniform(-math.radians(12.0), math.radians(12.0))
+    approach = np.array([math.cos(yaw), math.sin(yaw), 0.0])
+    down = rotate(np.array([0.0, 0.0, -1.0]), approach, rng.uniform(-tilt_max, tilt_max))
+    length, radius = rng.uniform(0.10, 0.16), rng.uniform(0.035, 0.05)
+    side = np.cross(down, approach)
+    berries = []
+    berry = 0.013
+    for level in np.linspace(0.0, 1.0, 5):
+        ring_r = (radius - berry) * (1.0 - 0.7 * level)
+        centre = cut + (PEDUNCLE_GAP + berry + level * (length - 2 * berry)) * down
+        n = 5 - int(round(4 * level))
+        phase = rng.uniform(0, 2 * math.pi)
+        for k in range(n):
+            a = phase + 2 * math.pi * k / n
+            offset = ring_r * (math.cos(a) * approach + math.sin(a) * side)
+            berries.append(np.concatenate([centre + offset, [berry]]))
+    b = np.array(berries)
+    lo = np.min(b[:, :3] - b[:, 3:], axis=0) - BOX_MARGIN
+    hi = np.max(b[:, :3] + b[:, 3:], axis=0) + BOX_MARGIN
+    return Cluster(cut.copy(), approach, down, b, lo, hi)
+
+
+def test_scalar_cluster_builder_equals_the_numpy_one_bit_for_bit():
+    from agri_envs.arm.scene import CUT_HIGH, CUT_LOW, make_cluster
+
+    r1, r2 = np.random.default_rng(11), np.random.default_rng(11)
+    for i in range(3000):
+        tilt = (0.0, 0.17, 0.5)[i % 3]
+        a = make_cluster(r1, r1.uniform(CUT_LOW, CUT_HIGH), tilt)
+        b = _numpy_make_cluster(r2, r2.uniform(CUT_LOW, CUT_HIGH), tilt)
+        for field in ("cut_point", "approach", "down", "berries", "box_lo", "box_hi"):
+            x, y = getattr(a, field), getattr(b, field)
+            assert x.dtype == y.dtype and x.shape == y.shape and x.tobytes() == y.tobytes(), (i, field)
+    assert r1.random() == r2.random()  # the same draws were consumed

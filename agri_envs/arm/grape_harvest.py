@@ -16,7 +16,13 @@ from agri_envs._actions import checked_action
 from agri_envs._config import StrictConfig, param
 from agri_envs.arm.kinematics import JOINT_LIMITS
 from agri_envs.arm.robot_model import goal_vector, tip_pose
-from agri_envs.arm.scene import HOME_Q, Scene, SceneParams, harvest_configurations, sample_scene
+from agri_envs.arm.scene import (
+    HOME_Q,
+    Scene,
+    SceneParams,
+    harvest_configurations,
+    sample_scene_and_configurations,
+)
 from agri_envs.arm.sim import ArmSim
 from agri_envs.arm.task import HarvestTask, goal_errors
 
@@ -343,7 +349,10 @@ class GrapeHarvestEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
         scene = self._scene_option(options)
         if self.sim.closed:  # Gymnasium's and SB3's checkers reset after close()
             self.sim = self._new_sim()
-        self.scene = scene if scene is not None else sample_scene(self.np_random, self.config.scene_params())
+        configs = None
+        if scene is None:
+            scene, configs = sample_scene_and_configurations(self.np_random, self.config.scene_params())
+        self.scene = scene
         self.sim.load_scene(self.scene)
         self.q = HOME_Q.copy()
         self.sim.set_joints(self.q)
@@ -352,7 +361,7 @@ class GrapeHarvestEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
         self._path_length = 0.0
         self._achieved_goal = achieved
         self.elapsed_steps = 0
-        self.time_limit = self._time_limit(self.scene)
+        self.time_limit = self._time_limit(self.scene, configs)
         pos, ang = goal_errors(achieved, self.task.desired_goal)
         outcome = {"collision": False, "is_success": False, "distance": pos, "angle_error": ang}
         info = self._info(dict(outcome, final_target=self.task.final_target), False)
@@ -479,8 +488,11 @@ class GrapeHarvestEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
         """A pybullet client for this env; visual shapes only when it renders (they cost time and memory)."""
         return ArmSim(show_boxes=self.config.show_boxes, visuals=self.render_mode is not None)
 
-    def _time_limit(self, scene: Scene) -> int:
-        """Steps of the episode: ``time_slack`` x the straight tour at full speed, plus approaches."""
+    def _time_limit(self, scene: Scene, configs: tuple[tuple[np.ndarray, np.ndarray], ...] | None = None) -> int:
+        """Steps of the episode: ``time_slack`` x the straight tour at full speed, plus approaches.
+
+        ``configs``: :func:`harvest_configurations` of every cluster, when the scene sampler already has them.
+        """
         cfg = self.config
         joint = cfg.control == "joint"
         home = tip_pose(HOME_Q)
@@ -493,8 +505,8 @@ class GrapeHarvestEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
         while left:
             i = min(left, key=lambda j: float(np.linalg.norm(scene.clusters[j].cut_point - at)))
             left.remove(i)
-            configs = harvest_configurations(scene.clusters[i])
-            legs.append((None if configs is None else configs[1], scene.clusters[i].tip_pose()))
+            q = harvest_configurations(scene.clusters[i]) if configs is None else configs[i]
+            legs.append((None if q is None else q[1], scene.clusters[i].tip_pose()))
             at = scene.clusters[i].cut_point
         if cfg.return_home or not legs:
             legs.append((HOME_Q, home))

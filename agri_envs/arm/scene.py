@@ -150,26 +150,66 @@ def _rotate(v: np.ndarray, axis: np.ndarray, angle: float) -> np.ndarray:
 
 def make_cluster(rng: np.random.Generator, cut: np.ndarray, tilt_max: float) -> Cluster:
     """A cluster with its cutting point at ``cut``, approached from the base side with a random lean."""
-    yaw = math.atan2(cut[1], cut[0]) + rng.uniform(-_YAW_JITTER, _YAW_JITTER)
-    approach = np.array([math.cos(yaw), math.sin(yaw), 0.0])
-    down = _rotate(np.array([0.0, 0.0, -1.0]), approach, rng.uniform(-tilt_max, tilt_max))
+    return _build_cluster(cut, _cluster_draws(rng, tilt_max))
+
+
+def _cluster_draws(rng: np.random.Generator, tilt_max: float) -> tuple[float, ...]:
+    """The random numbers of one cluster, in the order :func:`make_cluster` has always drawn them.
+
+    Yaw jitter, lean, length, radius and the phases of the 5 berry rings: drawn before the cluster is
+    built, so that a candidate rejected for its cutting point alone costs nothing more than its draws.
+    """
+    jitter = rng.uniform(-_YAW_JITTER, _YAW_JITTER)
+    tilt = rng.uniform(-tilt_max, tilt_max)
     length, radius = rng.uniform(0.10, 0.16), rng.uniform(0.035, 0.05)
-    side = np.cross(down, approach)
-    berries = []
+    phases = [rng.uniform(0, 2 * math.pi) for _ in range(5)]
+    return (jitter, tilt, length, radius, *phases)
+
+
+def _build_cluster(cut: np.ndarray, draws: tuple[float, ...]) -> Cluster:
+    """The cluster of :func:`make_cluster` from its draws.
+
+    Written out in Python floats, operation for operation what the numpy version computed (``_rotate``,
+    ``np.cross``, the berry rings), so the result is bit for bit the same, only without the overhead of
+    numpy calls on 3-vectors (``tests/test_grape_harvest_env.py`` checks it against that version). The
+    one dot product of ``_rotate`` (the approach with the z axis) is a sum of exact zeros.
+    """
+    jitter, tilt, length, radius = draws[:4]
+    cx, cy, cz = float(cut[0]), float(cut[1]), float(cut[2])
+    yaw = math.atan2(cy, cx) + jitter
+    a0, a1, a2 = math.cos(yaw), math.sin(yaw), 0.0
+    # _rotate((0, 0, -1), approach, tilt) = v c + (approach x v) s + approach (approach . v) (1 - c)
+    c, s = math.cos(tilt), math.sin(tilt)
+    v0, v1, v2 = 0.0, 0.0, -1.0
+    x0, x1, x2 = a1 * v2 - a2 * v1, a2 * v0 - a0 * v2, a0 * v1 - a1 * v0
+    dot = a0 * v0 + a1 * v1 + a2 * v2
+    d0 = v0 * c + x0 * s + a0 * dot * (1 - c)
+    d1 = v1 * c + x1 * s + a1 * dot * (1 - c)
+    d2 = v2 * c + x2 * s + a2 * dot * (1 - c)
+    s0, s1, s2 = d1 * a2 - d2 * a1, d2 * a0 - d0 * a2, d0 * a1 - d1 * a0  # side = down x approach
     berry = 0.013
-    for level in np.linspace(0.0, 1.0, 5):  # rings of 5, 4, 3, 2, 1 berries: 15 spheres
+    rows = []
+    for ring, level in enumerate((0.0, 0.25, 0.5, 0.75, 1.0)):  # np.linspace(0, 1, 5): rings of 5, 4, 3, 2, 1
         ring_r = (radius - berry) * (1.0 - 0.7 * level)
-        centre = cut + (PEDUNCLE_GAP + berry + level * (length - 2 * berry)) * down
+        along = PEDUNCLE_GAP + berry + level * (length - 2 * berry)
+        e0, e1, e2 = cx + along * d0, cy + along * d1, cz + along * d2
         n = 5 - int(round(4 * level))
-        phase = rng.uniform(0, 2 * math.pi)
+        phase = draws[4 + ring]
         for k in range(n):
-            a = phase + 2 * math.pi * k / n
-            offset = ring_r * (math.cos(a) * approach + math.sin(a) * side)
-            berries.append(np.concatenate([centre + offset, [berry]]))
-    b = np.array(berries)
+            ang = phase + 2 * math.pi * k / n
+            ca, sa = math.cos(ang), math.sin(ang)
+            rows.append(
+                (
+                    e0 + ring_r * (ca * a0 + sa * s0),
+                    e1 + ring_r * (ca * a1 + sa * s1),
+                    e2 + ring_r * (ca * a2 + sa * s2),
+                    berry,
+                )
+            )
+    b = np.array(rows)
     lo = np.min(b[:, :3] - b[:, 3:], axis=0) - BOX_MARGIN
     hi = np.max(b[:, :3] + b[:, 3:], axis=0) + BOX_MARGIN
-    return Cluster(cut.copy(), approach, down, b, lo, hi)
+    return Cluster(np.array(cut, dtype=np.float64), np.array([a0, a1, a2]), np.array([d0, d1, d2]), b, lo, hi)
 
 
 def corridor(cluster: Cluster, grow: float = 0.02) -> tuple[np.ndarray, np.ndarray]:
@@ -242,27 +282,39 @@ class _Checker:
 
 def sample_scene(rng: np.random.Generator, params: SceneParams) -> Scene:
     """Draw the clusters, stems and leaves of one episode (see the module docstring for the guarantees)."""
+    return sample_scene_and_configurations(rng, params)[0]
+
+
+def sample_scene_and_configurations(
+    rng: np.random.Generator, params: SceneParams
+) -> tuple[Scene, tuple[tuple[np.ndarray, np.ndarray], ...]]:
+    """:func:`sample_scene`, and :func:`harvest_configurations` of each cluster (computed while drawing)."""
     n = int(rng.integers(params.min_clusters, params.max_clusters + 1))
     while True:
-        scene = _try_scene(rng, params, n)
-        if scene is not None:
-            return scene
+        drawn = _try_scene(rng, params, n)
+        if drawn is not None:
+            return drawn
 
 
 def _overlaps_any(lo: np.ndarray, hi: np.ndarray, los: list[np.ndarray], his: list[np.ndarray]) -> bool:
     return any(_overlap(lo, hi, blo, bhi) for blo, bhi in zip(los, his, strict=True))
 
 
-def _try_scene(rng: np.random.Generator, params: SceneParams, n: int) -> Scene | None:
+def _try_scene(
+    rng: np.random.Generator, params: SceneParams, n: int
+) -> tuple[Scene, tuple[tuple[np.ndarray, np.ndarray], ...]] | None:
     check = _Checker()
     clusters: list[Cluster] = []
+    harvest: list[tuple[np.ndarray, np.ndarray]] = []
     cors: list[tuple[np.ndarray, np.ndarray]] = []
     for _ in range(_MAX_ATTEMPTS):
         if len(clusters) == n:
             break
-        c = make_cluster(rng, rng.uniform(CUT_LOW, CUT_HIGH), params.cluster_tilt)
-        if any(np.linalg.norm(c.cut_point - o.cut_point) < 0.12 for o in clusters):
+        cut = rng.uniform(CUT_LOW, CUT_HIGH)
+        draws = _cluster_draws(rng, params.cluster_tilt)  # make_cluster's draws, whether or not it is kept
+        if any(np.linalg.norm(cut - o.cut_point) < 0.12 for o in clusters):
             continue
+        c = _build_cluster(cut, draws)
         cor = corridor(c)
         # Feasible scenes keep every approach corridor free; Luo's random scenes do not check it.
         if params.feasible and _overlaps_any(cor[0], cor[1], check.lo, check.hi):
@@ -277,6 +329,7 @@ def _try_scene(rng: np.random.Generator, params: SceneParams, n: int) -> Scene |
         check.add(c.box_lo, c.box_hi, list(configs), cor if params.feasible else None)
         cors.append(cor)
         clusters.append(c)
+        harvest.append(configs)
     if len(clusters) < n:
         return None
     top = max(c.cut_point[2] for c in clusters) + 0.14
@@ -313,4 +366,4 @@ def _try_scene(rng: np.random.Generator, params: SceneParams, n: int) -> Scene |
                 obstacles.append(leaf)
                 check.add(leaf.lo, leaf.hi, [], None)
                 break
-    return Scene(tuple(clusters), tuple(obstacles))
+    return Scene(tuple(clusters), tuple(obstacles)), tuple(harvest)
