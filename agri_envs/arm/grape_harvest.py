@@ -505,8 +505,8 @@ class GrapeHarvestEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
         while left:
             i = min(left, key=lambda j: float(np.linalg.norm(scene.clusters[j].cut_point - at)))
             left.remove(i)
-            q = harvest_configurations(scene.clusters[i]) if configs is None else configs[i]
-            legs.append((None if q is None else q[1], scene.clusters[i].tip_pose()))
+            pair = harvest_configurations(scene.clusters[i]) if configs is None else configs[i]
+            legs.append((None if pair is None else pair[1], scene.clusters[i].tip_pose()))
             at = scene.clusters[i].cut_point
         if cfg.return_home or not legs:
             legs.append((HOME_Q, home))
