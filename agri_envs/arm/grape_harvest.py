@@ -522,7 +522,12 @@ class GrapeHarvestEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
                 steps += max(dist / cfg.max_ee_step, turn / cfg.max_ee_rotation)
             here_t = t
         approaches = 10 * (2 * len(scene.clusters) if cfg.return_home else 2 * len(scene.clusters) - 1)
-        return int(math.ceil(cfg.time_slack * steps)) + approaches
+        limit = cfg.time_slack * steps
+        if configs is not None and joint and abs(limit - round(limit)) < 1e-4:
+            # The sampler's configurations equal harvest_configurations' up to rounding (~1e-12 rad), which
+            # could only move a limit this close to an integer: take numpy's own.
+            return self._time_limit(scene)
+        return int(math.ceil(limit)) + approaches
 
     def _ee_target(self, a: np.ndarray) -> tuple[np.ndarray, bool]:
         """Joint values for a clamp-pose delta by damped least squares on the arm's Jacobian.

@@ -29,6 +29,7 @@ import math
 
 import numpy as np
 
+from agri_envs.arm import _kernels
 from agri_envs.arm.collision import ArmCollisionModel
 from agri_envs.arm.kinematics import nearest_ik, within_limits
 from agri_envs.arm.robot_model import (
@@ -59,6 +60,12 @@ _YAW_JITTER = math.radians(12.0)
 _BRANCH_REACH = math.radians(90.0)
 _LIMIT_MARGIN = math.radians(10.0)
 _MAX_ATTEMPTS = 200
+#: Clearance the scene checker keeps between the arm's points and every box (m).
+_CHECK_MARGIN = 0.005
+#: Corners of the tool box in the clamp-centre frame, as :func:`corridor` sweeps them (m).
+_TOOL_CORNERS = np.array(
+    [[sx * TOOL_HALF_X, sy * TOOL_HALF_Y, z] for sx in (-1, 1) for sy in (-1, 1) for z in (TOOL_OVERHANG, -TOOL_LENGTH)]
+)
 
 
 def cut_pose(cut_point: np.ndarray, approach: np.ndarray, down: np.ndarray, offset: float = 0.0) -> np.ndarray:
@@ -253,7 +260,7 @@ class _Checker:
     """Validity of a scene under construction: harvest configurations and corridors stay free."""
 
     def __init__(self) -> None:
-        self.model = ArmCollisionModel(np.zeros((0, 3)), np.zeros((0, 3)), margin=0.005)
+        self.model = ArmCollisionModel(np.zeros((0, 3)), np.zeros((0, 3)), margin=_CHECK_MARGIN)
         self.lo: list[np.ndarray] = []
         self.hi: list[np.ndarray] = []
         self.configs: list[np.ndarray] = [HOME_Q]
@@ -285,6 +292,15 @@ def sample_scene(rng: np.random.Generator, params: SceneParams) -> Scene:
     return sample_scene_and_configurations(rng, params)[0]
 
 
+def sample_scene_reference(rng: np.random.Generator, params: SceneParams) -> Scene:
+    """:func:`sample_scene` as first written, all in numpy: the oracle the fast sampler is tested against."""
+    n = int(rng.integers(params.min_clusters, params.max_clusters + 1))
+    while True:
+        scene = _try_scene_reference(rng, params, n)
+        if scene is not None:
+            return scene
+
+
 def sample_scene_and_configurations(
     rng: np.random.Generator, params: SceneParams
 ) -> tuple[Scene, tuple[tuple[np.ndarray, np.ndarray], ...]]:
@@ -300,21 +316,17 @@ def _overlaps_any(lo: np.ndarray, hi: np.ndarray, los: list[np.ndarray], his: li
     return any(_overlap(lo, hi, blo, bhi) for blo, bhi in zip(los, his, strict=True))
 
 
-def _try_scene(
-    rng: np.random.Generator, params: SceneParams, n: int
-) -> tuple[Scene, tuple[tuple[np.ndarray, np.ndarray], ...]] | None:
+def _try_scene_reference(rng: np.random.Generator, params: SceneParams, n: int) -> Scene | None:
+    """The sampler as first written (numpy throughout): the oracle of :func:`_try_scene`."""
     check = _Checker()
     clusters: list[Cluster] = []
-    harvest: list[tuple[np.ndarray, np.ndarray]] = []
     cors: list[tuple[np.ndarray, np.ndarray]] = []
     for _ in range(_MAX_ATTEMPTS):
         if len(clusters) == n:
             break
-        cut = rng.uniform(CUT_LOW, CUT_HIGH)
-        draws = _cluster_draws(rng, params.cluster_tilt)  # make_cluster's draws, whether or not it is kept
-        if any(np.linalg.norm(cut - o.cut_point) < 0.12 for o in clusters):
+        c = make_cluster(rng, rng.uniform(CUT_LOW, CUT_HIGH), params.cluster_tilt)
+        if any(np.linalg.norm(c.cut_point - o.cut_point) < 0.12 for o in clusters):
             continue
-        c = _build_cluster(cut, draws)
         cor = corridor(c)
         # Feasible scenes keep every approach corridor free; Luo's random scenes do not check it.
         if params.feasible and _overlaps_any(cor[0], cor[1], check.lo, check.hi):
@@ -329,7 +341,6 @@ def _try_scene(
         check.add(c.box_lo, c.box_hi, list(configs), cor if params.feasible else None)
         cors.append(cor)
         clusters.append(c)
-        harvest.append(configs)
     if len(clusters) < n:
         return None
     top = max(c.cut_point[2] for c in clusters) + 0.14
@@ -366,4 +377,191 @@ def _try_scene(
                 obstacles.append(leaf)
                 check.add(leaf.lo, leaf.hi, [], None)
                 break
-    return Scene(tuple(clusters), tuple(obstacles)), tuple(harvest)
+    return Scene(tuple(clusters), tuple(obstacles))
+
+
+class _Corridor:
+    """A cluster's approach corridor: the kernel's box, and :func:`corridor` itself when a test is close."""
+
+    def __init__(self, cluster: Cluster) -> None:
+        self.cluster = cluster
+        self.lo, self.hi = _kernels.corridor(
+            cluster.cut_point, cluster.approach, cluster.down, _TOOL_CORNERS, PRE_CUT, 0.02
+        )
+        self._exact: tuple[np.ndarray, np.ndarray] | None = None
+
+    def exact(self) -> tuple[np.ndarray, np.ndarray]:
+        if self._exact is None:
+            self._exact = corridor(self.cluster)
+        return self._exact
+
+    def overlaps(self, lo: np.ndarray, hi: np.ndarray) -> bool:
+        """``_overlap`` of the exact corridor with a box."""
+        st = _kernels.overlap(self.lo, self.hi, lo, hi)
+        if st == _kernels.UNCERTAIN:
+            clo, chi = self.exact()
+            return _overlap(clo, chi, lo, hi)
+        return st == _kernels.CERTAIN_YES
+
+
+def _boxes_overlap(lo: np.ndarray, hi: np.ndarray, los: list[np.ndarray], his: list[np.ndarray]) -> bool:
+    """``_overlaps_any`` for exact boxes, through the kernel (exact for exact inputs unless too close to call)."""
+    for blo, bhi in zip(los, his, strict=True):
+        st = _kernels.overlap(lo, hi, blo, bhi)
+        if st == _kernels.CERTAIN_YES or (st == _kernels.UNCERTAIN and _overlap(lo, hi, blo, bhi)):
+            return True
+    return False
+
+
+class _Harvest:
+    """Harvest configurations of an accepted cluster: the kernel's (certified), numpy's on demand."""
+
+    def __init__(self, cluster: Cluster | None, fast: tuple[np.ndarray, np.ndarray]) -> None:
+        self.cluster = cluster
+        self.fast = fast
+        self._exact: tuple[np.ndarray, np.ndarray] | None = None if cluster is not None else fast
+
+    def exact(self) -> tuple[np.ndarray, np.ndarray]:
+        if self._exact is None:
+            assert self.cluster is not None
+            configs = harvest_configurations(self.cluster)
+            assert configs is not None  # the kernel certified it reachable
+            self._exact = configs
+        return self._exact
+
+
+def _fast_harvest(cluster: Cluster) -> _Harvest | None:
+    """:func:`harvest_configurations` through the kernel; numpy's own when the kernel cannot be certain."""
+    pre, cut, st = _kernels.harvest_configurations(
+        cluster.cut_point, cluster.approach, cluster.down, HOME_Q, PRE_CUT, _BRANCH_REACH, _LIMIT_MARGIN
+    )
+    if st == _kernels.CERTAIN_NO:
+        return None
+    if st == _kernels.CERTAIN_YES:
+        return _Harvest(cluster, (pre, cut))
+    exact = harvest_configurations(cluster)
+    return None if exact is None else _Harvest(None, exact)
+
+
+class _FastChecker:
+    """:class:`_Checker` answering through the certified kernels, and through numpy where they are unsure.
+
+    Its answers are :class:`_Checker`'s: a kernel's certain answer equals numpy's (see
+    :mod:`agri_envs.arm._kernels`), and an uncertain one is replaced by the very call :class:`_Checker`
+    makes, on numpy's own harvest configurations.
+    """
+
+    def __init__(self) -> None:
+        self.lo: list[np.ndarray] = []
+        self.hi: list[np.ndarray] = []
+        self.harvests: list[_Harvest] = []
+        self.points = _kernels.arm_points(HOME_Q)[None]  # arm points of every accepted configuration
+        self.corridors: list[_Corridor] = []
+
+    def _exact_configs(self) -> list[np.ndarray]:
+        return [HOME_Q] + [q for h in self.harvests for q in h.exact()]
+
+    def free_with(self, lo: np.ndarray, hi: np.ndarray, extra: _Harvest | None) -> bool:
+        """:meth:`_Checker.free_with` with the extra configurations of ``extra`` (a cluster's, or none)."""
+        if any(cor.overlaps(lo, hi) for cor in self.corridors):
+            return False
+        new = np.zeros((0,) + self.points.shape[1:])
+        if extra is not None:
+            new = np.stack([_kernels.arm_points(q) for q in extra.fast])
+        st = _kernels.collides(np.concatenate([self.points, new]), lo[None], hi[None], _CHECK_MARGIN)
+        if st == _kernels.UNCERTAIN:
+            configs = self._exact_configs() + (list(extra.exact()) if extra is not None else [])
+            st = int(ArmCollisionModel(lo[None], hi[None], margin=_CHECK_MARGIN).collides(np.array(configs)).any())
+        if st == _kernels.CERTAIN_YES:
+            return False
+        if extra is not None and self.lo:
+            los, his = np.array(self.lo), np.array(self.hi)
+            st = _kernels.collides(new, los, his, _CHECK_MARGIN)
+            if st == _kernels.UNCERTAIN:
+                st = int(ArmCollisionModel(los, his, margin=_CHECK_MARGIN).collides(np.array(extra.exact())).any())
+            if st == _kernels.CERTAIN_YES:
+                return False
+        return True
+
+    def add(self, lo: np.ndarray, hi: np.ndarray, extra: _Harvest | None, cor: _Corridor | None) -> None:
+        self.lo.append(lo)
+        self.hi.append(hi)
+        if extra is not None:
+            self.harvests.append(extra)
+            self.points = np.concatenate([self.points, np.stack([_kernels.arm_points(q) for q in extra.fast])])
+        if cor is not None:
+            self.corridors.append(cor)
+
+
+def _try_scene(
+    rng: np.random.Generator, params: SceneParams, n: int
+) -> tuple[Scene, tuple[tuple[np.ndarray, np.ndarray], ...]] | None:
+    """One try of :func:`_try_scene_reference`, the same draws and the same decisions, made fast.
+
+    Candidates are built only past the cut-distance check, and the tests that reject most of them run in
+    the certified kernels of :mod:`agri_envs.arm._kernels`. Returns the scene and the harvest
+    configurations of its clusters (the kernel's: equal to numpy's up to rounding).
+    """
+    check = _FastChecker()
+    clusters: list[Cluster] = []
+    harvest: list[_Harvest] = []
+    cors: list[_Corridor] = []
+    for _ in range(_MAX_ATTEMPTS):
+        if len(clusters) == n:
+            break
+        cut = rng.uniform(CUT_LOW, CUT_HIGH)
+        draws = _cluster_draws(rng, params.cluster_tilt)  # make_cluster's draws, whether or not it is kept
+        if any(np.linalg.norm(cut - o.cut_point) < 0.12 for o in clusters):
+            continue
+        c = _build_cluster(cut, draws)
+        cor = _Corridor(c)
+        # Feasible scenes keep every approach corridor free; Luo's random scenes do not check it.
+        if params.feasible and any(cor.overlaps(blo, bhi) for blo, bhi in zip(check.lo, check.hi, strict=True)):
+            continue
+        if not params.feasible and _boxes_overlap(c.box_lo, c.box_hi, check.lo, check.hi):
+            continue  # two clusters cannot fill the same space
+        # Both: "randomly given in the configuration space of the manipulator" (sec. 4.2): the arm can
+        # stand at the cut and pre-cut poses without touching a box (C_free of eqs. 8-9).
+        configs = _fast_harvest(c)
+        if configs is None or not check.free_with(c.box_lo, c.box_hi, configs):
+            continue
+        check.add(c.box_lo, c.box_hi, configs, cor if params.feasible else None)
+        cors.append(cor)
+        clusters.append(c)
+        harvest.append(configs)
+    if len(clusters) < n:
+        return None
+    top = max(c.cut_point[2] for c in clusters) + 0.14
+    obstacles = [
+        Obstacle("cordon", np.array([ROW_X - 0.02, -0.7, top - 0.02]), np.array([ROW_X + 0.02, 0.7, top + 0.02])),
+    ]
+    trunk_y = rng.uniform(-0.4, 0.4)
+    obstacles.append(
+        Obstacle(
+            "trunk",
+            np.array([ROW_X - 0.03, trunk_y - 0.03, -BASE_HEIGHT]),
+            np.array([ROW_X + 0.03, trunk_y + 0.03, top - 0.02]),
+        )
+    )
+    for _ in range(params.n_canes):
+        y = rng.uniform(-0.6, 0.6)
+        obstacles.append(
+            Obstacle("cane", np.array([ROW_X - 0.01, y - 0.01, top - 0.55]), np.array([ROW_X + 0.01, y + 0.01, top]))
+        )
+    for o in obstacles:
+        if not check.free_with(o.lo, o.hi, None):
+            return None
+        check.add(o.lo, o.hi, None, None)
+    for _ in range(params.n_leaves):
+        for _attempt in range(30):
+            centre = rng.uniform([0.60, -0.45, -0.42], [ROW_X, 0.45, top])
+            half = rng.uniform([0.03, 0.04, 0.015], [0.06, 0.07, 0.04])
+            # Leaves are ours, not the paper's (its scenes hold clusters and their boxes): they never block an
+            # approach corridor or a cut pose, so that the random part stays the paper's, the clusters.
+            lo, hi = centre - half, centre + half
+            if check.free_with(lo, hi, None) and not any(cor.overlaps(lo, hi) for cor in cors):
+                leaf = Obstacle("leaf", lo, hi)
+                obstacles.append(leaf)
+                check.add(leaf.lo, leaf.hi, None, None)
+                break
+    return Scene(tuple(clusters), tuple(obstacles)), tuple(h.fast for h in harvest)
