@@ -111,7 +111,7 @@ def nearest_ik(pose: np.ndarray, ref: np.ndarray) -> tuple[np.ndarray, int]:
             for r in range(3):
                 for cc in range(3):
                     m[r, cc] = r03[0, r] * pose[0, cc] + r03[1, r] * pose[1, cc] + r03[2, r] * pose[2, cc]
-            n11, n13, n21, n23 = m[0, 0], m[0, 2], -m[2, 0], -m[2, 2]
+            n13, n23 = m[0, 2], -m[2, 2]
             n31, n32, n33 = m[1, 0], m[1, 1], m[1, 2]
             s5 = math.sqrt(max(n13 * n13 + n23 * n23, 0.0))
             if s5 < _WELL:
@@ -161,7 +161,13 @@ def nearest_ik(pose: np.ndarray, ref: np.ndarray) -> tuple[np.ndarray, int]:
 
 @numba.njit(cache=True)
 def harvest_configurations(
-    cut: np.ndarray, approach: np.ndarray, down: np.ndarray, home: np.ndarray, pre_cut: float, branch: float, margin: float
+    cut: np.ndarray,
+    approach: np.ndarray,
+    down: np.ndarray,
+    home: np.ndarray,
+    pre_cut: float,
+    branch: float,
+    margin: float,
 ) -> tuple[np.ndarray, np.ndarray, int]:
     """scene.harvest_configurations of one cluster, with its certainty: ``(pre, cut, status)``."""
     none = np.zeros(6)
@@ -285,3 +291,48 @@ def overlap(lo1: np.ndarray, hi1: np.ndarray, lo2: np.ndarray, hi2: np.ndarray) 
     if abs(dmin) <= TOL:
         return UNCERTAIN
     return CERTAIN_YES if dmin >= 0.0 else CERTAIN_NO
+
+
+@numba.njit(cache=True)
+def cluster_box(cut: np.ndarray, draws: np.ndarray, gap: float, margin: float):
+    """scene._build_cluster's approach, hanging axis and anti-collision box (lo, hi), up to rounding."""
+    yaw = math.atan2(cut[1], cut[0]) + draws[0]
+    approach = np.array([math.cos(yaw), math.sin(yaw), 0.0])
+    c, s = math.cos(draws[1]), math.sin(draws[1])
+    down = np.array([-approach[1] * s, approach[0] * s, -c])  # (0, 0, -1) turned about the approach
+    side = np.array(
+        [
+            down[1] * approach[2] - down[2] * approach[1],
+            down[2] * approach[0] - down[0] * approach[2],
+            down[0] * approach[1] - down[1] * approach[0],
+        ]
+    )
+    length, radius, berry = draws[2], draws[3], 0.013
+    lo = np.full(3, np.inf)
+    hi = np.full(3, -np.inf)
+    for ring in range(5):
+        level = 0.25 * ring
+        ring_r = (radius - berry) * (1.0 - 0.7 * level)
+        along = gap + berry + level * (length - 2 * berry)
+        n = 5 - ring
+        for k in range(n):
+            ang = draws[4 + ring] + 2 * math.pi * k / n
+            ca, sa = math.cos(ang), math.sin(ang)
+            for r in range(3):
+                v = cut[r] + along * down[r] + ring_r * (ca * approach[r] + sa * side[r])
+                lo[r] = min(lo[r], v - berry)
+                hi[r] = max(hi[r], v + berry)
+    return approach, down, lo - margin, hi + margin
+
+
+@numba.njit(cache=True)
+def too_close(cut: np.ndarray, others: np.ndarray, limit: float) -> int:
+    """Whether ``cut`` lies within ``limit`` of any row of ``others`` (k, 3), with its certainty."""
+    uncertain = False
+    for i in range(others.shape[0]):
+        d = math.sqrt((cut[0] - others[i, 0]) ** 2 + (cut[1] - others[i, 1]) ** 2 + (cut[2] - others[i, 2]) ** 2)
+        if d < limit - TOL:
+            return CERTAIN_YES
+        if d <= limit + TOL:
+            uncertain = True
+    return UNCERTAIN if uncertain else CERTAIN_NO

@@ -495,7 +495,7 @@ class GrapeHarvestEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
         """
         cfg = self.config
         joint = cfg.control == "joint"
-        home = tip_pose(HOME_Q)
+        home = _HOME_TIP
         # Nearest-first tour through the cuts (the order the task designates targets in).
         left = list(range(len(scene.clusters)))
         here_q, here_t = HOME_Q, home
@@ -506,7 +506,8 @@ class GrapeHarvestEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
             i = min(left, key=lambda j: float(np.linalg.norm(scene.clusters[j].cut_point - at)))
             left.remove(i)
             pair = harvest_configurations(scene.clusters[i]) if configs is None else configs[i]
-            legs.append((None if pair is None else pair[1], scene.clusters[i].tip_pose()))
+            # Clamp poses only count for end-effector control (they cost numpy calls on 3-vectors).
+            legs.append((None if pair is None else pair[1], home if joint else scene.clusters[i].tip_pose()))
             at = scene.clusters[i].cut_point
         if cfg.return_home or not legs:
             legs.append((HOME_Q, home))
@@ -609,6 +610,8 @@ class GrapeHarvestEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
         }
 
 
+#: The clamp's home pose.
+_HOME_TIP = tip_pose(HOME_Q)
 #: Largest joint change of one end-effector step (rad): the damped solution near a singularity is bounded.
 _MAX_EE_JOINT_STEP = 0.3
 

@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from collections.abc import Callable
 
 import numpy as np
 
@@ -380,66 +381,83 @@ def _try_scene_reference(rng: np.random.Generator, params: SceneParams, n: int) 
     return Scene(tuple(clusters), tuple(obstacles))
 
 
-class _Corridor:
-    """A cluster's approach corridor: the kernel's box, and :func:`corridor` itself when a test is close."""
+class _Candidate:
+    """A drawn cluster: the kernel's frame and box for the tests, :func:`_build_cluster`'s on demand (exact)."""
 
-    def __init__(self, cluster: Cluster) -> None:
-        self.cluster = cluster
-        self.lo, self.hi = _kernels.corridor(
-            cluster.cut_point, cluster.approach, cluster.down, _TOOL_CORNERS, PRE_CUT, 0.02
+    def __init__(self, cut: np.ndarray, draws: tuple[float, ...]) -> None:
+        self.cut_point, self.draws = cut, draws
+        self.approach, self.down, self.box_lo, self.box_hi = _kernels.cluster_box(
+            cut, np.array(draws), PEDUNCLE_GAP, BOX_MARGIN
         )
-        self._exact: tuple[np.ndarray, np.ndarray] | None = None
+        self._exact: Cluster | None = None
 
-    def exact(self) -> tuple[np.ndarray, np.ndarray]:
+    def exact(self) -> Cluster:
         if self._exact is None:
-            self._exact = corridor(self.cluster)
+            self._exact = _build_cluster(self.cut_point, self.draws)
         return self._exact
 
-    def overlaps(self, lo: np.ndarray, hi: np.ndarray) -> bool:
-        """``_overlap`` of the exact corridor with a box."""
-        st = _kernels.overlap(self.lo, self.hi, lo, hi)
+
+class _Box:
+    """An AABB for the tests: ``lo``/``hi`` (a candidate's may be the kernel's) and the exact one on demand."""
+
+    def __init__(
+        self, lo: np.ndarray, hi: np.ndarray, exact: Callable[[], tuple[np.ndarray, np.ndarray]] | None = None
+    ) -> None:
+        self.lo, self.hi = lo, hi
+        self._exact = exact
+
+    def exact(self) -> tuple[np.ndarray, np.ndarray]:
+        return (self.lo, self.hi) if self._exact is None else self._exact()
+
+    def overlaps(self, other: _Box) -> bool:
+        """``_overlap`` of the two exact boxes."""
+        st = _kernels.overlap(self.lo, self.hi, other.lo, other.hi)
         if st == _kernels.UNCERTAIN:
-            clo, chi = self.exact()
-            return _overlap(clo, chi, lo, hi)
+            return _overlap(*self.exact(), *other.exact())
         return st == _kernels.CERTAIN_YES
 
 
-def _boxes_overlap(lo: np.ndarray, hi: np.ndarray, los: list[np.ndarray], his: list[np.ndarray]) -> bool:
-    """``_overlaps_any`` for exact boxes, through the kernel (exact for exact inputs unless too close to call)."""
-    for blo, bhi in zip(los, his, strict=True):
-        st = _kernels.overlap(lo, hi, blo, bhi)
-        if st == _kernels.CERTAIN_YES or (st == _kernels.UNCERTAIN and _overlap(lo, hi, blo, bhi)):
-            return True
-    return False
+def _candidate_box(cand: _Candidate) -> _Box:
+    def exact() -> tuple[np.ndarray, np.ndarray]:
+        c = cand.exact()
+        return c.box_lo, c.box_hi
+
+    return _Box(cand.box_lo, cand.box_hi, exact)
+
+
+def _corridor_box(cand: _Candidate) -> _Box:
+    """The candidate's approach corridor (:func:`corridor`), the kernel's, exact on demand."""
+    lo, hi = _kernels.corridor(cand.cut_point, cand.approach, cand.down, _TOOL_CORNERS, PRE_CUT, 0.02)
+    return _Box(lo, hi, lambda: corridor(cand.exact()))
 
 
 class _Harvest:
-    """Harvest configurations of an accepted cluster: the kernel's (certified), numpy's on demand."""
+    """Harvest configurations of a candidate: the kernel's (certified reachable), numpy's on demand."""
 
-    def __init__(self, cluster: Cluster | None, fast: tuple[np.ndarray, np.ndarray]) -> None:
-        self.cluster = cluster
+    def __init__(self, cand: _Candidate | None, fast: tuple[np.ndarray, np.ndarray]) -> None:
+        self.cand = cand
         self.fast = fast
-        self._exact: tuple[np.ndarray, np.ndarray] | None = None if cluster is not None else fast
+        self._exact: tuple[np.ndarray, np.ndarray] | None = None if cand is not None else fast
 
     def exact(self) -> tuple[np.ndarray, np.ndarray]:
         if self._exact is None:
-            assert self.cluster is not None
-            configs = harvest_configurations(self.cluster)
+            assert self.cand is not None
+            configs = harvest_configurations(self.cand.exact())
             assert configs is not None  # the kernel certified it reachable
             self._exact = configs
         return self._exact
 
 
-def _fast_harvest(cluster: Cluster) -> _Harvest | None:
+def _fast_harvest(cand: _Candidate) -> _Harvest | None:
     """:func:`harvest_configurations` through the kernel; numpy's own when the kernel cannot be certain."""
     pre, cut, st = _kernels.harvest_configurations(
-        cluster.cut_point, cluster.approach, cluster.down, HOME_Q, PRE_CUT, _BRANCH_REACH, _LIMIT_MARGIN
+        cand.cut_point, cand.approach, cand.down, HOME_Q, PRE_CUT, _BRANCH_REACH, _LIMIT_MARGIN
     )
     if st == _kernels.CERTAIN_NO:
         return None
     if st == _kernels.CERTAIN_YES:
-        return _Harvest(cluster, (pre, cut))
-    exact = harvest_configurations(cluster)
+        return _Harvest(cand, (pre, cut))
+    exact = harvest_configurations(cand.exact())
     return None if exact is None else _Harvest(None, exact)
 
 
@@ -448,44 +466,45 @@ class _FastChecker:
 
     Its answers are :class:`_Checker`'s: a kernel's certain answer equals numpy's (see
     :mod:`agri_envs.arm._kernels`), and an uncertain one is replaced by the very call :class:`_Checker`
-    makes, on numpy's own harvest configurations.
+    makes, on the exact boxes and numpy's own harvest configurations.
     """
 
     def __init__(self) -> None:
-        self.lo: list[np.ndarray] = []
-        self.hi: list[np.ndarray] = []
+        self.boxes: list[_Box] = []
         self.harvests: list[_Harvest] = []
         self.points = _kernels.arm_points(HOME_Q)[None]  # arm points of every accepted configuration
-        self.corridors: list[_Corridor] = []
+        self.corridors: list[_Box] = []
 
     def _exact_configs(self) -> list[np.ndarray]:
         return [HOME_Q] + [q for h in self.harvests for q in h.exact()]
 
-    def free_with(self, lo: np.ndarray, hi: np.ndarray, extra: _Harvest | None) -> bool:
+    def free_with(self, box: _Box, extra: _Harvest | None) -> bool:
         """:meth:`_Checker.free_with` with the extra configurations of ``extra`` (a cluster's, or none)."""
-        if any(cor.overlaps(lo, hi) for cor in self.corridors):
+        if any(cor.overlaps(box) for cor in self.corridors):
             return False
         new = np.zeros((0,) + self.points.shape[1:])
         if extra is not None:
             new = np.stack([_kernels.arm_points(q) for q in extra.fast])
-        st = _kernels.collides(np.concatenate([self.points, new]), lo[None], hi[None], _CHECK_MARGIN)
+        st = _kernels.collides(np.concatenate([self.points, new]), box.lo[None], box.hi[None], _CHECK_MARGIN)
         if st == _kernels.UNCERTAIN:
+            lo, hi = box.exact()
             configs = self._exact_configs() + (list(extra.exact()) if extra is not None else [])
             st = int(ArmCollisionModel(lo[None], hi[None], margin=_CHECK_MARGIN).collides(np.array(configs)).any())
         if st == _kernels.CERTAIN_YES:
             return False
-        if extra is not None and self.lo:
-            los, his = np.array(self.lo), np.array(self.hi)
+        if extra is not None and self.boxes:
+            los, his = np.array([b.lo for b in self.boxes]), np.array([b.hi for b in self.boxes])
             st = _kernels.collides(new, los, his, _CHECK_MARGIN)
             if st == _kernels.UNCERTAIN:
-                st = int(ArmCollisionModel(los, his, margin=_CHECK_MARGIN).collides(np.array(extra.exact())).any())
+                model = ArmCollisionModel(los, his, margin=_CHECK_MARGIN)  # accepted boxes are exact
+                st = int(model.collides(np.array(extra.exact())).any())
             if st == _kernels.CERTAIN_YES:
                 return False
         return True
 
-    def add(self, lo: np.ndarray, hi: np.ndarray, extra: _Harvest | None, cor: _Corridor | None) -> None:
-        self.lo.append(lo)
-        self.hi.append(hi)
+    def add(self, box: _Box, extra: _Harvest | None, cor: _Box | None) -> None:
+        lo, hi = box.exact()
+        self.boxes.append(_Box(lo, hi))
         if extra is not None:
             self.harvests.append(extra)
             self.points = np.concatenate([self.points, np.stack([_kernels.arm_points(q) for q in extra.fast])])
@@ -498,37 +517,44 @@ def _try_scene(
 ) -> tuple[Scene, tuple[tuple[np.ndarray, np.ndarray], ...]] | None:
     """One try of :func:`_try_scene_reference`, the same draws and the same decisions, made fast.
 
-    Candidates are built only past the cut-distance check, and the tests that reject most of them run in
-    the certified kernels of :mod:`agri_envs.arm._kernels`. Returns the scene and the harvest
-    configurations of its clusters (the kernel's: equal to numpy's up to rounding).
+    Each candidate is tested on the kernels' frame, box, corridor and harvest configurations (certified,
+    :mod:`agri_envs.arm._kernels`) and built exactly only when it is kept or a test is too close to
+    call. Returns the scene and the harvest configurations of its clusters (the kernel's: equal to
+    numpy's up to rounding).
     """
     check = _FastChecker()
     clusters: list[Cluster] = []
     harvest: list[_Harvest] = []
-    cors: list[_Corridor] = []
+    cors: list[_Box] = []
+    cuts = np.zeros((0, 3))
     for _ in range(_MAX_ATTEMPTS):
         if len(clusters) == n:
             break
         cut = rng.uniform(CUT_LOW, CUT_HIGH)
         draws = _cluster_draws(rng, params.cluster_tilt)  # make_cluster's draws, whether or not it is kept
-        if any(np.linalg.norm(cut - o.cut_point) < 0.12 for o in clusters):
+        st = _kernels.too_close(cut, cuts, 0.12)
+        if st == _kernels.UNCERTAIN:
+            st = int(any(np.linalg.norm(cut - o.cut_point) < 0.12 for o in clusters))
+        if st == _kernels.CERTAIN_YES:
             continue
-        c = _build_cluster(cut, draws)
-        cor = _Corridor(c)
+        cand = _Candidate(cut, draws)
+        box = _candidate_box(cand)
+        cor = _corridor_box(cand)
         # Feasible scenes keep every approach corridor free; Luo's random scenes do not check it.
-        if params.feasible and any(cor.overlaps(blo, bhi) for blo, bhi in zip(check.lo, check.hi, strict=True)):
+        if params.feasible and any(cor.overlaps(b) for b in check.boxes):
             continue
-        if not params.feasible and _boxes_overlap(c.box_lo, c.box_hi, check.lo, check.hi):
+        if not params.feasible and any(box.overlaps(b) for b in check.boxes):
             continue  # two clusters cannot fill the same space
         # Both: "randomly given in the configuration space of the manipulator" (sec. 4.2): the arm can
         # stand at the cut and pre-cut poses without touching a box (C_free of eqs. 8-9).
-        configs = _fast_harvest(c)
-        if configs is None or not check.free_with(c.box_lo, c.box_hi, configs):
+        configs = _fast_harvest(cand)
+        if configs is None or not check.free_with(box, configs):
             continue
-        check.add(c.box_lo, c.box_hi, configs, cor if params.feasible else None)
+        check.add(box, configs, cor if params.feasible else None)
         cors.append(cor)
-        clusters.append(c)
+        clusters.append(cand.exact())
         harvest.append(configs)
+        cuts = np.concatenate([cuts, cut[None]])
     if len(clusters) < n:
         return None
     top = max(c.cut_point[2] for c in clusters) + 0.14
@@ -549,19 +575,18 @@ def _try_scene(
             Obstacle("cane", np.array([ROW_X - 0.01, y - 0.01, top - 0.55]), np.array([ROW_X + 0.01, y + 0.01, top]))
         )
     for o in obstacles:
-        if not check.free_with(o.lo, o.hi, None):
+        if not check.free_with(_Box(o.lo, o.hi), None):
             return None
-        check.add(o.lo, o.hi, None, None)
+        check.add(_Box(o.lo, o.hi), None, None)
     for _ in range(params.n_leaves):
         for _attempt in range(30):
             centre = rng.uniform([0.60, -0.45, -0.42], [ROW_X, 0.45, top])
             half = rng.uniform([0.03, 0.04, 0.015], [0.06, 0.07, 0.04])
             # Leaves are ours, not the paper's (its scenes hold clusters and their boxes): they never block an
             # approach corridor or a cut pose, so that the random part stays the paper's, the clusters.
-            lo, hi = centre - half, centre + half
-            if check.free_with(lo, hi, None) and not any(cor.overlaps(lo, hi) for cor in cors):
-                leaf = Obstacle("leaf", lo, hi)
-                obstacles.append(leaf)
-                check.add(leaf.lo, leaf.hi, None, None)
+            leaf = _Box(centre - half, centre + half)
+            if check.free_with(leaf, None) and not any(cor.overlaps(leaf) for cor in cors):
+                obstacles.append(Obstacle("leaf", leaf.lo, leaf.hi))
+                check.add(leaf, None, None)
                 break
     return Scene(tuple(clusters), tuple(obstacles)), tuple(h.fast for h in harvest)

@@ -76,8 +76,9 @@ class ArmSim:
 
     pybullet never frees a collision or visual shape that a body has used (``removeBody`` keeps it and
     ``removeCollisionShape`` refuses), so every scene leaves its shapes behind; once
-    :data:`SHAPES_PER_CLIENT` have piled up, the next :meth:`load_scene` reconnects to a fresh client
-    (the arm reloaded), which frees them all. Memory stays flat over any number of resets.
+    :data:`SHAPES_PER_CLIENT` have piled up, the next :meth:`load_scene` empties the world
+    (``resetSimulation``, which frees them all) and reloads the arm. Memory stays flat over any number
+    of resets.
 
     Args:
         gui: Open pybullet's own window (needs a display) instead of a DIRECT client.
@@ -87,8 +88,8 @@ class ArmSim:
 
     N_JOINTS = 6
     TIP_LINK = 7  # the clamp_centre link of the URDF
-    #: Shapes a client may accumulate before :meth:`load_scene` starts a fresh one (about 50 default scenes
-    #: without visuals: a few MiB at most, and one reconnect, ~15 ms, per 50 resets).
+    #: Shapes a client may accumulate before :meth:`load_scene` empties its world (about 50 default scenes
+    #: without visuals: about 2 MiB, and one reload of the arm, ~6 ms, per 50 resets).
     SHAPES_PER_CLIENT = 600
 
     def __init__(self, gui: bool = False, show_boxes: bool = True, visuals: bool = True) -> None:
@@ -103,6 +104,10 @@ class ArmSim:
         self.client = pb.connect(pb.GUI if self.gui else pb.DIRECT)
         if self.gui:
             pb.configureDebugVisualizer(pb.COV_ENABLE_GUI, 0, physicsClientId=self.client)
+        self._build()
+
+    def _build(self) -> None:
+        """Load the arm (and the static visuals) into the client's empty world."""
         self.robot = pb.loadURDF(str(URDF_PATH), useFixedBase=True, physicsClientId=self.client)
         self._shapes = 0  # collision and visual shapes made in this client since it connected
         self._boxes_body = -1  # the multibody whose links are the scene's boxes (-1: none)
@@ -195,8 +200,8 @@ class ArmSim:
     def load_scene(self, scene: Scene) -> None:
         """Replace the clusters, stems and leaves by those of ``scene`` (bodies of the last one removed)."""
         if self._shapes >= self.SHAPES_PER_CLIENT:  # free the shapes the earlier scenes left behind
-            pb.disconnect(physicsClientId=self._c)
-            self._connect()
+            pb.resetSimulation(physicsClientId=self._c)
+            self._build()
         c = self._c
         for body in self._visual_bodies + ([self._boxes_body] if self._boxes_body >= 0 else []):
             pb.removeBody(body, physicsClientId=c)
