@@ -478,3 +478,49 @@ def test_scalar_cluster_builder_equals_the_numpy_one_bit_for_bit():
             x, y = getattr(a, field), getattr(b, field)
             assert x.dtype == y.dtype and x.shape == y.shape and x.tobytes() == y.tobytes(), (i, field)
     assert r1.random() == r2.random()  # the same draws were consumed
+
+
+def _same_scene(a, b):
+    assert len(a.clusters) == len(b.clusters) and len(a.obstacles) == len(b.obstacles)
+    for x, y in zip(a.clusters, b.clusters, strict=True):
+        for field in ("cut_point", "approach", "down", "berries", "box_lo", "box_hi"):
+            assert getattr(x, field).tobytes() == getattr(y, field).tobytes(), field
+    for x, y in zip(a.obstacles, b.obstacles, strict=True):
+        assert x.kind == y.kind and x.lo.tobytes() == y.lo.tobytes() and x.hi.tobytes() == y.hi.tobytes()
+
+
+@pytest.mark.parametrize("unsure", [0.0, 0.3, 1.0])
+@pytest.mark.parametrize(
+    "params", [(2, 5, 4, 2, 0.17, False), (2, 5, 4, 2, 0.17, True), (5, 5, 8, 4, 0.5, False), (1, 1, 0, 0, 0.0, True)]
+)
+def test_fast_scene_sampler_equals_the_numpy_reference(params, unsure, monkeypatch):
+    """The certified kernels' answers, numpy's fallbacks (forced at random here) and the reference agree."""
+    from agri_envs.arm import _kernels
+    from agri_envs.arm.scene import (
+        SceneParams,
+        harvest_configurations,
+        sample_scene_and_configurations,
+        sample_scene_reference,
+    )
+
+    coin = np.random.default_rng(0)
+    for name in ("overlap", "collides", "too_close", "harvest_configurations"):
+        real = getattr(_kernels, name)
+
+        def shaky(*args, _real=real, _name=name):
+            out = _real(*args)
+            if coin.random() >= unsure:
+                return out
+            return (out[0], out[1], _kernels.UNCERTAIN) if _name == "harvest_configurations" else _kernels.UNCERTAIN
+
+        monkeypatch.setattr(_kernels, name, shaky)
+    p = SceneParams(*params)
+    for seed in range(12):
+        r1, r2 = np.random.default_rng(seed), np.random.default_rng(seed)
+        scene, configs = sample_scene_and_configurations(r1, p)
+        _same_scene(scene, sample_scene_reference(r2, p))
+        assert r1.random() == r2.random()  # the same draws
+        for c, (pre, cut) in zip(scene.clusters, configs, strict=True):
+            exact = harvest_configurations(c)
+            np.testing.assert_allclose(pre, exact[0], rtol=0, atol=1e-12)
+            np.testing.assert_allclose(cut, exact[1], rtol=0, atol=1e-12)
