@@ -524,3 +524,18 @@ def test_fast_scene_sampler_equals_the_numpy_reference(params, unsure, monkeypat
             exact = harvest_configurations(c)
             np.testing.assert_allclose(pre, exact[0], rtol=0, atol=1e-12)
             np.testing.assert_allclose(cut, exact[1], rtol=0, atol=1e-12)
+
+
+def test_frames_show_the_scene_not_the_collision_boxes():
+    """Visual shapes are made at the first frame of a scene; the boxes' collision links stay invisible."""
+    env = gym.make(ENV_ID, render_mode="rgb_array")
+    env.reset(seed=3)
+    first = env.render()
+    for seed in range(6):  # resets without frames make no visual shapes
+        env.reset(seed=seed)
+    env.reset(seed=3)
+    assert np.array_equal(env.render(), first)
+    # Berries are drawn in their purple (the bare collision boxes would hide them in white).
+    purple = (first[..., 2] > first[..., 1] + 40) & (first[..., 0] > first[..., 1] + 20)
+    assert purple.sum() > 200
+    env.close()

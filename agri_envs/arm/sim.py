@@ -72,7 +72,8 @@ class ArmSim:
     The anti-collision boxes of a scene are the links of one fixed multibody (one pybullet call per
     scene, and one closest-points query per step for all of them); pybullet's answers for a link are
     the same, bit for bit, as for a separate body with the same box. Visual shapes (berries, stems,
-    drawn boxes, platform) are only made when ``visuals`` is set, i.e. when the env renders.
+    drawn boxes, platform) are only made when ``visuals`` is set, i.e. when the env renders, and a
+    scene's own at its first frame (so resets between recorded episodes stay cheap).
 
     pybullet never frees a collision or visual shape that a body has used (``removeBody`` keeps it and
     ``removeCollisionShape`` refuses), so every scene leaves its shapes behind; once
@@ -114,6 +115,7 @@ class ArmSim:
         self._n_boxes = 0
         self._removed: set[int] = set()  # boxes of harvested clusters, out of the scene
         self._visual_bodies: list[int] = []  # per cluster: wire box, berries, peduncle; then obstacle boxes
+        self._scene: Scene | None = None  # loaded, its visual bodies not made yet
         if self.visuals:
             self._static_visuals()
 
@@ -230,7 +232,15 @@ class ArmSim:
                 linkJointAxis=[[0.0, 0.0, 1.0]] * n,
                 physicsClientId=c,
             )
-        if not self.visuals:
+            if self.visuals:  # the renderer would draw the bare collision boxes: make them invisible
+                for link in range(n):
+                    pb.changeVisualShape(self._boxes_body, link, rgbaColor=[0.0, 0.0, 0.0, 0.0], physicsClientId=c)
+        self._scene = scene  # its visual bodies are made at the next render()
+
+    def _scene_visuals(self) -> None:
+        """Berries, stems, leaves and drawn boxes of the loaded scene (made when a frame first needs them)."""
+        scene, self._scene = self._scene, None
+        if scene is None or not self.visuals:
             return
         for cl in scene.clusters:
             wire = [self._wire_box(cl.box_lo, cl.box_hi, _BOX)] if self.show_boxes else []
@@ -239,16 +249,18 @@ class ArmSim:
             half = tuple((0.5 * (ob.hi - ob.lo)).tolist())
             centre = tuple((0.5 * (ob.lo + ob.hi)).tolist())
             self._visual_bodies.append(self._visual_box(centre, half, _GREEN if ob.kind == "leaf" else _BROWN))
+        for index in self._removed:
+            self._hide_cluster(index)
 
     def remove_cluster(self, index: int) -> None:
         """Take a harvested cluster (berries, peduncle and box) out of the scene: it is in the clamp now."""
-        c = self._c
         self._removed.add(index)
-        if not self.visuals:
-            return
+        self._hide_cluster(index)
+
+    def _hide_cluster(self, index: int) -> None:
         k = self._per_cluster
         for body in self._visual_bodies[k * index : k * (index + 1)]:
-            pb.resetBasePositionAndOrientation(body, [0.0, 0.0, -50.0 - index], [0, 0, 0, 1], physicsClientId=c)
+            pb.resetBasePositionAndOrientation(body, [0.0, 0.0, -50.0 - index], [0, 0, 0, 1], physicsClientId=self._c)
 
     def set_joints(self, q: np.ndarray) -> None:
         """Put the arm at joint values ``q`` (rad), kinematically."""
@@ -288,6 +300,7 @@ class ArmSim:
     def render(self, width: int, height: int) -> np.ndarray:
         """An RGB frame (height, width, 3) from a fixed camera behind and beside the platform."""
         c = self._c
+        self._scene_visuals()
         view = pb.computeViewMatrix(
             cameraEyePosition=[-0.2, -1.35, 0.45],
             cameraTargetPosition=[0.6, 0.0, -0.25],
