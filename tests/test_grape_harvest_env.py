@@ -539,3 +539,15 @@ def test_frames_show_the_scene_not_the_collision_boxes():
     purple = (first[..., 2] > first[..., 1] + 40) & (first[..., 0] > first[..., 1] + 20)
     assert purple.sum() > 200
     env.close()
+
+
+def test_tool_rotation_equals_the_numpy_cross_version_bit_for_bit():
+    from agri_envs.arm.scene import tool_rotation
+
+    rng = np.random.default_rng(4)
+    for _ in range(2000):
+        approach, down = rng.normal(size=3), rng.normal(size=3)
+        z = approach / np.linalg.norm(approach)
+        x = down - np.dot(down, z) * z
+        x /= np.linalg.norm(x)
+        assert tool_rotation(approach, down).tobytes() == np.stack([x, np.cross(z, x), z], axis=1).tobytes()

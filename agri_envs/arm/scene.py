@@ -82,7 +82,11 @@ def tool_rotation(approach: np.ndarray, down: np.ndarray) -> np.ndarray:
     z = approach / np.linalg.norm(approach)
     x = down - np.dot(down, z) * z
     x /= np.linalg.norm(x)
-    return np.stack([x, np.cross(z, x), z], axis=1)
+    (z0, z1, z2), (x0, x1, x2) = z.tolist(), x.tolist()
+    rot = np.empty((3, 3))
+    rot[:, 0], rot[:, 2] = x, z
+    rot[:, 1] = (z1 * x2 - z2 * x1, z2 * x0 - z0 * x2, z0 * x1 - z1 * x0)  # np.cross(z, x), operation for operation
+    return rot
 
 
 @dataclasses.dataclass(frozen=True)
@@ -522,6 +526,9 @@ def _try_scene(
     call. Returns the scene and the harvest configurations of its clusters (the kernel's: equal to
     numpy's up to rounding).
     """
+    tilt = params.cluster_tilt
+    draw_low = np.array([*CUT_LOW, -_YAW_JITTER, -tilt, 0.10, 0.035] + [0.0] * 5)
+    draw_high = np.array([*CUT_HIGH, _YAW_JITTER, tilt, 0.16, 0.05] + [2 * math.pi] * 5)
     check = _FastChecker()
     clusters: list[Cluster] = []
     harvest: list[_Harvest] = []
@@ -530,8 +537,10 @@ def _try_scene(
     for _ in range(_MAX_ATTEMPTS):
         if len(clusters) == n:
             break
-        cut = rng.uniform(CUT_LOW, CUT_HIGH)
-        draws = _cluster_draws(rng, params.cluster_tilt)  # make_cluster's draws, whether or not it is kept
+        # The cut and make_cluster's draws (whether or not the cluster is kept) in one call: Generator.uniform
+        # computes every element, array or scalar bounds alike, as low + (high - low) * next_double, in order.
+        u = rng.uniform(draw_low, draw_high)
+        cut, draws = u[:3], tuple(u[3:].tolist())
         st = _kernels.too_close(cut, cuts, 0.12)
         if st == _kernels.UNCERTAIN:
             st = int(any(np.linalg.norm(cut - o.cut_point) < 0.12 for o in clusters))
@@ -578,10 +587,12 @@ def _try_scene(
         if not check.free_with(_Box(o.lo, o.hi), None):
             return None
         check.add(_Box(o.lo, o.hi), None, None)
+    leaf_low = np.array([0.60, -0.45, -0.42, 0.03, 0.04, 0.015])
+    leaf_high = np.array([ROW_X, 0.45, top, 0.06, 0.07, 0.04])
     for _ in range(params.n_leaves):
         for _attempt in range(30):
-            centre = rng.uniform([0.60, -0.45, -0.42], [ROW_X, 0.45, top])
-            half = rng.uniform([0.03, 0.04, 0.015], [0.06, 0.07, 0.04])
+            u = rng.uniform(leaf_low, leaf_high)  # centre, then half extents: the reference's two calls in one
+            centre, half = u[:3], u[3:]
             # Leaves are ours, not the paper's (its scenes hold clusters and their boxes): they never block an
             # approach corridor or a cut pose, so that the random part stays the paper's, the clusters.
             leaf = _Box(centre - half, centre + half)
