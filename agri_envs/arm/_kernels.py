@@ -104,9 +104,7 @@ def nearest_ik(pose: np.ndarray, ref: np.ndarray) -> tuple[np.ndarray, int]:
             t2 = math.atan2(ya, xa)
             t23 = t2 + t3
             c23, s23 = math.cos(t23), math.sin(t23)
-            r03 = np.array(
-                [[c1 * c23, -c1 * s23, -s1], [s1 * c23, -s1 * s23, c1], [-s23, -c23, 0.0]]
-            )
+            r03 = np.array([[c1 * c23, -c1 * s23, -s1], [s1 * c23, -s1 * s23, c1], [-s23, -c23, 0.0]])
             m = np.zeros((3, 3))  # R_03^T R_06
             for r in range(3):
                 for cc in range(3):

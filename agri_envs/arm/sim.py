@@ -110,7 +110,7 @@ class ArmSim:
     def _build(self) -> None:
         """Load the arm (and the static visuals) into the client's empty world."""
         self.robot = pb.loadURDF(str(URDF_PATH), useFixedBase=True, physicsClientId=self.client)
-        self._shapes = 0  # collision and visual shapes made in this client since it connected
+        self._shapes = 0  # collision and visual shapes made since the world was last emptied
         self._boxes_body = -1  # the multibody whose links are the scene's boxes (-1: none)
         self._n_boxes = 0
         self._removed: set[int] = set()  # boxes of harvested clusters, out of the scene
