@@ -551,3 +551,11 @@ def test_tool_rotation_equals_the_numpy_cross_version_bit_for_bit():
         x = down - np.dot(down, z) * z
         x /= np.linalg.norm(x)
         assert tool_rotation(approach, down).tobytes() == np.stack([x, np.cross(z, x), z], axis=1).tobytes()
+
+
+@pytest.mark.parametrize("kwargs", [{}, {"max_joint_step": 0.001, "time_slack": 100.0}])
+def test_time_limit_from_the_samplers_configurations_equals_numpys(kwargs):
+    env = gym.make(ENV_ID, **kwargs).unwrapped
+    for seed in range(40):
+        env.reset(seed=seed)
+        assert env.time_limit == env._time_limit(env.scene)  # configurations from harvest_configurations
