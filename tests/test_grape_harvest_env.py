@@ -350,3 +350,212 @@ def test_importing_the_sim_prints_nothing():
         [sys.executable, "-c", "import agri_envs.arm.sim"], capture_output=True, text=True, check=True, timeout=120
     )
     assert out.stdout == "" and out.stderr == ""
+
+
+@pytest.mark.parametrize(
+    ("name", "value", "expected"),
+    [
+        ("cluster_tilt", "0.1", "must be a number"),
+        ("position_tolerance", None, "must be a number"),
+        ("time_slack", True, "must be a number"),
+        ("orientation_weight", [0.1], "must be a number"),
+        ("min_clusters", "2", "must be an integer"),
+        ("n_leaves", None, "must be an integer"),
+        ("n_canes", 1.5, "must be an integer"),
+        ("feasible_scenes", "yes", "must be a bool"),
+        ("return_home", None, "must be a bool"),
+        ("control", None, "is invalid; expected one of 'joint', 'ee'"),
+        ("reward_type", 1, "is invalid; expected one of 'sparse', 'dense'"),
+    ],
+)
+def test_wrong_argument_types_are_named(name, value, expected):
+    with pytest.raises(ValueError, match=rf"{name}=.*{expected}"):
+        gym.make(ENV_ID, **{name: value})
+    env = gym.make(ENV_ID, cluster_tilt=0.2)  # numbers of either kind still pass
+    env.reset(seed=0)
+    env.step(np.zeros(6))
+    env.close()
+
+
+def test_wrong_reset_options_are_named_and_leave_the_env_usable():
+    env = gym.make(ENV_ID)
+    obs, _ = env.reset(seed=5)
+    for bad in (3, "scene", [1, 2], env.unwrapped.scene.clusters):
+        with pytest.raises(TypeError, match=r"reset option 'scene' must be an agri_envs.arm.scene.Scene"):
+            env.reset(options={"scene": bad})
+    with pytest.raises(TypeError, match="reset options must be a dict"):
+        env.reset(options="scene")
+    with pytest.raises(ValueError, match=r"reset options \['n_clusters'\] unknown"):
+        env.reset(options={"n_clusters": 2})
+    big = gym.make(ENV_ID, min_clusters=5, max_clusters=5)
+    big.reset(seed=0)
+    small = gym.make(ENV_ID, max_clusters=3)
+    with pytest.raises(ValueError, match=r"'scene' has 5 clusters.*max_clusters >= 5"):
+        small.reset(options={"scene": big.unwrapped.scene})
+    # The env is still usable: the same seed gives the same episode, and a fitting scene is placed.
+    again, _ = env.reset(seed=5)
+    assert all(np.array_equal(obs[k], again[k]) for k in obs)
+    env.step(np.zeros(6))
+    two = gym.make(ENV_ID, min_clusters=2, max_clusters=2)
+    two.reset(seed=1)
+    placed, info = small.reset(options={"scene": two.unwrapped.scene})
+    assert small.observation_space.contains(placed) and info["n_clusters"] == 2
+    for e in (env, big, small, two):
+        e.close()
+
+
+def test_episodes_equal_the_digests_recorded_before_resets_were_made_fast():
+    import json
+    from pathlib import Path
+
+    from grape_reference import digests
+
+    recorded = json.loads((Path(__file__).parent / "data" / "grape_harvest_digests.json").read_text())
+    assert digests() == recorded
+
+
+@pytest.mark.parametrize("kwargs", [{}, {"min_clusters": 5, "n_leaves": 8, "n_canes": 4, "control": "ee"}])
+def test_a_long_lived_env_equals_a_fresh_one_for_every_seed(kwargs):
+    """The reused pybullet client (bodies replaced, reconnected when shapes pile up) is a fresh env's."""
+    env = gym.make(ENV_ID, **kwargs)
+    env.unwrapped.sim.SHAPES_PER_CLIENT = 40  # reconnect every few resets
+    actions = np.random.default_rng(0).uniform(-1, 1, (5, 6)).astype(np.float32)
+    for seed in range(12):
+        fresh = gym.make(ENV_ID, **kwargs)
+        a = [env.reset(seed=seed)] + [env.step(x) for x in actions]
+        b = [fresh.reset(seed=seed)] + [fresh.step(x) for x in actions]
+        assert_same(
+            [(o[0], 0.0 if len(o) == 2 else o[1], o[-1]) for o in a],
+            [(o[0], 0.0 if len(o) == 2 else o[1], o[-1]) for o in b],
+        )
+        assert env.unwrapped.sim.min_distance(0.3) == fresh.unwrapped.sim.min_distance(0.3)
+        assert env.unwrapped.sim.collisions(0.1) == fresh.unwrapped.sim.collisions(0.1)
+        fresh.close()
+    env.close()
+
+
+def _numpy_make_cluster(rng, cut, tilt_max):
+    """make_cluster as first written, in numpy: the reference for the scalar version."""
+    import math
+
+    from agri_envs.arm.scene import BOX_MARGIN, PEDUNCLE_GAP, Cluster
+
+    def rotate(v, axis, angle):
+        c, s = math.cos(angle), math.sin(angle)
+        return v * c + np.cross(axis, v) * s + axis * np.dot(axis, v) * (1 - c)
+
+    yaw = math.atan2(cut[1], cut[0]) + rng.uniform(-math.radians(12.0), math.radians(12.0))
+    approach = np.array([math.cos(yaw), math.sin(yaw), 0.0])
+    down = rotate(np.array([0.0, 0.0, -1.0]), approach, rng.uniform(-tilt_max, tilt_max))
+    length, radius = rng.uniform(0.10, 0.16), rng.uniform(0.035, 0.05)
+    side = np.cross(down, approach)
+    berries = []
+    berry = 0.013
+    for level in np.linspace(0.0, 1.0, 5):
+        ring_r = (radius - berry) * (1.0 - 0.7 * level)
+        centre = cut + (PEDUNCLE_GAP + berry + level * (length - 2 * berry)) * down
+        n = 5 - int(round(4 * level))
+        phase = rng.uniform(0, 2 * math.pi)
+        for k in range(n):
+            a = phase + 2 * math.pi * k / n
+            offset = ring_r * (math.cos(a) * approach + math.sin(a) * side)
+            berries.append(np.concatenate([centre + offset, [berry]]))
+    b = np.array(berries)
+    lo = np.min(b[:, :3] - b[:, 3:], axis=0) - BOX_MARGIN
+    hi = np.max(b[:, :3] + b[:, 3:], axis=0) + BOX_MARGIN
+    return Cluster(cut.copy(), approach, down, b, lo, hi)
+
+
+def test_scalar_cluster_builder_equals_the_numpy_one_bit_for_bit():
+    from agri_envs.arm.scene import CUT_HIGH, CUT_LOW, make_cluster
+
+    r1, r2 = np.random.default_rng(11), np.random.default_rng(11)
+    for i in range(3000):
+        tilt = (0.0, 0.17, 0.5)[i % 3]
+        a = make_cluster(r1, r1.uniform(CUT_LOW, CUT_HIGH), tilt)
+        b = _numpy_make_cluster(r2, r2.uniform(CUT_LOW, CUT_HIGH), tilt)
+        for field in ("cut_point", "approach", "down", "berries", "box_lo", "box_hi"):
+            x, y = getattr(a, field), getattr(b, field)
+            assert x.dtype == y.dtype and x.shape == y.shape and x.tobytes() == y.tobytes(), (i, field)
+    assert r1.random() == r2.random()  # the same draws were consumed
+
+
+def _same_scene(a, b):
+    assert len(a.clusters) == len(b.clusters) and len(a.obstacles) == len(b.obstacles)
+    for x, y in zip(a.clusters, b.clusters, strict=True):
+        for field in ("cut_point", "approach", "down", "berries", "box_lo", "box_hi"):
+            assert getattr(x, field).tobytes() == getattr(y, field).tobytes(), field
+    for x, y in zip(a.obstacles, b.obstacles, strict=True):
+        assert x.kind == y.kind and x.lo.tobytes() == y.lo.tobytes() and x.hi.tobytes() == y.hi.tobytes()
+
+
+@pytest.mark.parametrize("unsure", [0.0, 0.3, 1.0])
+@pytest.mark.parametrize(
+    "params", [(2, 5, 4, 2, 0.17, False), (2, 5, 4, 2, 0.17, True), (5, 5, 8, 4, 0.5, False), (1, 1, 0, 0, 0.0, True)]
+)
+def test_fast_scene_sampler_equals_the_numpy_reference(params, unsure, monkeypatch):
+    """The certified kernels' answers, numpy's fallbacks (forced at random here) and the reference agree."""
+    from agri_envs.arm import _kernels
+    from agri_envs.arm.scene import (
+        SceneParams,
+        harvest_configurations,
+        sample_scene_and_configurations,
+        sample_scene_reference,
+    )
+
+    coin = np.random.default_rng(0)
+    for name in ("overlap", "collides", "too_close", "harvest_configurations"):
+        real = getattr(_kernels, name)
+
+        def shaky(*args, _real=real, _name=name):
+            out = _real(*args)
+            if coin.random() >= unsure:
+                return out
+            return (out[0], out[1], _kernels.UNCERTAIN) if _name == "harvest_configurations" else _kernels.UNCERTAIN
+
+        monkeypatch.setattr(_kernels, name, shaky)
+    p = SceneParams(*params)
+    for seed in range(12):
+        r1, r2 = np.random.default_rng(seed), np.random.default_rng(seed)
+        scene, configs = sample_scene_and_configurations(r1, p)
+        _same_scene(scene, sample_scene_reference(r2, p))
+        assert r1.random() == r2.random()  # the same draws
+        for c, (pre, cut) in zip(scene.clusters, configs, strict=True):
+            exact = harvest_configurations(c)
+            np.testing.assert_allclose(pre, exact[0], rtol=0, atol=1e-12)
+            np.testing.assert_allclose(cut, exact[1], rtol=0, atol=1e-12)
+
+
+def test_frames_show_the_scene_not_the_collision_boxes():
+    """Visual shapes are made at the first frame of a scene; the boxes' collision links stay invisible."""
+    env = gym.make(ENV_ID, render_mode="rgb_array")
+    env.reset(seed=3)
+    first = env.render()
+    for seed in range(6):  # resets without frames make no visual shapes
+        env.reset(seed=seed)
+    env.reset(seed=3)
+    assert np.array_equal(env.render(), first)
+    # Berries are drawn in their purple (the bare collision boxes would hide them in white).
+    purple = (first[..., 2] > first[..., 1] + 40) & (first[..., 0] > first[..., 1] + 20)
+    assert purple.sum() > 200
+    env.close()
+
+
+def test_tool_rotation_equals_the_numpy_cross_version_bit_for_bit():
+    from agri_envs.arm.scene import tool_rotation
+
+    rng = np.random.default_rng(4)
+    for _ in range(2000):
+        approach, down = rng.normal(size=3), rng.normal(size=3)
+        z = approach / np.linalg.norm(approach)
+        x = down - np.dot(down, z) * z
+        x /= np.linalg.norm(x)
+        assert tool_rotation(approach, down).tobytes() == np.stack([x, np.cross(z, x), z], axis=1).tobytes()
+
+
+@pytest.mark.parametrize("kwargs", [{}, {"max_joint_step": 0.001, "time_slack": 100.0}])
+def test_time_limit_from_the_samplers_configurations_equals_numpys(kwargs):
+    env = gym.make(ENV_ID, **kwargs).unwrapped
+    for seed in range(40):
+        env.reset(seed=seed)
+        assert env.time_limit == env._time_limit(env.scene)  # configurations from harvest_configurations

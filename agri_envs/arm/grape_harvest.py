@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import numbers
+from collections.abc import Mapping
 from typing import Any
 
 import gymnasium as gym
@@ -14,7 +16,13 @@ from agri_envs._actions import checked_action
 from agri_envs._config import StrictConfig, param
 from agri_envs.arm.kinematics import JOINT_LIMITS
 from agri_envs.arm.robot_model import goal_vector, tip_pose
-from agri_envs.arm.scene import HOME_Q, Scene, SceneParams, harvest_configurations, sample_scene
+from agri_envs.arm.scene import (
+    HOME_Q,
+    Scene,
+    SceneParams,
+    harvest_configurations,
+    sample_scene_and_configurations,
+)
 from agri_envs.arm.sim import ArmSim
 from agri_envs.arm.task import HarvestTask, goal_errors
 
@@ -75,6 +83,17 @@ class GrapeHarvestConfig(StrictConfig):
     show_boxes: bool = param(True, "draw the clusters' anti-collision boxes in rendered frames")
     render_width: int = param(480, "width of rendered frames", unit="px", low=64, high=4000)
     render_height: int = param(360, "height of rendered frames", unit="px", low=64, high=4000)
+
+    @classmethod
+    def _check_field(cls, f: dataclasses.Field[Any], value: Any) -> None:
+        """The base checks, after making sure a numeric argument got a number (not a string or None)."""
+        default = f.default
+        if isinstance(default, float) and (isinstance(value, bool) or not isinstance(value, numbers.Real)):
+            raise ValueError(
+                f"{cls.__name__}: {f.name}={value!r} must be a number (float in "
+                f"[{f.metadata['low']}, {f.metadata['high']}]), got {type(value).__name__}."
+            )
+        super()._check_field(f, value)
 
     def validate(self) -> None:
         """Check the cluster counts fit together."""
@@ -189,7 +208,12 @@ class GrapeHarvestEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
 
     The arm at its home configuration (the clamp tucked in 0.45 m in front of the base). The scene is
     drawn from the episode seed; ``reset(options={"scene": scene})`` places a given
-    :class:`~agri_envs.arm.scene.Scene` instead.
+    :class:`~agri_envs.arm.scene.Scene` instead (of at most ``max_clusters`` clusters: another type raises
+    ``TypeError``, too many clusters or another option key ``ValueError``). Resets reuse the env's
+    pybullet client (the scene's boxes are one multibody; visual shapes exist only with a render mode)
+    and take about 3 ms: the scene sampler tests its candidates with certified compiled kernels and
+    falls back to the numpy code wherever they cannot be sure, so scenes are bit for bit those of the
+    original numpy sampler (``tests/test_grape_harvest_env.py`` checks both against recorded digests).
 
     ## Episode End
 
@@ -311,7 +335,7 @@ class GrapeHarvestEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
             cfg.return_home,
             cfg.terminate_on_collision,
         )
-        self.sim = ArmSim(show_boxes=cfg.show_boxes)
+        self.sim = self._new_sim()
         self._window: Any = None
         home = tip_pose(HOME_Q)
         self.home_goal = goal_vector(home[:3, 3], home[:3, :3]).astype(np.float32).astype(np.float64)
@@ -327,13 +351,13 @@ class GrapeHarvestEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
     ) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
         """Draw a new scene (or place ``options["scene"]``) and put the arm home; reopens a closed sim."""
         super().reset(seed=seed)
-        options = dict(options or {})
-        scene = options.pop("scene", None)
-        if options:
-            raise ValueError(f"reset options {sorted(options)} unknown; allowed: ['scene']")
+        scene = self._scene_option(options)
         if self.sim.closed:  # Gymnasium's and SB3's checkers reset after close()
-            self.sim = ArmSim(show_boxes=self.config.show_boxes)
-        self.scene = scene if scene is not None else sample_scene(self.np_random, self.config.scene_params())
+            self.sim = self._new_sim()
+        configs = None
+        if scene is None:
+            scene, configs = sample_scene_and_configurations(self.np_random, self.config.scene_params())
+        self.scene = scene
         self.sim.load_scene(self.scene)
         self.q = HOME_Q.copy()
         self.sim.set_joints(self.q)
@@ -342,7 +366,7 @@ class GrapeHarvestEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
         self._path_length = 0.0
         self._achieved_goal = achieved
         self.elapsed_steps = 0
-        self.time_limit = self._time_limit(self.scene)
+        self.time_limit = self._time_limit(self.scene, configs)
         pos, ang = goal_errors(achieved, self.task.desired_goal)
         outcome = {"collision": False, "is_success": False, "distance": pos, "angle_error": ang}
         info = self._info(dict(outcome, final_target=self.task.final_target), False)
@@ -432,7 +456,7 @@ class GrapeHarvestEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
         harvested = state.pop("_harvested_bodies")
         self.__dict__.update(state)
         self._window = None
-        self.sim = ArmSim(show_boxes=self.config.show_boxes)
+        self.sim = self._new_sim()
         if self.scene is not None:
             self.sim.load_scene(self.scene)
             for i in np.flatnonzero(harvested):
@@ -441,11 +465,42 @@ class GrapeHarvestEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
 
     # -------------------------------------------------------------------------------------- helpers
 
-    def _time_limit(self, scene: Scene) -> int:
-        """Steps of the episode: ``time_slack`` x the straight tour at full speed, plus approaches."""
+    def _scene_option(self, options: Any) -> Scene | None:
+        """The ``scene`` reset option, checked: a :class:`Scene` of at most ``max_clusters`` clusters, or None."""
+        if options is None:
+            return None
+        if not isinstance(options, Mapping):
+            raise TypeError(f"reset options must be a dict (or None), got {type(options).__name__}: {options!r}")
+        unknown = sorted(str(k) for k in options if k != "scene")
+        if unknown:
+            raise ValueError(f"reset options {unknown} unknown; allowed: ['scene']")
+        scene = options.get("scene")
+        if scene is None:
+            return None
+        if not isinstance(scene, Scene):
+            raise TypeError(
+                f"reset option 'scene' must be an agri_envs.arm.scene.Scene (or None), got {type(scene).__name__}"
+            )
+        n = len(scene.clusters)
+        if n > self.config.max_clusters:
+            raise ValueError(
+                f"reset option 'scene' has {n} clusters; this env observes at most max_clusters="
+                f"{self.config.max_clusters} (make it with max_clusters >= {n})"
+            )
+        return scene
+
+    def _new_sim(self) -> ArmSim:
+        """A pybullet client for this env; visual shapes only when it renders (they cost time and memory)."""
+        return ArmSim(show_boxes=self.config.show_boxes, visuals=self.render_mode is not None)
+
+    def _time_limit(self, scene: Scene, configs: tuple[tuple[np.ndarray, np.ndarray], ...] | None = None) -> int:
+        """Steps of the episode: ``time_slack`` x the straight tour at full speed, plus approaches.
+
+        ``configs``: :func:`harvest_configurations` of every cluster, when the scene sampler already has them.
+        """
         cfg = self.config
         joint = cfg.control == "joint"
-        home = tip_pose(HOME_Q)
+        home = _HOME_TIP
         # Nearest-first tour through the cuts (the order the task designates targets in).
         left = list(range(len(scene.clusters)))
         here_q, here_t = HOME_Q, home
@@ -455,8 +510,9 @@ class GrapeHarvestEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
         while left:
             i = min(left, key=lambda j: float(np.linalg.norm(scene.clusters[j].cut_point - at)))
             left.remove(i)
-            configs = harvest_configurations(scene.clusters[i])
-            legs.append((None if configs is None else configs[1], scene.clusters[i].tip_pose()))
+            pair = harvest_configurations(scene.clusters[i]) if configs is None else configs[i]
+            # Clamp poses only count for end-effector control (they cost numpy calls on 3-vectors).
+            legs.append((None if pair is None else pair[1], home if joint else scene.clusters[i].tip_pose()))
             at = scene.clusters[i].cut_point
         if cfg.return_home or not legs:
             legs.append((HOME_Q, home))
@@ -472,7 +528,12 @@ class GrapeHarvestEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
                 steps += max(dist / cfg.max_ee_step, turn / cfg.max_ee_rotation)
             here_t = t
         approaches = 10 * (2 * len(scene.clusters) if cfg.return_home else 2 * len(scene.clusters) - 1)
-        return int(math.ceil(cfg.time_slack * steps)) + approaches
+        limit = cfg.time_slack * steps
+        if configs is not None and joint and abs(limit - round(limit)) < 1e-4:
+            # The sampler's configurations equal harvest_configurations' up to rounding (~1e-12 rad), which
+            # could only move a limit this close to an integer: take numpy's own.
+            return self._time_limit(scene)
+        return int(math.ceil(limit)) + approaches
 
     def _ee_target(self, a: np.ndarray) -> tuple[np.ndarray, bool]:
         """Joint values for a clamp-pose delta by damped least squares on the arm's Jacobian.
@@ -554,6 +615,8 @@ class GrapeHarvestEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
         }
 
 
+#: The clamp's home pose.
+_HOME_TIP = tip_pose(HOME_Q)
 #: Largest joint change of one end-effector step (rad): the damped solution near a singularity is bounded.
 _MAX_EE_JOINT_STEP = 0.3
 

@@ -26,9 +26,11 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from collections.abc import Callable
 
 import numpy as np
 
+from agri_envs.arm import _kernels
 from agri_envs.arm.collision import ArmCollisionModel
 from agri_envs.arm.kinematics import nearest_ik, within_limits
 from agri_envs.arm.robot_model import (
@@ -59,6 +61,12 @@ _YAW_JITTER = math.radians(12.0)
 _BRANCH_REACH = math.radians(90.0)
 _LIMIT_MARGIN = math.radians(10.0)
 _MAX_ATTEMPTS = 200
+#: Clearance the scene checker keeps between the arm's points and every box (m).
+_CHECK_MARGIN = 0.005
+#: Corners of the tool box in the clamp-centre frame, as :func:`corridor` sweeps them (m).
+_TOOL_CORNERS = np.array(
+    [[sx * TOOL_HALF_X, sy * TOOL_HALF_Y, z] for sx in (-1, 1) for sy in (-1, 1) for z in (TOOL_OVERHANG, -TOOL_LENGTH)]
+)
 
 
 def cut_pose(cut_point: np.ndarray, approach: np.ndarray, down: np.ndarray, offset: float = 0.0) -> np.ndarray:
@@ -74,7 +82,11 @@ def tool_rotation(approach: np.ndarray, down: np.ndarray) -> np.ndarray:
     z = approach / np.linalg.norm(approach)
     x = down - np.dot(down, z) * z
     x /= np.linalg.norm(x)
-    return np.stack([x, np.cross(z, x), z], axis=1)
+    (z0, z1, z2), (x0, x1, x2) = z.tolist(), x.tolist()
+    rot = np.empty((3, 3))
+    rot[:, 0], rot[:, 2] = x, z
+    rot[:, 1] = (z1 * x2 - z2 * x1, z2 * x0 - z0 * x2, z0 * x1 - z1 * x0)  # np.cross(z, x), operation for operation
+    return rot
 
 
 @dataclasses.dataclass(frozen=True)
@@ -150,26 +162,66 @@ def _rotate(v: np.ndarray, axis: np.ndarray, angle: float) -> np.ndarray:
 
 def make_cluster(rng: np.random.Generator, cut: np.ndarray, tilt_max: float) -> Cluster:
     """A cluster with its cutting point at ``cut``, approached from the base side with a random lean."""
-    yaw = math.atan2(cut[1], cut[0]) + rng.uniform(-_YAW_JITTER, _YAW_JITTER)
-    approach = np.array([math.cos(yaw), math.sin(yaw), 0.0])
-    down = _rotate(np.array([0.0, 0.0, -1.0]), approach, rng.uniform(-tilt_max, tilt_max))
+    return _build_cluster(cut, _cluster_draws(rng, tilt_max))
+
+
+def _cluster_draws(rng: np.random.Generator, tilt_max: float) -> tuple[float, ...]:
+    """The random numbers of one cluster, in the order :func:`make_cluster` has always drawn them.
+
+    Yaw jitter, lean, length, radius and the phases of the 5 berry rings: drawn before the cluster is
+    built, so that a candidate rejected for its cutting point alone costs nothing more than its draws.
+    """
+    jitter = rng.uniform(-_YAW_JITTER, _YAW_JITTER)
+    tilt = rng.uniform(-tilt_max, tilt_max)
     length, radius = rng.uniform(0.10, 0.16), rng.uniform(0.035, 0.05)
-    side = np.cross(down, approach)
-    berries = []
+    phases = [rng.uniform(0, 2 * math.pi) for _ in range(5)]
+    return (jitter, tilt, length, radius, *phases)
+
+
+def _build_cluster(cut: np.ndarray, draws: tuple[float, ...]) -> Cluster:
+    """The cluster of :func:`make_cluster` from its draws.
+
+    Written out in Python floats, operation for operation what the numpy version computed (``_rotate``,
+    ``np.cross``, the berry rings), so the result is bit for bit the same, only without the overhead of
+    numpy calls on 3-vectors (``tests/test_grape_harvest_env.py`` checks it against that version). The
+    one dot product of ``_rotate`` (the approach with the z axis) is a sum of exact zeros.
+    """
+    jitter, tilt, length, radius = draws[:4]
+    cx, cy, cz = float(cut[0]), float(cut[1]), float(cut[2])
+    yaw = math.atan2(cy, cx) + jitter
+    a0, a1, a2 = math.cos(yaw), math.sin(yaw), 0.0
+    # _rotate((0, 0, -1), approach, tilt) = v c + (approach x v) s + approach (approach . v) (1 - c)
+    c, s = math.cos(tilt), math.sin(tilt)
+    v0, v1, v2 = 0.0, 0.0, -1.0
+    x0, x1, x2 = a1 * v2 - a2 * v1, a2 * v0 - a0 * v2, a0 * v1 - a1 * v0
+    dot = a0 * v0 + a1 * v1 + a2 * v2
+    d0 = v0 * c + x0 * s + a0 * dot * (1 - c)
+    d1 = v1 * c + x1 * s + a1 * dot * (1 - c)
+    d2 = v2 * c + x2 * s + a2 * dot * (1 - c)
+    s0, s1, s2 = d1 * a2 - d2 * a1, d2 * a0 - d0 * a2, d0 * a1 - d1 * a0  # side = down x approach
     berry = 0.013
-    for level in np.linspace(0.0, 1.0, 5):  # rings of 5, 4, 3, 2, 1 berries: 15 spheres
+    rows = []
+    for ring, level in enumerate((0.0, 0.25, 0.5, 0.75, 1.0)):  # np.linspace(0, 1, 5): rings of 5, 4, 3, 2, 1
         ring_r = (radius - berry) * (1.0 - 0.7 * level)
-        centre = cut + (PEDUNCLE_GAP + berry + level * (length - 2 * berry)) * down
+        along = PEDUNCLE_GAP + berry + level * (length - 2 * berry)
+        e0, e1, e2 = cx + along * d0, cy + along * d1, cz + along * d2
         n = 5 - int(round(4 * level))
-        phase = rng.uniform(0, 2 * math.pi)
+        phase = draws[4 + ring]
         for k in range(n):
-            a = phase + 2 * math.pi * k / n
-            offset = ring_r * (math.cos(a) * approach + math.sin(a) * side)
-            berries.append(np.concatenate([centre + offset, [berry]]))
-    b = np.array(berries)
+            ang = phase + 2 * math.pi * k / n
+            ca, sa = math.cos(ang), math.sin(ang)
+            rows.append(
+                (
+                    e0 + ring_r * (ca * a0 + sa * s0),
+                    e1 + ring_r * (ca * a1 + sa * s1),
+                    e2 + ring_r * (ca * a2 + sa * s2),
+                    berry,
+                )
+            )
+    b = np.array(rows)
     lo = np.min(b[:, :3] - b[:, 3:], axis=0) - BOX_MARGIN
     hi = np.max(b[:, :3] + b[:, 3:], axis=0) + BOX_MARGIN
-    return Cluster(cut.copy(), approach, down, b, lo, hi)
+    return Cluster(np.array(cut, dtype=np.float64), np.array([a0, a1, a2]), np.array([d0, d1, d2]), b, lo, hi)
 
 
 def corridor(cluster: Cluster, grow: float = 0.02) -> tuple[np.ndarray, np.ndarray]:
@@ -213,7 +265,7 @@ class _Checker:
     """Validity of a scene under construction: harvest configurations and corridors stay free."""
 
     def __init__(self) -> None:
-        self.model = ArmCollisionModel(np.zeros((0, 3)), np.zeros((0, 3)), margin=0.005)
+        self.model = ArmCollisionModel(np.zeros((0, 3)), np.zeros((0, 3)), margin=_CHECK_MARGIN)
         self.lo: list[np.ndarray] = []
         self.hi: list[np.ndarray] = []
         self.configs: list[np.ndarray] = [HOME_Q]
@@ -242,18 +294,35 @@ class _Checker:
 
 def sample_scene(rng: np.random.Generator, params: SceneParams) -> Scene:
     """Draw the clusters, stems and leaves of one episode (see the module docstring for the guarantees)."""
+    return sample_scene_and_configurations(rng, params)[0]
+
+
+def sample_scene_reference(rng: np.random.Generator, params: SceneParams) -> Scene:
+    """:func:`sample_scene` as first written, all in numpy: the oracle the fast sampler is tested against."""
     n = int(rng.integers(params.min_clusters, params.max_clusters + 1))
     while True:
-        scene = _try_scene(rng, params, n)
+        scene = _try_scene_reference(rng, params, n)
         if scene is not None:
             return scene
+
+
+def sample_scene_and_configurations(
+    rng: np.random.Generator, params: SceneParams
+) -> tuple[Scene, tuple[tuple[np.ndarray, np.ndarray], ...]]:
+    """:func:`sample_scene`, and :func:`harvest_configurations` of each cluster (computed while drawing)."""
+    n = int(rng.integers(params.min_clusters, params.max_clusters + 1))
+    while True:
+        drawn = _try_scene(rng, params, n)
+        if drawn is not None:
+            return drawn
 
 
 def _overlaps_any(lo: np.ndarray, hi: np.ndarray, los: list[np.ndarray], his: list[np.ndarray]) -> bool:
     return any(_overlap(lo, hi, blo, bhi) for blo, bhi in zip(los, his, strict=True))
 
 
-def _try_scene(rng: np.random.Generator, params: SceneParams, n: int) -> Scene | None:
+def _try_scene_reference(rng: np.random.Generator, params: SceneParams, n: int) -> Scene | None:
+    """The sampler as first written (numpy throughout): the oracle of :func:`_try_scene`."""
     check = _Checker()
     clusters: list[Cluster] = []
     cors: list[tuple[np.ndarray, np.ndarray]] = []
@@ -314,3 +383,221 @@ def _try_scene(rng: np.random.Generator, params: SceneParams, n: int) -> Scene |
                 check.add(leaf.lo, leaf.hi, [], None)
                 break
     return Scene(tuple(clusters), tuple(obstacles))
+
+
+class _Candidate:
+    """A drawn cluster: the kernel's frame and box for the tests, :func:`_build_cluster`'s on demand (exact)."""
+
+    def __init__(self, cut: np.ndarray, draws: tuple[float, ...]) -> None:
+        self.cut_point, self.draws = cut, draws
+        self.approach, self.down, self.box_lo, self.box_hi = _kernels.cluster_box(
+            cut, np.array(draws), PEDUNCLE_GAP, BOX_MARGIN
+        )
+        self._exact: Cluster | None = None
+
+    def exact(self) -> Cluster:
+        if self._exact is None:
+            self._exact = _build_cluster(self.cut_point, self.draws)
+        return self._exact
+
+
+class _Box:
+    """An AABB for the tests: ``lo``/``hi`` (a candidate's may be the kernel's) and the exact one on demand."""
+
+    def __init__(
+        self, lo: np.ndarray, hi: np.ndarray, exact: Callable[[], tuple[np.ndarray, np.ndarray]] | None = None
+    ) -> None:
+        self.lo, self.hi = lo, hi
+        self._exact = exact
+
+    def exact(self) -> tuple[np.ndarray, np.ndarray]:
+        return (self.lo, self.hi) if self._exact is None else self._exact()
+
+    def overlaps(self, other: _Box) -> bool:
+        """``_overlap`` of the two exact boxes."""
+        st = _kernels.overlap(self.lo, self.hi, other.lo, other.hi)
+        if st == _kernels.UNCERTAIN:
+            return _overlap(*self.exact(), *other.exact())
+        return st == _kernels.CERTAIN_YES
+
+
+def _candidate_box(cand: _Candidate) -> _Box:
+    def exact() -> tuple[np.ndarray, np.ndarray]:
+        c = cand.exact()
+        return c.box_lo, c.box_hi
+
+    return _Box(cand.box_lo, cand.box_hi, exact)
+
+
+def _corridor_box(cand: _Candidate) -> _Box:
+    """The candidate's approach corridor (:func:`corridor`), the kernel's, exact on demand."""
+    lo, hi = _kernels.corridor(cand.cut_point, cand.approach, cand.down, _TOOL_CORNERS, PRE_CUT, 0.02)
+    return _Box(lo, hi, lambda: corridor(cand.exact()))
+
+
+class _Harvest:
+    """Harvest configurations of a candidate: the kernel's (certified reachable), numpy's on demand."""
+
+    def __init__(self, cand: _Candidate | None, fast: tuple[np.ndarray, np.ndarray]) -> None:
+        self.cand = cand
+        self.fast = fast
+        self._exact: tuple[np.ndarray, np.ndarray] | None = None if cand is not None else fast
+
+    def exact(self) -> tuple[np.ndarray, np.ndarray]:
+        if self._exact is None:
+            assert self.cand is not None
+            configs = harvest_configurations(self.cand.exact())
+            assert configs is not None  # the kernel certified it reachable
+            self._exact = configs
+        return self._exact
+
+
+def _fast_harvest(cand: _Candidate) -> _Harvest | None:
+    """:func:`harvest_configurations` through the kernel; numpy's own when the kernel cannot be certain."""
+    pre, cut, st = _kernels.harvest_configurations(
+        cand.cut_point, cand.approach, cand.down, HOME_Q, PRE_CUT, _BRANCH_REACH, _LIMIT_MARGIN
+    )
+    if st == _kernels.CERTAIN_NO:
+        return None
+    if st == _kernels.CERTAIN_YES:
+        return _Harvest(cand, (pre, cut))
+    exact = harvest_configurations(cand.exact())
+    return None if exact is None else _Harvest(None, exact)
+
+
+class _FastChecker:
+    """:class:`_Checker` answering through the certified kernels, and through numpy where they are unsure.
+
+    Its answers are :class:`_Checker`'s: a kernel's certain answer equals numpy's (see
+    :mod:`agri_envs.arm._kernels`), and an uncertain one is replaced by the very call :class:`_Checker`
+    makes, on the exact boxes and numpy's own harvest configurations.
+    """
+
+    def __init__(self) -> None:
+        self.boxes: list[_Box] = []
+        self.harvests: list[_Harvest] = []
+        self.points = _kernels.arm_points(HOME_Q)[None]  # arm points of every accepted configuration
+        self.corridors: list[_Box] = []
+
+    def _exact_configs(self) -> list[np.ndarray]:
+        return [HOME_Q] + [q for h in self.harvests for q in h.exact()]
+
+    def free_with(self, box: _Box, extra: _Harvest | None) -> bool:
+        """:meth:`_Checker.free_with` with the extra configurations of ``extra`` (a cluster's, or none)."""
+        if any(cor.overlaps(box) for cor in self.corridors):
+            return False
+        new = np.zeros((0,) + self.points.shape[1:])
+        if extra is not None:
+            new = np.stack([_kernels.arm_points(q) for q in extra.fast])
+        st = _kernels.collides(np.concatenate([self.points, new]), box.lo[None], box.hi[None], _CHECK_MARGIN)
+        if st == _kernels.UNCERTAIN:
+            lo, hi = box.exact()
+            configs = self._exact_configs() + (list(extra.exact()) if extra is not None else [])
+            st = int(ArmCollisionModel(lo[None], hi[None], margin=_CHECK_MARGIN).collides(np.array(configs)).any())
+        if st == _kernels.CERTAIN_YES:
+            return False
+        if extra is not None and self.boxes:
+            los, his = np.array([b.lo for b in self.boxes]), np.array([b.hi for b in self.boxes])
+            st = _kernels.collides(new, los, his, _CHECK_MARGIN)
+            if st == _kernels.UNCERTAIN:
+                model = ArmCollisionModel(los, his, margin=_CHECK_MARGIN)  # accepted boxes are exact
+                st = int(model.collides(np.array(extra.exact())).any())
+            if st == _kernels.CERTAIN_YES:
+                return False
+        return True
+
+    def add(self, box: _Box, extra: _Harvest | None, cor: _Box | None) -> None:
+        lo, hi = box.exact()
+        self.boxes.append(_Box(lo, hi))
+        if extra is not None:
+            self.harvests.append(extra)
+            self.points = np.concatenate([self.points, np.stack([_kernels.arm_points(q) for q in extra.fast])])
+        if cor is not None:
+            self.corridors.append(cor)
+
+
+def _try_scene(
+    rng: np.random.Generator, params: SceneParams, n: int
+) -> tuple[Scene, tuple[tuple[np.ndarray, np.ndarray], ...]] | None:
+    """One try of :func:`_try_scene_reference`, the same draws and the same decisions, made fast.
+
+    Each candidate is tested on the kernels' frame, box, corridor and harvest configurations (certified,
+    :mod:`agri_envs.arm._kernels`) and built exactly only when it is kept or a test is too close to
+    call. Returns the scene and the harvest configurations of its clusters (the kernel's: equal to
+    numpy's up to rounding).
+    """
+    tilt = params.cluster_tilt
+    draw_low = np.array([*CUT_LOW, -_YAW_JITTER, -tilt, 0.10, 0.035] + [0.0] * 5)
+    draw_high = np.array([*CUT_HIGH, _YAW_JITTER, tilt, 0.16, 0.05] + [2 * math.pi] * 5)
+    check = _FastChecker()
+    clusters: list[Cluster] = []
+    harvest: list[_Harvest] = []
+    cors: list[_Box] = []
+    cuts = np.zeros((0, 3))
+    for _ in range(_MAX_ATTEMPTS):
+        if len(clusters) == n:
+            break
+        # The cut and make_cluster's draws (whether or not the cluster is kept) in one call: Generator.uniform
+        # computes every element, array or scalar bounds alike, as low + (high - low) * next_double, in order.
+        u = rng.uniform(draw_low, draw_high)
+        cut, draws = u[:3], tuple(u[3:].tolist())
+        st = _kernels.too_close(cut, cuts, 0.12)
+        if st == _kernels.UNCERTAIN:
+            st = int(any(np.linalg.norm(cut - o.cut_point) < 0.12 for o in clusters))
+        if st == _kernels.CERTAIN_YES:
+            continue
+        cand = _Candidate(cut, draws)
+        box = _candidate_box(cand)
+        cor = _corridor_box(cand)
+        # Feasible scenes keep every approach corridor free; Luo's random scenes do not check it.
+        if params.feasible and any(cor.overlaps(b) for b in check.boxes):
+            continue
+        if not params.feasible and any(box.overlaps(b) for b in check.boxes):
+            continue  # two clusters cannot fill the same space
+        # Both: "randomly given in the configuration space of the manipulator" (sec. 4.2): the arm can
+        # stand at the cut and pre-cut poses without touching a box (C_free of eqs. 8-9).
+        configs = _fast_harvest(cand)
+        if configs is None or not check.free_with(box, configs):
+            continue
+        check.add(box, configs, cor if params.feasible else None)
+        cors.append(cor)
+        clusters.append(cand.exact())
+        harvest.append(configs)
+        cuts = np.concatenate([cuts, cut[None]])
+    if len(clusters) < n:
+        return None
+    top = max(c.cut_point[2] for c in clusters) + 0.14
+    obstacles = [
+        Obstacle("cordon", np.array([ROW_X - 0.02, -0.7, top - 0.02]), np.array([ROW_X + 0.02, 0.7, top + 0.02])),
+    ]
+    trunk_y = rng.uniform(-0.4, 0.4)
+    obstacles.append(
+        Obstacle(
+            "trunk",
+            np.array([ROW_X - 0.03, trunk_y - 0.03, -BASE_HEIGHT]),
+            np.array([ROW_X + 0.03, trunk_y + 0.03, top - 0.02]),
+        )
+    )
+    for _ in range(params.n_canes):
+        y = rng.uniform(-0.6, 0.6)
+        obstacles.append(
+            Obstacle("cane", np.array([ROW_X - 0.01, y - 0.01, top - 0.55]), np.array([ROW_X + 0.01, y + 0.01, top]))
+        )
+    for o in obstacles:
+        if not check.free_with(_Box(o.lo, o.hi), None):
+            return None
+        check.add(_Box(o.lo, o.hi), None, None)
+    leaf_low = np.array([0.60, -0.45, -0.42, 0.03, 0.04, 0.015])
+    leaf_high = np.array([ROW_X, 0.45, top, 0.06, 0.07, 0.04])
+    for _ in range(params.n_leaves):
+        for _attempt in range(30):
+            u = rng.uniform(leaf_low, leaf_high)  # centre, then half extents: the reference's two calls in one
+            centre, half = u[:3], u[3:]
+            # Leaves are ours, not the paper's (its scenes hold clusters and their boxes): they never block an
+            # approach corridor or a cut pose, so that the random part stays the paper's, the clusters.
+            leaf = _Box(centre - half, centre + half)
+            if check.free_with(leaf, None) and not any(cor.overlaps(leaf) for cor in cors):
+                obstacles.append(Obstacle("leaf", leaf.lo, leaf.hi))
+                check.add(leaf, None, None)
+                break
+    return Scene(tuple(clusters), tuple(obstacles)), tuple(h.fast for h in harvest)
