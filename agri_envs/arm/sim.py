@@ -8,6 +8,7 @@ anti-collision boxes only.
 
 from __future__ import annotations
 
+import ctypes
 import os
 import sys
 from typing import Any
@@ -21,8 +22,6 @@ from agri_envs.arm.scene import BASE_HEIGHT, PEDUNCLE_GAP, ROW_X, Cluster, Scene
 def _flush_c_stdout() -> None:
     """Flush the C library's stdio buffers (best effort)."""
     try:
-        import ctypes
-
         ctypes.CDLL(None).fflush(None)
     except (OSError, AttributeError):
         pass
