@@ -265,6 +265,18 @@ def test_frames_keep_one_shape_across_episodes(env_id, kwargs):
     assert len(shapes) == 1, f"frame shapes differ between episodes: {sorted(shapes)}"
 
 
+@pytest.mark.parametrize("env_id", env_ids("pickle_rendering"))
+def test_pickle_a_rendering_env(env_id):
+    """An env that has rendered pickles (the copy makes its own renderer) and draws frames of the same shape."""
+    env = gym.make(env_id, render_mode="rgb_array")
+    env.reset(seed=SEED)
+    frame = env.render()
+    copy = pickle.loads(pickle.dumps(env))
+    assert copy.render().shape == frame.shape
+    env.close()
+    copy.close()
+
+
 def _numeric_fields(env_id):
     """``(name, expected type word)`` of every int, float and bool argument of ``env_id``'s config."""
     config = gym.make(env_id, disable_env_checker=True).unwrapped.config
