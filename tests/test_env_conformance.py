@@ -6,9 +6,9 @@ sets. Checks: the env checkers of Gymnasium and SB3 with the render check on, th
 (two envs, same seed, same actions), pickling (the copy continues identically), every declared render
 mode, ``render()`` warning under ``render_mode=None``, reset after ``close()``, a clean interpreter
 exit for a script that never closes its env, Gymnasium's conventions on the made env (``gym.make(spec)``,
-``check_env`` on the wrapped env), frames of one shape across episodes, pickling an env that has rendered, and bad inputs (wrong types for
-every argument and reset option, malformed actions) refused with errors that name them, leaving the env
-working.
+``check_env`` on the wrapped env), frames of one shape across episodes, pickling an env that has
+rendered, and bad inputs (wrong types for every argument and reset option, malformed actions) refused
+with errors that name them, leaving the env working.
 """
 
 from __future__ import annotations
