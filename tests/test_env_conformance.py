@@ -6,9 +6,9 @@ sets. Checks: the env checkers of Gymnasium and SB3 with the render check on, th
 (two envs, same seed, same actions), pickling (the copy continues identically), every declared render
 mode, ``render()`` warning under ``render_mode=None``, reset after ``close()``, a clean interpreter
 exit for a script that never closes its env, Gymnasium's conventions on the made env (``gym.make(spec)``,
-``check_env`` on the wrapped env), frames of one shape across episodes, and bad inputs (wrong types for
-every argument and reset option, malformed actions) refused with errors that name them, leaving the env
-working.
+``check_env`` on the wrapped env), frames of one shape across episodes, pickling an env that has
+rendered, and bad inputs (wrong types for every argument and reset option, malformed actions) refused
+with errors that name them, leaving the env working.
 """
 
 from __future__ import annotations
@@ -263,6 +263,18 @@ def test_frames_keep_one_shape_across_episodes(env_id, kwargs):
         shapes.add(env.render().shape)
     env.close()
     assert len(shapes) == 1, f"frame shapes differ between episodes: {sorted(shapes)}"
+
+
+@pytest.mark.parametrize("env_id", env_ids("pickle_rendering"))
+def test_pickle_a_rendering_env(env_id):
+    """An env that has rendered pickles (the copy makes its own renderer) and draws frames of the same shape."""
+    env = gym.make(env_id, render_mode="rgb_array")
+    env.reset(seed=SEED)
+    frame = env.render()
+    copy = pickle.loads(pickle.dumps(env))
+    assert copy.render().shape == frame.shape
+    env.close()
+    copy.close()
 
 
 def _numeric_fields(env_id):
