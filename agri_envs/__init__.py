@@ -1,23 +1,42 @@
 """agri_envs: Gymnasium / PettingZoo environments for agricultural robots.
 
-Importing the package registers every env with string entry points, so no physics engine is imported
-until an env is made::
+Every env of the package, of either kind, is registered here: the Gymnasium ids with Gymnasium's
+registry (string entry points, so no physics engine is imported until an env is made), the PettingZoo
+ones in :data:`PARALLEL_ENVS`. :func:`make` builds any of them by id::
 
     import gymnasium as gym
-    import agri_envs  # noqa: F401
+    import agri_envs
 
-    env = gym.make("agri_envs/GreenhouseNav-v2", n_rows=4, growth=0.5)
+    env = gym.make("agri_envs/GreenhouseNav-v2", n_rows=4, growth=0.5)   # or agri_envs.make(...)
+    chain = agri_envs.make("robot_chain_v0", n_robots=8)                  # a PettingZoo ParallelEnv
+
+Package map: ``sim2d`` (the shared 2D engine), ``scenes`` (scene generators shared by the 2D envs),
+``rover`` (GreenhouseNav), ``coverage`` (GreenhouseCoverage), ``chain`` (robot_chain), ``arm``
+(GrapeHarvest); ``scenarios`` holds the named presets of env arguments.
 """
 
 from __future__ import annotations
 
+import importlib
+from typing import Any
+
+import gymnasium as gym
 from gymnasium.envs.registration import WrapperSpec, register, registry
 
 from agri_envs.arm.presets import REACH_PRESET  # pure data: no pybullet
 
 __version__ = "0.1.0"
 
-__all__ = ["__version__", "register_envs"]
+__all__ = ["PARALLEL_ENVS", "__version__", "env_ids", "env_version", "is_parallel_id", "make", "register_envs"]
+
+# ---------------------------------------------------------------- PettingZoo envs
+
+#: PettingZoo env ids -> the versioned module that provides ``parallel_env``, ``env`` and ``raw_env``.
+PARALLEL_ENVS: dict[str, str] = {
+    "robot_chain_v0": "agri_envs.chain.robot_chain_v0",
+}
+
+# ---------------------------------------------------------------- Gymnasium envs
 
 
 def register_envs() -> None:
@@ -49,3 +68,42 @@ def register_envs() -> None:
 
 
 register_envs()
+
+
+# ---------------------------------------------------------------- one door for both kinds
+
+
+def env_ids() -> list[str]:
+    """Every env id of the package: the Gymnasium ``agri_envs/...`` ids, then the PettingZoo ones."""
+    return sorted(i for i in registry if i.startswith("agri_envs/")) + sorted(PARALLEL_ENVS)
+
+
+def is_parallel_id(env_id: str) -> bool:
+    """Whether ``env_id`` names a PettingZoo (parallel, multi-agent) env of the package."""
+    return env_id in PARALLEL_ENVS
+
+
+def env_version(env_id: str) -> str:
+    """The version tag of an env id: ``v2`` for ``agri_envs/GreenhouseNav-v2``, ``v0`` for ``robot_chain_v0``.
+
+    Raises:
+        ValueError: For an id that is not the package's.
+    """
+    if env_id in PARALLEL_ENVS:
+        return env_id.rsplit("_", 1)[-1]
+    if env_id in registry and env_id.startswith("agri_envs/"):
+        return env_id.rsplit("-", 1)[-1]
+    raise ValueError(f"unknown env id {env_id!r}; known: {', '.join(env_ids())}")
+
+
+def make(env_id: str, **kwargs: Any) -> Any:
+    """Any env of the package by id: ``gym.make`` for a Gymnasium id, the native ``ParallelEnv`` otherwise.
+
+    Raises:
+        ValueError: For an unknown id (the message lists the known ones), or a bad env argument.
+    """
+    if env_id in PARALLEL_ENVS:
+        return importlib.import_module(PARALLEL_ENVS[env_id]).parallel_env(**kwargs)
+    if not (env_id in registry and env_id.startswith("agri_envs/")):
+        raise ValueError(f"unknown env id {env_id!r}; known: {', '.join(env_ids())}")
+    return gym.make(env_id, **kwargs)

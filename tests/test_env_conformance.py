@@ -26,7 +26,7 @@ import numpy as np
 import pytest
 from gymnasium.utils.env_checker import check_env, data_equivalence
 
-import agri_envs  # noqa: F401
+import agri_envs
 
 ENV_IDS = sorted(env_id for env_id in gym.registry if env_id.startswith("agri_envs/"))
 
@@ -332,3 +332,17 @@ def test_malformed_actions_are_named_and_leave_the_env_working(env_id):
     for _ in range(3):
         action = env.action_space.sample()
         assert data_equivalence(env.step(action), fresh.step(action), exact=True)
+
+
+def test_one_registry_builds_every_env_of_both_kinds():
+    ids = agri_envs.env_ids()
+    assert "robot_chain_v0" in ids and set(ENV_IDS) <= set(ids)
+    for env_id in ids:
+        env = agri_envs.make(env_id)
+        try:
+            assert agri_envs.env_version(env_id) in {"v0", "v1", "v2"}
+            assert hasattr(env, "possible_agents") == agri_envs.is_parallel_id(env_id)
+        finally:
+            env.close()
+    with pytest.raises(ValueError, match="unknown env id 'CartPole-v1'.*robot_chain_v0"):
+        agri_envs.make("CartPole-v1")

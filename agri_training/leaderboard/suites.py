@@ -29,6 +29,7 @@ from typing import Any
 
 import yaml
 
+import agri_envs
 from agri_training.core.envs import is_multiagent
 
 #: First evaluation seed of every suite; training must never use seeds at or above it.
@@ -128,8 +129,8 @@ class Suite:
 
     @property
     def env_version(self) -> str:
-        """The env's version tag, e.g. ``v1``."""
-        return self.env_id.rsplit("-", 1)[-1]
+        """The env's version tag, e.g. ``v1`` (``v0`` for ``robot_chain_v0``)."""
+        return agri_envs.env_version(self.env_id)
 
     @property
     def seeds(self) -> list[int]:
