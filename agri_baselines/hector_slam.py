@@ -8,7 +8,7 @@ matcher minimises ``sum_i (1 - M(S_i(xi)))^2`` over ``xi = (x, y, psi)`` (Kohlbr
 its gradient is the analytic derivative of that interpolation (eqs. 4-6). Note: the public ROS
 ``hector_mapping`` code weights the x and y differences of the gradient with the wrong interpolation
 factors (it uses the x factor for the x derivative); this module implements the paper's formula, and
-``tests/test_hector_slam.py`` checks it against finite differences.
+``tests/baselines/test_hector_slam.py`` checks it against finite differences.
 
 The map is updated only when the pose has moved or turned past a threshold since the last update. Every
 beam is traced with Bresenham's algorithm; each cell is updated at most once per scan (a cell that is

@@ -17,7 +17,7 @@ Resources are explicit: a run gets one CPU (one worker process, or a Ray task wi
 trains with ``torch_threads: 1`` (``torch.set_num_threads(1)``) in one process (``vec_env: subproc`` is
 refused). Local workers fork from a server that has imported torch (with ``torch._dynamo``, which the
 optimizers load on their first step), stable-baselines3 and the envs once, and each keeps its imports and
-loaded numba kernels for its next runs (every run seeds everything afresh: ``tests/test_sweep.py`` checks that
+loaded numba kernels for its next runs (every run seeds everything afresh: ``tests/training/test_sweep.py`` checks that
 a run's learning curve does not depend on where it ran). Every run's configuration is resolved before the first
 run starts, so a bad grid value fails at once with a ``ValueError`` that names it. A run that raises is
 recorded with its seed, grid point and exception (and ``OUT/<run>/error.txt`` with the traceback); the other

@@ -213,7 +213,7 @@ class GrapeHarvestEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
     pybullet client (the scene's boxes are one multibody; visual shapes exist only with a render mode)
     and take about 3 ms: the scene sampler tests its candidates with certified compiled kernels and
     falls back to the numpy code wherever they cannot be sure, so scenes are bit for bit those of the
-    original numpy sampler (``tests/test_grape_harvest_env.py`` checks both against recorded digests).
+    original numpy sampler (``tests/envs/test_grape_harvest_env.py`` checks both against recorded digests).
 
     ## Episode End
 

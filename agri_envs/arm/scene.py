@@ -183,7 +183,7 @@ def _build_cluster(cut: np.ndarray, draws: tuple[float, ...]) -> Cluster:
 
     Written out in Python floats, operation for operation what the numpy version computed (``_rotate``,
     ``np.cross``, the berry rings), so the result is bit for bit the same, only without the overhead of
-    numpy calls on 3-vectors (``tests/test_grape_harvest_env.py`` checks it against that version). The
+    numpy calls on 3-vectors (``tests/envs/test_grape_harvest_env.py`` checks it against that version). The
     one dot product of ``_rotate`` (the approach with the z axis) is a sum of exact zeros.
     """
     jitter, tilt, length, radius = draws[:4]

@@ -3,7 +3,7 @@
 The scan is rasterised primitive by primitive instead of beam by beam: each circle or capsule within
 range is turned into the interval of beam indices it can cover (its angular extent seen from the
 sensor), and only those beams are intersected with it. The cost is the number of (primitive, beam)
-pairs that can actually hit, not ``beams x primitives``. ``tests/test_sensors.py`` checks these kernels
+pairs that can actually hit, not ``beams x primitives``. ``tests/sim2d/test_sensors.py`` checks these kernels
 against :mod:`agri_envs.sim2d.reference`, which casts every ray one at a time with pymunk.
 """
 

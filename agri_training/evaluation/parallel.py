@@ -8,7 +8,7 @@ job, so every record equals the serial one except its ``wall_time_s``. Three bac
 - ``workers=1``: in this process, one episode after the other (the reference).
 - ``workers=N > 1``: a pool of N worker processes (``forkserver`` start method, so no thread or pybullet
   client of the caller is forked). Each worker builds an env once per configuration and reuses it across
-  the seeds it is handed (``reset(seed=...)`` re-seeds everything; ``tests/test_parallel.py`` checks
+  the seeds it is handed (``reset(seed=...)`` re-seeds everything; ``tests/training/test_parallel.py`` checks
   reused envs against fresh ones). The policy is built afresh for every episode, on every backend: not
   every policy forgets everything on ``episode_start`` (``luo-apf``'s sampling stream runs on across
   episodes), and an episode's record must depend on its seed only, not on which episodes its worker ran

@@ -4,7 +4,7 @@
 fast (pybullet bodies reused, scene sampling sped up); ``test_grape_harvest_env.py`` recomputes them. Write
 the file anew only for a deliberate change of the env's episodes (which also bumps its version):
 
-    python tests/grape_reference.py tests/data/grape_harvest_digests.json
+    python tests/envs/grape_reference.py tests/data/grape_harvest_digests.json
 """
 
 import hashlib

@@ -410,7 +410,7 @@ def test_episodes_equal_the_digests_recorded_before_resets_were_made_fast():
 
     from grape_reference import digests
 
-    recorded = json.loads((Path(__file__).parent / "data" / "grape_harvest_digests.json").read_text())
+    recorded = json.loads((Path(__file__).parents[1] / "data" / "grape_harvest_digests.json").read_text())
     assert digests() == recorded
 
 

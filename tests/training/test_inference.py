@@ -14,7 +14,7 @@ from agri_training.learned.inference import _EXP_TAYLOR, _INV_LN2, _LN2_HI, _LN2
 from agri_training.learned.policy import LearnedPolicy, load_weights, read_config
 from agri_training.learned.zoo import ZOO_DIR
 
-GOLDEN = Path(__file__).parent / "data" / "inference_golden.json"
+GOLDEN = Path(__file__).parents[1] / "data" / "inference_golden.json"
 
 
 # ---- an obviously written reference: Python floats, one operation at a time -----------------------------
@@ -205,7 +205,7 @@ def golden_actions() -> dict[str, list[list[str]]]:
 
 
 def test_zoo_actions_are_the_committed_bits():
-    """Written once (``python tests/test_inference.py``); any CPU must compute the same bits."""
+    """Written once (``python tests/training/test_inference.py``); any CPU must compute the same bits."""
     committed = json.loads(GOLDEN.read_text())
     assert golden_actions() == committed
 
