@@ -8,6 +8,7 @@ import yaml
 
 from agri_training import leaderboard as lb
 from agri_training.cli import main
+from agri_training.core.stats import newcombe_paired_interval
 from agri_training.report.page import Row, comparison_table, find_runs, markdown_to_html
 
 SUITE = {
@@ -76,6 +77,7 @@ def test_report_from_entries_and_fresh_runs(tmp_path, capsys):
     for line in md.splitlines():
         if line.startswith("!["):
             assert (out / line.split("(")[1].rstrip(")")).stat().st_size > 10_000
+    assert scan_report_tables(md, lb.load_entries(entries) + lb.load_entries(out / "results")) == []
     html = (out / "report.html").read_text()
     assert "<table>" in html and "<img" in html and "<h2 id='who-wins-where'>" in html
     assert json.loads((out / "summary.json").read_text())[0]["suite"] == "tiny-rover"
@@ -95,11 +97,16 @@ def test_claims_only_where_the_interval_supports_them():
     slow = _entry("slow", [True] * 20, [80.0 + 0.1 * i for i in range(20)])
     table, claims = comparison_table([Row(suite, fast, True), Row(suite, slow, True)])
     # 20/20 against 20/20: no claim on success; 30 s faster on every seed: a supported claim on time
-    assert claims == ["tiny-rover: `fast` beats `slow` on time [s] (-30.0 [-30.0, -30.0])."]
+    assert claims == [
+        "tiny-rover: `fast` beats `slow` on time [s] (-30.0 [-30.0, -30.0]; over the 20 episodes both completed)."
+    ]
     assert "+0.00 [-0.16, +0.16]" in table[2]
     near = _entry("near", [True] * 19 + [False], [50.0 + 0.1 * i for i in range(20)])
     _, claims = comparison_table([Row(suite, near, True), Row(suite, fast, True)])
-    assert claims == ["tiny-rover: `fast` matches `near` on time [s] (+0.0 [+0.0, +0.0])."]  # nothing on success
+    # nothing on success; time over the 19 episodes both completed
+    assert claims == [
+        "tiny-rover: `fast` matches `near` on time [s] (+0.0 [+0.0, +0.0]; over the 19 episodes both completed)."
+    ]
 
 
 def test_a_policy_that_fails_more_is_not_said_to_be_faster():
@@ -110,7 +117,76 @@ def test_a_policy_that_fails_more_is_not_said_to_be_faster():
     table, claims = comparison_table([Row(suite, crashing, True), Row(suite, steady, True)])
     assert len(claims) == 1 and claims[0].startswith("tiny-rover: `crashing` is worse than `steady` on success")
     assert "beats" not in claims[0] and "time" not in claims[0]
-    assert "**X better**" in table[2]  # the table still shows the raw time difference
+    # the table shows the time difference over the 10 episodes both completed, without a verdict
+    assert "not claimed: X succeeds less often" in table[2] and "over the 10 episodes both completed" in table[2]
+    assert "**X better**" not in table[2]
+
+
+def test_secondary_metrics_are_compared_over_episodes_both_completed():
+    suite = lb.parse_suite(SUITE)
+    # fails 18 of 20 (early, hence "fast"): only 2 episodes both completed, too few to compare times
+    failing = _entry("failing", [True, True] + [False] * 18, [10.0] * 20, kind="learned")
+    steady = _entry("steady", [True] * 20, [80.0 + 0.1 * i for i in range(20)])
+    table, claims = comparison_table([Row(suite, failing, True), Row(suite, steady, True)])
+    assert "n/a: both completed 2 of 20 episodes" in table[2] and "better" not in table[2].replace("P(X better)", "")
+    assert "time" not in claims[0]
+    # the same time on the shared successes: a match over them, however short the failures were
+    mixed = _entry("mixed", [True] * 15 + [False] * 5, [80.0 + 0.1 * i for i in range(15)] + [5.0] * 5)
+    table, claims = comparison_table([Row(suite, mixed, True), Row(suite, steady, True)])
+    assert "match over the 15 episodes both completed" in table[2]
+
+
+def _success_contradicts(table_line, success):
+    """Why a paired-table row's verdicts contradict the success rates (or None)."""
+    cells = [c.strip() for c in table_line.strip().strip("|").split("|")]
+    x, y = (n.strip("` ") for n in cells[0].split(" vs "))
+    sx, sy = success[x], success[y]
+    lo, hi = newcombe_paired_interval(sx, sy)
+    for cell in cells[2:]:  # the secondary metrics
+        for word, contradicted in (("**X better**", hi < 0), ("**X worse**", lo > 0)):
+            if word not in cell:
+                continue
+            if contradicted:
+                return f"{cells[0]}: {word} though the success rates say otherwise ({sum(sx)} vs {sum(sy)})"
+            both = sum(a and b for a, b in zip(sx, sy, strict=True))
+            if f"over the {both} episodes both completed" not in cell and "episodes both completed" in cell:
+                return f"{cells[0]}: compared over other episodes than the {both} both completed"
+            if "episodes both completed" in cell and both < lb.MIN_COMPLETED_PAIRS:
+                return f"{cells[0]}: compared over {both} episodes"
+    return None
+
+
+def scan_report_tables(md, entries):
+    """Every paired-table row of a report page checked against the success rates of its entries."""
+    suite = None
+    problems = []
+    for line in md.splitlines():
+        if line.startswith("#### "):
+            suite = line[5:].split(" (v")[0]
+        elif line.startswith("| `") and " vs `" in line.split("|")[1]:
+            success = {
+                e["policy"]["name"]: lb.episode_values(e, "success_rate")[0]
+                for e in entries
+                if e["suite"]["name"] == suite
+            }
+            problem = _success_contradicts(line, success)
+            if problem:
+                problems.append(f"{suite}: {problem}")
+    return problems
+
+
+def test_committed_entries_make_no_claim_their_success_rates_contradict():
+    suites, entries = lb.load_suites(lb.SUITES_DIR), lb.load_entries(lb.ENTRIES_DIR)
+    md = []
+    for suite in suites:
+        group = [Row(suite, e, True) for e in entries if e["suite"]["name"] == suite.name]
+        if len(group) > 1:
+            md += [f"#### {suite.name} (v{suite.version})", *comparison_table(group)[0]]
+    assert sum(line.startswith("| `") for line in md) >= 10
+    assert scan_report_tables("\n".join(md), entries) == []
+    # e.g. ppo-greenhouse-nav (0.10 on greenhouse-corridor) is not "better" on time or path length there
+    corridor = "\n".join(md).split("#### greenhouse-corridor")[1].split("####")[0]
+    assert "**X better**" not in corridor
 
 
 def test_learned_policies_are_compared_with_every_baseline():

@@ -49,11 +49,56 @@ def episode_values(entry: Mapping[str, Any], metric: str) -> tuple[list[Any], bo
     return [], False
 
 
-def compare_entries(x: Mapping[str, Any], y: Mapping[str, Any], metric: str, higher_is_better: bool) -> Any:
-    """Paired comparison of two entries of one suite on one summary key (None when not comparable)."""
+#: Metrics that measure progress toward the task itself: compared over every episode, like the rates.
+PROGRESS_METRICS = frozenset({"coverage", "waypoints_reached"})
+
+#: Fewest episodes that both policies completed for a comparison of a secondary metric.
+MIN_COMPLETED_PAIRS = 5
+
+
+def is_conditional(metric: str) -> bool:
+    """True for a metric compared only over the episodes both policies completed (time, path length, ...).
+
+    Rates and progress metrics (:data:`PROGRESS_METRICS`) are compared over every episode; any other
+    metric describes how an episode went, and a failed episode (a crash that ends it early, a chain that
+    never arrived) makes it look better than it is.
+    """
+    if metric in ("success_rate", "collision_rate") or metric.endswith("_rate"):
+        return False
+    key = metric.split("_", 1)[1] if metric.startswith(("mean_", "iqm_")) else metric
+    return key not in PROGRESS_METRICS
+
+
+def paired_values(
+    x: Mapping[str, Any], y: Mapping[str, Any], metric: str
+) -> tuple[list[Any], list[Any], bool, int | None]:
+    """The per-episode values of two entries on one metric, paired by seed, as the comparison uses them.
+
+    Returns:
+        ``(vx, vy, binary, completed)``: for a conditional metric (:func:`is_conditional`) the values of
+        episodes that either policy failed are None (the comparison drops them) and ``completed`` counts the
+        episodes both completed; otherwise ``completed`` is None.
+    """
     vx, binary = episode_values(x, metric)
     vy, _ = episode_values(y, metric)
-    if not vx or len(vx) != len(vy):
+    if not vx or len(vx) != len(vy) or not is_conditional(metric):
+        return vx, vy, binary, None
+    sx, _ = episode_values(x, "success_rate")
+    sy, _ = episode_values(y, "success_rate")
+    both = [a and b for a, b in zip(sx, sy, strict=True)]
+    vx = [v if ok else None for v, ok in zip(vx, both, strict=True)]
+    vy = [v if ok else None for v, ok in zip(vy, both, strict=True)]
+    return vx, vy, binary, sum(both)
+
+
+def compare_entries(x: Mapping[str, Any], y: Mapping[str, Any], metric: str, higher_is_better: bool) -> Any:
+    """Paired comparison of two entries of one suite on one summary key (None when not comparable).
+
+    Secondary metrics are compared over the episodes both completed, and not at all when fewer than
+    :data:`MIN_COMPLETED_PAIRS` are.
+    """
+    vx, vy, binary, completed = paired_values(x, y, metric)
+    if not vx or len(vx) != len(vy) or (completed is not None and completed < MIN_COMPLETED_PAIRS):
         return None
     try:
         return paired_comparison(vx, vy, metric, higher_is_better, binary=binary)

@@ -77,9 +77,12 @@ How to read the numbers:
   with a true rate as low as 84 %. Means use a percentile bootstrap over episodes.
 - A policy *beats* another only where the paired comparison's interval of the difference excludes zero; it
   *matches* only where that interval lies within a small margin (0.10 for rates, 5 % of the other's mean
-  for times and lengths). Everything else is *not distinguishable* with these episodes. A policy that is
-  worse on a suite's first ranking metric (success) is never said to beat another on the others: its
-  failed episodes end early, which makes it look faster without being so.
+  for times and lengths). Everything else is *not distinguishable* with these episodes.
+- Secondary metrics (time, path length, clearance, cross-track, path ratio, ...) are compared only over
+  the episodes that both policies completed, and not at all (*n/a*) when fewer than 5 are: a failed
+  episode ends early, which makes a policy look faster or straighter without being so. Rates and progress
+  (coverage, waypoints reached) are compared over every episode. A policy that is worse on a suite's first
+  ranking metric (success) is never said to beat another on the others, nor a better one to be worse.
 - **P** marks *privileged* policies: they use what a real robot would not have (such as the true pose),
   so they show what the controller could do with perfect localization, not what the robot does.
 """
@@ -222,10 +225,14 @@ def _margin(metric: str, reference: float) -> float:
 
 
 def compare(x: Mapping[str, Any], y: Mapping[str, Any], metric: str, higher_is_better: bool) -> Any:
-    """Paired comparison of entry ``x`` with entry ``y`` on a suite metric, with the report's margins."""
-    vx, binary = lb.episode_values(x, metric)
-    vy, _ = lb.episode_values(y, metric)
-    if not vx or len(vx) != len(vy):
+    """Paired comparison of entry ``x`` with entry ``y`` on a suite metric, with the report's margins.
+
+    Secondary metrics (time, path length, clearance, cross-track, path ratio, ...) are compared over the
+    episodes both policies completed (:func:`agri_training.leaderboard.paired_values`); with fewer than
+    :data:`agri_training.leaderboard.MIN_COMPLETED_PAIRS` of them, not at all (None).
+    """
+    vx, vy, binary, completed = lb.paired_values(x, y, metric)
+    if not vx or len(vx) != len(vy) or (completed is not None and completed < lb.MIN_COMPLETED_PAIRS):
         return None
     finite = [float(v) for v in vy if v is not None and math.isfinite(float(v))]
     if not finite:
@@ -235,6 +242,12 @@ def compare(x: Mapping[str, Any], y: Mapping[str, Any], metric: str, higher_is_b
         return paired_comparison(vx, vy, metric, higher_is_better, binary=binary, margin=_margin(metric, ref))
     except ValueError:
         return None
+
+
+def _completed(x: Mapping[str, Any], y: Mapping[str, Any], metric: str) -> tuple[int | None, int]:
+    """(episodes both completed or None for an unconditional metric, episodes in all) of a pair."""
+    vx, _, _, completed = lb.paired_values(x, y, metric)
+    return completed, len(vx)
 
 
 _UNITS = {"episode_time": "s", "path_length": "m", "min_clearance": "m", "ate_rmse": "m", "final_position_error": "m"}
@@ -273,26 +286,42 @@ def comparison_table(group: Sequence[Row]) -> tuple[list[str], list[str]]:
         wins: list[str] = []
         losses: list[str] = []
         same: list[str] = []
-        primary_lost = False
+        primary = "inconclusive"
         for i, rk in enumerate(suite.rank_by):
             c = compare(a.entry, b.entry, rk.metric, rk.higher_is_better)
+            completed, n = _completed(a.entry, b.entry, rk.metric)
             if c is None:
-                cells.append("n/a")
+                cells.append(
+                    f"n/a: both completed {completed} of {n} episodes"
+                    if completed is not None and completed < lb.MIN_COMPLETED_PAIRS
+                    else "n/a"
+                )
                 continue
             fmt = "{:+" + lb.metric_format(rk.metric)[2:]
-            word = {"better": "**X better**", "worse": "**X worse**", "matches": "match", "inconclusive": "-"}
+            verdict = c.verdict
+            if i == 0:
+                primary = verdict
+            # The one that succeeds less often is never said to do better on the others, nor the one that
+            # succeeds more often worse: the episodes both completed are too few a share to rank them on.
+            elif (primary == "worse" and verdict == "better") or (primary == "better" and verdict == "worse"):
+                verdict = "not claimed"
+            word = {
+                "better": "**X better**",
+                "worse": "**X worse**",
+                "matches": "match",
+                "inconclusive": "-",
+                "not claimed": f"- (not claimed: X succeeds {'less' if primary == 'worse' else 'more'} often)",
+            }
+            over = f" over the {completed} episodes both completed" if completed is not None else ""
             cells.append(
                 f"{fmt.format(c.difference)} [{fmt.format(c.ci[0])}, {fmt.format(c.ci[1])}], "
-                f"P(X better) {c.prob_improvement:.2f}; {word[c.verdict]}"
+                f"P(X better) {c.prob_improvement:.2f}; {word[verdict]}{over}"
             )
             text = (
-                f"{_metric_name(rk.metric)} ({fmt.format(c.difference)} [{fmt.format(c.ci[0])}, {fmt.format(c.ci[1])}])"
+                f"{_metric_name(rk.metric)} ({fmt.format(c.difference)} [{fmt.format(c.ci[0])}, {fmt.format(c.ci[1])}]"
+                f"{'; ' + over.strip() if over else ''})"
             )
-            if i == 0 and c.verdict == "worse":
-                primary_lost = True
-            if primary_lost and i > 0 and c.verdict == "better":
-                continue  # e.g. "faster" only because its failed episodes ended early: not a win
-            {"better": wins, "worse": losses, "matches": same}.get(c.verdict, []).append(text)
+            {"better": wins, "worse": losses, "matches": same}.get(verdict, []).append(text)
         lines.append("| " + " | ".join(cells) + " |")
         parts = []
         if wins:
@@ -534,7 +563,15 @@ def build_report(
     runs = find_runs(runs_dir) + zoo_runs()
     env_ids = list(dict.fromkeys(s.env_id for s in suites))
 
-    parts = ["# agri_envs evaluation report", "", INTRO, "Envs in this report:", ""]
+    parts = ["# agri_envs evaluation report", "", INTRO]
+    if episodes is not None:
+        parts += [
+            f"**Quick look: {episodes} episodes per suite level** (`--episodes {episodes}`), evaluated afresh "
+            "instead of the committed entries. Intervals from so few episodes are wide or degenerate; read the "
+            "claims below as a smoke test, not as results.",
+            "",
+        ]
+    parts += ["Envs in this report:", ""]
     parts += [f"- [{e}](#{_anchor(e)})" for e in env_ids]
     parts += ["", "## Who wins where", ""]
     claims_all = []
