@@ -9,7 +9,7 @@ import yaml
 from agri_training import leaderboard as lb
 from agri_training.cli import main
 from agri_training.core.stats import newcombe_paired_interval
-from agri_training.report.page import Row, comparison_table, find_runs, markdown_to_html
+from agri_training.report.page import Row, comparison_table, find_runs, markdown_to_html, zoo_runs
 
 SUITE = {
     "name": "tiny-rover",
@@ -233,3 +233,22 @@ def test_progress_names_the_block_and_prints_no_rows_per_episode(capsys, monkeyp
     assert "[1/2] harik-apf-gt on GreenhouseNav-v2 [a]" in err and "[2/2] harik-apf-gt on GreenhouseNav-v2 [b]" in err
     assert "4/4" in err and "success 2/2 of 2" in err  # one bar over the whole run (its ETA), per-block counts
     assert "seed" not in err and [d["label"] for d in docs] == ["a", "b"]
+
+
+def test_learning_curves_only_against_baselines_of_the_same_task_and_scene(tmp_path):
+    from agri_training.report.page import curve_suite, learning_curves
+
+    suites = {s.name: s for s in lb.load_suites(lb.SUITES_DIR)}
+    zoo = {run["name"]: run for run in zoo_runs()}
+    # the reach learner trained on one cluster: not the table2 scenes (2-5 clusters, return home)
+    assert curve_suite(zoo["zoo/sac-her-grape-reach"], list(suites.values())).name == "grape-reach"
+    # the rover trained on the default scene (people walking): greenhouse-default, not sim-loop
+    assert curve_suite(zoo["zoo/ppo-greenhouse-nav"], list(suites.values())).name == "greenhouse-default"
+    entries = lb.load_entries(lb.ENTRIES_DIR)
+    nav = [Row(s, e, True) for s in suites.values() for e in entries if e["suite"]["name"] == s.name]
+    md = "\n".join(learning_curves("agri_envs/GreenhouseNav-v2", [zoo["zoo/ppo-greenhouse-nav"]], nav, tmp_path))
+    assert "GreenhouseNav-v2_greenhouse-default_learning_success.png" in md and "sim-loop" not in md
+    # a run on a scene no suite has: drawn alone, with a note
+    other = {**zoo["zoo/ppo-greenhouse-nav"], "config": {"env_kwargs": {"n_rows": 7}}, "name": "mine"}
+    md = "\n".join(learning_curves("agri_envs/GreenhouseNav-v2", [other], nav, tmp_path))
+    assert "no suite has this run's env arguments" in md and "_own-scene_learning_success.png" in md

@@ -30,6 +30,7 @@ from typing import Any
 import gymnasium as gym
 import yaml
 
+from agri_envs.scenarios import scenario as get_scenario
 from agri_training import leaderboard as lb
 from agri_training.core.documents import git_commit
 from agri_training.core.envs import make_env
@@ -52,12 +53,6 @@ SECTION_HOOKS: dict[str, str] = {
 #: with theirs by an interval of the difference, not by eye.
 PAPER_RATES: dict[str, tuple[int, int, str]] = {
     "grape-table2": (9, 10, "Luo et al. 2018, Table 2"),
-}
-
-#: The suite whose baseline results are drawn as bands on an env's learning curves (default: its first).
-CURVE_SUITES: dict[str, str] = {
-    "agri_envs/GreenhouseNav-v2": "greenhouse-sim-loop",
-    "agri_envs/GrapeHarvest-v1": "grape-table2",
 }
 
 #: Equivalence margins for "matches": rates within +-0.10; other metrics within +-5 % of the reference mean.
@@ -376,6 +371,7 @@ def find_runs(runs_dir: Path) -> list[dict[str, Any]]:
     csvs = sorted(set(runs_dir.rglob("progress.csv")) | set(runs_dir.rglob("*curve*.csv")))
     for path in csvs:
         env_id = None
+        config: Mapping[str, Any] = {}
         for folder in (path.parent, path.parent.parent):
             for name in ("config.yaml", "config.yml", "config.json", "run.json", "meta.json"):
                 cfg = folder / name
@@ -386,6 +382,7 @@ def find_runs(runs_dir: Path) -> list[dict[str, Any]]:
                         continue
                     if isinstance(doc, Mapping):
                         env_id = doc.get("env_id") or doc.get("env")
+                        config = doc
                 if env_id:
                     break
             if env_id:
@@ -395,7 +392,9 @@ def find_runs(runs_dir: Path) -> list[dict[str, Any]]:
         with open(path, newline="") as f:
             rows = list(csv.DictReader(f))
         if rows:
-            runs.append({"env_id": env_id, "name": str(path.parent.relative_to(runs_dir)), "rows": rows})
+            runs.append(
+                {"env_id": env_id, "name": str(path.parent.relative_to(runs_dir)), "rows": rows, "config": config}
+            )
     return runs
 
 
@@ -428,11 +427,74 @@ def _curve(rows: list[dict[str, str]]) -> tuple[str, str, list[float], list[floa
     return None
 
 
-def learning_curves(env_id: str, runs: list[dict[str, Any]], rows: Sequence[Row], out_dir: Path) -> list[str]:
-    """Markdown: learning curves of the env's runs with each baseline as a horizontal band (its 95 % interval).
+#: Env arguments that change what a policy observes or how it commands, not the task or the scene: a run
+#: and a suite that differ only in these are drawn together (a learned rover on the true pose against
+#: ``harik-apf`` on its SLAM pose, both on the same scene).
+POLICY_SIDE_KWARGS = frozenset({"localization", "full_scan", "control", "max_ee_step", "max_ee_rotation"})
 
-    Success-rate curves get the baselines' success rates on the env's first suite; return curves get their
-    mean returns (the same reward only when the run trained on the suite's arguments: said in the caption).
+
+def run_env_kwargs(run: Mapping[str, Any]) -> dict[str, Any] | None:
+    """The env arguments of a run's periodic evaluation (its scenario's preset, then its ``env_kwargs``).
+
+    None when the run's config does not say (an SB3 ``progress.csv`` with a bare config): then it cannot be
+    matched with a suite.
+    """
+    config = run.get("config") or {}
+    if "env_kwargs" not in config and not config.get("scenario"):
+        return None
+    kwargs: dict[str, Any] = {}
+    if config.get("scenario"):
+        try:
+            kwargs.update(get_scenario(run["env_id"], str(config["scenario"])).env_kwargs)
+        except ValueError:
+            return None
+    kwargs.update(config.get("env_kwargs") or {})
+    return kwargs
+
+
+def _task_kwargs(kwargs: Mapping[str, Any]) -> dict[str, Any]:
+    return {k: v for k, v in kwargs.items() if k not in POLICY_SIDE_KWARGS}
+
+
+def curve_suite(run: Mapping[str, Any], suites: Sequence[lb.Suite]) -> lb.Suite | None:
+    """The suite of the run's task and scene: same env id, same env arguments (less the policy-side ones).
+
+    Sweeping suites (several levels) never match: a curve has one scene.
+    """
+    kwargs = run_env_kwargs(run)
+    if kwargs is None:
+        return None
+    for suite in suites:
+        if suite.env_id == run["env_id"] and not suite.sweep:
+            if _task_kwargs(suite.env_kwargs) == _task_kwargs(kwargs):
+                return suite
+    return None
+
+
+def _baseline_groups(base: Sequence[Row], key: str) -> list[tuple[str, float, tuple[float, float]]]:
+    """Baselines with the same value and interval merged into one line: ``(label, value, (lo, hi))``."""
+    groups: dict[tuple[float, float, float], list[str]] = {}
+    for b in base:
+        s = b.entry["summary"]
+        if s.get(key) is None:
+            continue
+        lo, hi = s.get(f"{key}_ci") or (s[key], s[key])
+        groups.setdefault((round(float(s[key]), 3), round(float(lo), 3), round(float(hi), 3)), []).append(
+            b.entry["policy"]["name"]
+        )
+    return [
+        (f"{', '.join(names)}: {v:.2f} [{lo:.2f}, {hi:.2f}] (baseline{'s' if len(names) > 1 else ''})", v, (lo, hi))
+        for (v, lo, hi), names in groups.items()
+    ]
+
+
+def learning_curves(env_id: str, runs: list[dict[str, Any]], rows: Sequence[Row], out_dir: Path) -> list[str]:
+    """Markdown: learning curves of the env's runs, each against the baselines of its own task and scene.
+
+    A run is drawn with the baselines' 95 % bands of the suite with its env id and env arguments
+    (:func:`curve_suite`); a run that no suite matches is drawn alone, with a note. Success-rate points
+    carry their Wilson interval over the run's evaluation episodes; return curves get the baselines' mean
+    returns.
     """
     mine = [r for r in runs if r["env_id"] == env_id]
     if not mine:
@@ -452,47 +514,67 @@ def learning_curves(env_id: str, runs: list[dict[str, Any]], rows: Sequence[Row]
             curves.append((run, c))
     if not curves:
         return ["Training runs were found, but none logs a success rate or a return."]
-    env_suites = [r.suite for r in rows if r.suite.env_id == env_id]
-    first_suite = next((su for su in env_suites if su.name == CURVE_SUITES.get(env_id)), None) or next(
-        iter(env_suites), None
-    )
-    base = [
-        r for r in rows if first_suite and r.suite.name == first_suite.name and r.entry["policy"]["kind"] == "baseline"
-    ]
-    out = []
-    for kind in ("success", "return"):
-        sel = [(run, c) for run, c in curves if (kind == "success") == ("success" in c[0])]
-        if not sel:
-            continue
-        fig, ax = plt.subplots(figsize=(8, 4.5))
-        colours = plt.get_cmap("tab10")
-        for i, b in enumerate(base):
-            s = b.entry["summary"]
-            key = "success_rate" if kind == "success" else "mean_return"
-            if s.get(key) is None:
+    env_suites = list({r.suite.name: r.suite for r in rows if r.suite.env_id == env_id}.values())
+    by_suite: dict[str | None, list[tuple[dict[str, Any], tuple[str, str, list[float], list[float]]]]] = {}
+    for run, c in curves:
+        suite = curve_suite(run, env_suites)
+        by_suite.setdefault(suite.name if suite else None, []).append((run, c))
+    out: list[str] = []
+    for suite_name, group in by_suite.items():
+        base = [r for r in rows if r.suite.name == suite_name and r.entry["policy"]["kind"] == "baseline"]
+        for kind in ("success", "return"):
+            sel = [(run, c) for run, c in group if (kind == "success") == ("success" in c[0])]
+            if not sel:
                 continue
-            lo, hi = s.get(f"{key}_ci") or (s[key], s[key])
-            col = colours(i + 5)
-            ax.axhspan(lo, hi, color=col, alpha=0.18, lw=0)
-            ax.axhline(s[key], color=col, ls="--", lw=1.2, label=f"{b.entry['policy']['name']} (baseline, 95 % CI)")
-        for i, (run, (_, label, xs, ys)) in enumerate(sel):
-            ax.plot(xs, ys, color=colours(i), lw=1.6, label=f"{run['name']} ({label})")
-        if kind == "success":
-            ax.set_ylim(-0.03, 1.03)
-        ax.set_xlabel("training steps (policy decisions, as --timesteps counts them)")
-        ax.set_ylabel("success rate" if kind == "success" else "episode return")
-        ax.set_title(f"{env_id}: learning curves, baselines as bands ({first_suite.name if first_suite else ''})")
-        ax.grid(alpha=0.3)
-        ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8, frameon=False)
-        name = f"{env_id.split('/')[-1]}_learning_{kind}.png"
-        fig.savefig(out_dir / name, dpi=110, bbox_inches="tight")
-        plt.close(fig)
-        out += [f"![{name}]({name})", ""]
-    if any("success" not in c[0] for _, c in sel):
-        out.append(
-            "Return curves are comparable with the baseline bands only where the run trained on the suite's "
-            "env arguments."
-        )
+            fig, ax = plt.subplots(figsize=(8, 4.5))
+            colours = plt.get_cmap("tab10")
+            key = "success_rate" if kind == "success" else "mean_return"
+            for i, (label, v, (lo, hi)) in enumerate(_baseline_groups(base, key)):
+                col = colours(i + 5)
+                ax.axhspan(lo, hi, color=col, alpha=0.15, lw=0, zorder=1)
+                ax.axhline(v, color=col, ls="--", lw=1.2, label=label, zorder=2)
+            for i, (run, (_, label, xs, ys)) in enumerate(sel):
+                n = (run.get("config") or {}).get("eval_episodes")
+                counted = f"{n} episodes per point" if n else "episodes per point not logged"
+                ax.plot(
+                    xs,
+                    ys,
+                    color=colours(i),
+                    lw=1.6,
+                    marker="o",
+                    ms=4,
+                    zorder=4,
+                    label=f"{run['name']} ({label}; {counted})",
+                )
+                if kind == "success" and n:
+                    ci = [wilson_interval(round(y * int(n)), int(n)) for y in ys]
+                    ax.fill_between(
+                        xs, [c[0] for c in ci], [c[1] for c in ci], color=colours(i), alpha=0.15, lw=0, zorder=3
+                    )
+            if kind == "success":
+                ax.set_ylim(-0.03, 1.05)
+            ax.set_xlabel("training steps (policy decisions, as --timesteps counts them)")
+            ax.set_ylabel("success rate (95 % interval shaded)" if kind == "success" else "episode return")
+            where = f"baselines on suite {suite_name}" if suite_name else "no suite of the same task and scene"
+            ax.set_title(f"{env_id}: learning curves ({where})", fontsize=10)
+            ax.grid(alpha=0.3)
+            ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8, frameon=False)
+            stem = env_id.split("/")[-1] + (f"_{suite_name}" if suite_name else "_own-scene")
+            name = f"{stem}_learning_{kind}.png"
+            fig.savefig(out_dir / name, dpi=110, bbox_inches="tight")
+            plt.close(fig)
+            out += [f"![{name}]({name})", ""]
+        names = ", ".join(f"`{run['name']}`" for run, _ in group)
+        if suite_name is None:
+            out += [
+                f"{names}: no suite has this run's env arguments (its task and scene), so no baseline is drawn "
+                "beside it; bands from another scene would not compare like with like.",
+                "",
+            ]
+        elif not base:
+            out += [f"{names}: suite `{suite_name}` has the same task and scene but no baseline entry to draw.", ""]
+        else:
+            out += [f"{names} against the baselines of suite `{suite_name}` (same env arguments).", ""]
     return out
 
 
