@@ -252,3 +252,51 @@ def test_learning_curves_only_against_baselines_of_the_same_task_and_scene(tmp_p
     other = {**zoo["zoo/ppo-greenhouse-nav"], "config": {"env_kwargs": {"n_rows": 7}}, "name": "mine"}
     md = "\n".join(learning_curves("agri_envs/GreenhouseNav-v2", [other], nav, tmp_path))
     assert "no suite has this run's env arguments" in md and "_own-scene_learning_success.png" in md
+
+
+def test_failure_labels_of_learned_policies_use_no_controller_words():
+    from agri_training.report import arm, rover
+
+    stuck = {"is_success": False, "collision": False, "blocked_at_end": False}
+    assert "APF" in rover.failure_cause(stuck) and "APF" not in rover.failure_cause(stuck, learned=True)
+    blocked = {**stuck, "blocked_at_end": True}
+    assert "safety stop" not in rover.failure_cause(blocked, learned=True)
+    assert arm.failure_cause(stuck) == "plan incomplete" and "plan" not in arm.failure_cause(stuck, learned=True)
+    lines = rover.failure_lines({"policy_kind": "learned", "episodes": [{**stuck, "seed": 1}]})
+    assert not any("APF" in line for line in lines)
+
+
+def test_every_env_section_has_a_description_line():
+    from agri_training.report.page import _env_blurb
+
+    for env_id in ("robot_chain_v0", "agri_envs/GreenhouseNav-v2", "agri_envs/GrapeHarvest-v1"):
+        assert len(_env_blurb(env_id)) > 40, env_id
+
+
+def test_grape_figures_name_their_policy_and_the_scene_is_drawn_once(tmp_path, monkeypatch):
+    import matplotlib
+
+    matplotlib.use("Agg")
+    from matplotlib.axes import Axes
+
+    from agri_training.report.arm import plot_planned_path
+
+    titles = []
+    set_title = Axes.set_title
+    monkeypatch.setattr(
+        Axes, "set_title", lambda self, text, *a, **k: titles.append(text) or set_title(self, text, *a, **k)
+    )
+    suite = lb.load_suite(lb.SUITES_DIR / "grape-table2.yaml")
+    files = []
+    for policy in ("luo-apf", "luo-apf-attract-only"):
+        result = {
+            "env_id": suite.env_id,
+            "env_kwargs": dict(suite.env_kwargs),
+            "policy": policy,
+            "scenario": "table2",
+            "label": "grape-table2",
+        }
+        files.append(plot_planned_path(result, 100000, tmp_path, f"grape_{policy}"))
+    assert titles[0].startswith("luo-apf on grape-table2") and titles[2].startswith("luo-apf-attract-only on")
+    assert "the scene at reset" in titles[1] and len(titles) == 3  # one scene picture for both policies
+    assert files[0][1] == files[1][1] and files[0][0] != files[1][0]

@@ -23,6 +23,7 @@ import math
 import re
 import sys
 import time
+import typing
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
@@ -33,7 +34,7 @@ import yaml
 from agri_envs.scenarios import scenario as get_scenario
 from agri_training import leaderboard as lb
 from agri_training.core.documents import git_commit
-from agri_training.core.envs import make_env
+from agri_training.core.envs import MULTIAGENT_ENVS, is_multiagent, make_env
 from agri_training.core.progress import Progress
 from agri_training.core.stats import newcombe_interval, paired_comparison, wilson_interval
 from agri_training.evaluation.episode import run_episode
@@ -180,6 +181,7 @@ def _level_document(row: Row, k: int, seeds: list[int], bar: Any) -> dict[str, A
         "suite": row.suite.name,
         "label": level["label"],
         "policy": entry["policy"]["name"],
+        "policy_kind": entry["policy"]["kind"],
         "privileged": bool(entry.get("privileged")),
         "seed": row.suite.seed_start,
         "env_kwargs": level["env_kwargs"],
@@ -245,14 +247,8 @@ def _completed(x: Mapping[str, Any], y: Mapping[str, Any], metric: str) -> tuple
     return completed, len(vx)
 
 
-_UNITS = {"episode_time": "s", "path_length": "m", "min_clearance": "m", "ate_rmse": "m", "final_position_error": "m"}
-
-
 def _metric_name(metric: str) -> str:
-    key = metric.replace("mean_", "").replace("iqm_", "")
-    name = ("IQM " if metric.startswith("iqm_") else "") + key.replace("_", " ")
-    name = {"episode time": "time", "success rate": "success", "collision rate": "collisions"}.get(name, name)
-    return f"{name} [{_UNITS[key]}]" if key in _UNITS else name
+    return lb.metric_label(metric)
 
 
 def _pairs(group: Sequence[Row]) -> list[tuple[Row, Row]]:
@@ -584,11 +580,15 @@ def learning_curves(env_id: str, runs: list[dict[str, Any]], rows: Sequence[Row]
 def _env_blurb(env_id: str) -> str:
     """The first paragraph of the env class's docstring (its Description), or ''."""
     try:
-        entry = gym.spec(env_id).entry_point
-        if not isinstance(entry, str):
-            return ""
-        module, attr = entry.split(":")
-        doc = getattr(importlib.import_module(module), attr).__doc__ or ""
+        if is_multiagent(env_id):  # a PettingZoo module: the class its parallel_env returns
+            factory = importlib.import_module(MULTIAGENT_ENVS[env_id]).parallel_env
+            doc = typing.get_type_hints(factory)["return"].__doc__ or ""
+        else:
+            entry = gym.spec(env_id).entry_point
+            if not isinstance(entry, str):
+                return ""
+            module, attr = entry.split(":")
+            doc = getattr(importlib.import_module(module), attr).__doc__ or ""
     except Exception:  # noqa: BLE001 - a missing description must not break the report
         return ""
     text = re.sub(r"^#+ *Description\s*", "", doc.strip())
