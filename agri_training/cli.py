@@ -16,6 +16,7 @@ import agri_envs  # noqa: F401  (registers the env ids)
 from agri_baselines import list_policies, policy_spec
 from agri_envs.scenarios import list_scenarios
 from agri_training import leaderboard as lb
+from agri_training.core.envs import MULTIAGENT_ENVS
 from agri_training.core.yaml_values import load_yaml
 from agri_training.evaluation.evaluate import EvalRequest, evaluate, format_summary
 from agri_training.evaluation.parallel import EpisodeError
@@ -211,6 +212,8 @@ def _cmd_list(args: argparse.Namespace) -> int:
     print("envs:")
     for env_id in sorted(k for k in gym.registry if k.startswith("agri_envs/")):
         print(f"  {env_id}")
+    for env_id, module in MULTIAGENT_ENVS.items():
+        print(f"  {env_id} (PettingZoo parallel env: {module})")
     print("scenarios:")
     for sc in list_scenarios():
         print(f"  {sc.env_id} {sc.name}: {sc.description}")
@@ -261,14 +264,22 @@ def build_parser() -> argparse.ArgumentParser:
     ev.add_argument("--env", required=True, help="env id, e.g. agri_envs/GreenhouseNav-v2")
     ev.add_argument("--scenario", default=None, help="named preset of env arguments (agri list)")
     ev.add_argument(
-        "--policy", required=True, help="registered policy name (agri list) or an `agri train` run directory"
+        "--policy",
+        required=True,
+        help="registered policy name (baseline or shipped learned policy: agri list), or an `agri train` run "
+        "directory (or its best/ folder); SB3 .zip files are refused (they unpickle code)",
     )
-    ev.add_argument("--episodes", type=int, default=20)
-    ev.add_argument("--seed", type=int, default=0)
+    ev.add_argument("--episodes", type=int, default=20, help="episodes to run (default 20)")
+    ev.add_argument(
+        "--seed",
+        type=int,
+        default=0,
+        help="seed of the first episode; episode i runs seed S+i (default 0; held-out suites use 100000 and up)",
+    )
     ev.add_argument("--env-kwargs", nargs="*", metavar="KEY=VALUE", help="extra env arguments")
     ev.add_argument("--traces", type=int, default=1, help="episodes that record per-step traces")
     ev.add_argument("--out", required=True, help="output JSON file")
-    ev.add_argument("--quiet", action="store_true", help="no progress bar")
+    ev.add_argument("--quiet", action="store_true", help="no progress bar or progress lines (the summary still prints)")
     add_scale_arguments(ev)
     ev.set_defaults(func=_cmd_evaluate)
     tr = sub.add_parser("train", help="train an SB3 policy; writes a weights-only run directory")
