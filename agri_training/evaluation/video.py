@@ -9,9 +9,11 @@ The same in Python::
 
     import numpy as np
     from agri_training.core.envs import make_env
-    from agri_training.evaluation.policies import load_policy
+    from agri_training.evaluation.policies import EvalRequest, load_policy, resolve_env_kwargs
 
-    env = make_env("agri_envs/GreenhouseNav-v2", {"render_mode": "rgb_array"})
+    # the env arguments the policy needs (harik-apf-gt: full scan, true pose), as agri evaluate resolves them
+    kwargs, _ = resolve_env_kwargs(EvalRequest("agri_envs/GreenhouseNav-v2", "harik-apf-gt"))
+    env = make_env("agri_envs/GreenhouseNav-v2", {**kwargs, "render_mode": "rgb_array"})
     policy = load_policy("harik-apf-gt", env)  # a baseline, a zoo policy or an `agri train` run folder
     obs, info = env.reset(seed=0)
     frames, state, start, done = [env.render()], None, True, False
