@@ -73,7 +73,12 @@ def test_report_from_entries_and_fresh_runs(tmp_path, capsys):
         "harik-apf.json",
         "ppo-greenhouse-nav.json",
     ]
-    assert "GreenhouseNav-v2_learning_success.png" in md and "_d_alpha.png" in md and "_trajectory.png" in md
+    assert "GreenhouseNav-v2_greenhouse-default_learning_success.png" not in md  # the fake run has no scene: no bands
+    assert "_d_alpha.png" in md and "_trajectory.png" in md
+    from PIL import Image
+
+    assert "![greenhousenav-v2_clip.gif](greenhousenav-v2_clip.gif)" in md
+    assert Image.open(out / "greenhousenav-v2_clip.gif").n_frames >= 10
     for line in md.splitlines():
         if line.startswith("!["):
             assert (out / line.split("(")[1].rstrip(")")).stat().st_size > 10_000

@@ -40,6 +40,7 @@ from agri_training.core.stats import newcombe_interval, paired_comparison, wilso
 from agri_training.evaluation.episode import run_episode
 from agri_training.evaluation.evaluate import INTERVALS_NOTE
 from agri_training.evaluation.policies import load_policy
+from agri_training.evaluation.video import ClipRequest, record
 from agri_training.learned.zoo import ZOO_DIR
 
 #: Per-env report sections: env id -> ``"module:function"`` (see the module docstring).
@@ -574,6 +575,54 @@ def learning_curves(env_id: str, runs: list[dict[str, Any]], rows: Sequence[Row]
     return out
 
 
+# ---------------------------------------------------------------- clips
+
+#: Most frames of an env's clip in the report (the episode is sampled evenly), and their shrink factor.
+CLIP_FRAMES = 60
+CLIP_SCALE = 0.5
+
+
+def env_clip(env_id: str, rows: Sequence[Row], out_dir: Path) -> list[str]:
+    """Markdown: a short GIF of one representative episode of the env, and what it shows.
+
+    The episode: on the env's first suite where a baseline succeeds, the first unprivileged such baseline
+    (the paper's robot) on its first successful seed, re-run from its seed as the entry counted it.
+    """
+    for suite_name in dict.fromkeys(r.suite.name for r in rows if r.suite.env_id == env_id):
+        group = [r for r in rows if r.suite.name == suite_name and r.entry["policy"]["kind"] == "baseline"]
+        group.sort(key=lambda r: bool(r.entry.get("privileged")))
+        for r in group:
+            found = next(
+                ((lv, e) for lv in r.entry["levels"] for e in lv["episodes"] if e["is_success"] and e.get("steps")),
+                None,
+            )
+            if found is None:
+                continue
+            level, episode = found
+            name = f"{_anchor(env_id.split('/')[-1])}_clip.gif"
+            every = max(1, math.ceil(int(episode["steps"]) / CLIP_FRAMES))
+            clip = record(
+                ClipRequest(
+                    env_id,
+                    lb.policy_argument(r.entry["policy"]),
+                    seed=int(episode["seed"]),
+                    out=out_dir / name,
+                    env_kwargs=level["env_kwargs"],
+                    every=every,
+                    fps=10.0,
+                    scale=CLIP_SCALE,
+                )
+            )
+            return [
+                f"`{r.entry['policy']['name']}` on `{level['label']}`, seed {episode['seed']} (a success): one frame "
+                f"every {every} step(s) of {episode['steps']}, {clip['frames']} frames at 10 fps. Record any "
+                f"policy with `agri record --env {env_id} --policy NAME --seed S --out clip.gif`.",
+                "",
+                f"![{name}]({name})",
+            ]
+    return []
+
+
 # ---------------------------------------------------------------- the page
 
 
@@ -702,6 +751,9 @@ def build_report(
             except ImportError as exc:
                 section = f"(plots unavailable: {exc})"
             parts += ["### Paper reproduction and plots", "", section, ""]
+        clip = env_clip(env_id, rows, out_dir)
+        if clip:
+            parts += ["### A representative episode", "", *clip, ""]
     commits = sorted({r.entry["git_commit"][:10] for r in rows})
     parts += [
         "## How this report was made",
