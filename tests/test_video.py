@@ -50,3 +50,9 @@ def test_record_refuses_other_files_and_names_the_fix(tmp_path, capsys):
     ]
     assert main(argv) == 2
     assert ".gif or .mp4" in capsys.readouterr().err
+
+
+def test_watch_shows_the_episode_in_a_window(capsys):  # conftest sets SDL's dummy video driver
+    argv = ["watch", "--env", "agri_envs/GreenhouseNav-v2", "--policy", "harik-apf-gt", "--max-steps", "3"]
+    assert main([*argv, "--env-kwargs", "n_rows=1", "row_length=3"]) == 0
+    assert "seed 0: no success after 3 steps" in capsys.readouterr().out
