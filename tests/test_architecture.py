@@ -179,13 +179,18 @@ def heavy(module: str) -> bool:
     return False
 
 
+#: Late imports of light project modules with a reason: the ``agri`` entry point sets numpy's and OpenBLAS's
+#: kernel pins in the environment before anything imports numpy, so it imports the command line after that.
+LATE_FOR_A_REASON = {("agri_training.__main__", "agri_training.cli")}
+
+
 def test_project_imports_inside_functions_only_defer_heavy_modules():
     """A function may import one of the project's modules late only to defer what that module pulls in."""
     wrong = [
         f"{src}:{line} imports {dst} inside a function"
         for src, out in GRAPH.items()
         for dst, line, inside, _ in out
-        if inside and not heavy(dst)
+        if inside and not heavy(dst) and (src, dst) not in LATE_FOR_A_REASON
     ]
     assert not wrong, "\n".join(wrong)
 
