@@ -305,3 +305,27 @@ def test_grape_figures_name_their_policy_and_the_scene_is_drawn_once(tmp_path, m
     assert titles[0].startswith("luo-apf on grape-table2") and titles[2].startswith("luo-apf-attract-only on")
     assert "the scene at reset" in titles[1] and len(titles) == 3  # one scene picture for both policies
     assert files[0][1] == files[1][1] and files[0][0] != files[1][0]
+
+
+def test_learning_curves_across_seeds_show_the_mean_and_an_interval(tmp_path):
+    from agri_training.report.page import across_seeds, learning_curves, seed_groups
+
+    runs = []
+    for seed in range(3):
+        config = {
+            "env_id": "agri_envs/GreenhouseNav-v2",
+            "env_kwargs": {"n_rows": 7},
+            "seed": seed,
+            "eval_episodes": 10,
+        }
+        rows = [{"timesteps": str(k * 100), "success_rate": str(min(1.0, k * 0.1 + 0.1 * seed))} for k in range(6)]
+        runs.append({"env_id": config["env_id"], "name": f"sweep/seed{seed}", "rows": rows, "config": config})
+    other = {**runs[0], "name": "other", "config": {**runs[0]["config"], "algo": "sac"}}
+    curves = [(r, ("success_rate", "success rate", [float(x["timesteps"]) for x in r["rows"]],
+                   [float(x["success_rate"]) for x in r["rows"]])) for r in [*runs, other]]  # fmt: skip
+    groups = seed_groups(curves)
+    assert [len(g) for g in groups] == [3, 1]
+    xs, mean, lo, hi = across_seeds([c for _, c in groups[0]])
+    assert xs[:2] == [0.0, 100.0] and abs(mean[1] - 0.2) < 1e-9 and lo[1] < mean[1] < hi[1]
+    md = "\n".join(learning_curves("agri_envs/GreenhouseNav-v2", runs, [], tmp_path))
+    assert "_own-scene_learning_success.png" in md

@@ -29,6 +29,7 @@ from pathlib import Path
 from typing import Any
 
 import gymnasium as gym
+import numpy as np
 import yaml
 
 from agri_envs.scenarios import scenario as get_scenario
@@ -36,7 +37,7 @@ from agri_training import leaderboard as lb
 from agri_training.core.documents import git_commit
 from agri_training.core.envs import MULTIAGENT_ENVS, is_multiagent, make_env
 from agri_training.core.progress import Progress
-from agri_training.core.stats import newcombe_interval, paired_comparison, wilson_interval
+from agri_training.core.stats import bootstrap_ci, newcombe_interval, paired_comparison, wilson_interval
 from agri_training.evaluation.episode import run_episode
 from agri_training.evaluation.evaluate import INTERVALS_NOTE
 from agri_training.evaluation.policies import load_policy
@@ -485,6 +486,36 @@ def _baseline_groups(base: Sequence[Row], key: str) -> list[tuple[str, float, tu
     ]
 
 
+_Curve = tuple[str, str, list[float], list[float]]
+
+
+def seed_groups(curves: Sequence[tuple[dict[str, Any], _Curve]]) -> list[list[tuple[dict[str, Any], _Curve]]]:
+    """Runs grouped by configuration: the same config (but the seed) and the same logged key, in order."""
+    groups: dict[str, list[tuple[dict[str, Any], _Curve]]] = {}
+    for run, c in curves:
+        config = {k: v for k, v in (run.get("config") or {}).items() if k != "seed"}
+        key = json.dumps(config, sort_keys=True, default=str) + c[0] if config else f"{run['name']}:{c[0]}"
+        groups.setdefault(key, []).append((run, c))
+    return list(groups.values())
+
+
+def across_seeds(curves: Sequence[_Curve]) -> tuple[list[float], list[float], list[float], list[float]]:
+    """Mean over seeds at the steps every seed logged, with a 95 % bootstrap interval of that mean."""
+    common = sorted(set.intersection(*(set(c[2]) for c in curves)))
+    values = [[dict(zip(c[2], c[3], strict=True))[x] for c in curves] for x in common]
+    cis = [bootstrap_ci(v) for v in values]
+    return common, [float(np.mean(v)) for v in values], [c[0] for c in cis], [c[1] for c in cis]
+
+
+def _common_name(names: Sequence[str]) -> str:
+    """``runs/sweep/seed0``, ``runs/sweep/seed1`` -> ``runs/sweep/seed*``."""
+    prefix = names[0]
+    for n in names[1:]:
+        while not n.startswith(prefix):
+            prefix = prefix[:-1]
+    return (prefix or "runs") + "*"
+
+
 def learning_curves(env_id: str, runs: list[dict[str, Any]], rows: Sequence[Row], out_dir: Path) -> list[str]:
     """Markdown: learning curves of the env's runs, each against the baselines of its own task and scene.
 
@@ -530,13 +561,32 @@ def learning_curves(env_id: str, runs: list[dict[str, Any]], rows: Sequence[Row]
                 col = colours(i + 5)
                 ax.axhspan(lo, hi, color=col, alpha=0.15, lw=0, zorder=1)
                 ax.axhline(v, color=col, ls="--", lw=1.2, label=label, zorder=2)
-            for i, (run, (_, label, xs, ys)) in enumerate(sel):
+            for i, members in enumerate(seed_groups(sel)):
+                col = colours(i)
+                if len(members) > 1:  # one configuration over several training seeds: mean and interval
+                    xs, mean, low, high = across_seeds([c for _, c in members])
+                    for _, (_, _, mx, my) in members:
+                        ax.plot(mx, my, color=col, lw=0.6, alpha=0.35, zorder=3)
+                    ax.fill_between(xs, low, high, color=col, alpha=0.2, lw=0, zorder=3)
+                    ax.plot(
+                        xs,
+                        mean,
+                        color=col,
+                        lw=2.0,
+                        marker="o",
+                        ms=4,
+                        zorder=4,
+                        label=f"{_common_name([r['name'] for r, _ in members])} ({members[0][1][1]}; mean of "
+                        f"{len(members)} seeds, 95 % bootstrap interval across seeds; thin: each seed)",
+                    )
+                    continue
+                run, (_, label, xs, ys) = members[0]
                 n = (run.get("config") or {}).get("eval_episodes")
                 counted = f"{n} episodes per point" if n else "episodes per point not logged"
                 ax.plot(
                     xs,
                     ys,
-                    color=colours(i),
+                    color=col,
                     lw=1.6,
                     marker="o",
                     ms=4,
@@ -545,9 +595,7 @@ def learning_curves(env_id: str, runs: list[dict[str, Any]], rows: Sequence[Row]
                 )
                 if kind == "success" and n:
                     ci = [wilson_interval(round(y * int(n)), int(n)) for y in ys]
-                    ax.fill_between(
-                        xs, [c[0] for c in ci], [c[1] for c in ci], color=colours(i), alpha=0.15, lw=0, zorder=3
-                    )
+                    ax.fill_between(xs, [c[0] for c in ci], [c[1] for c in ci], color=col, alpha=0.15, lw=0, zorder=3)
             if kind == "success":
                 ax.set_ylim(-0.03, 1.05)
             ax.set_xlabel("training steps (policy decisions, as --timesteps counts them)")
