@@ -16,10 +16,10 @@ $(STAMP): pyproject.toml
 	if $(BIN)/python -c "import urllib.request as u; u.urlopen('$(TORCH_CPU_INDEX)/torch/', timeout=10)" 2>/dev/null; \
 	then $(BIN)/pip install -q "$(TORCH)" --index-url $(TORCH_CPU_INDEX); \
 	else echo "PyTorch's CPU index is out of reach: $(TORCH) from the default index"; $(BIN)/pip install -q "$(TORCH)"; fi
-	$(BIN)/pip install -q -e ".[train,report,dev,ray]"
+	$(BIN)/pip install -q -e ".[train,report,dev,ray,video,docs]"
 	touch $(STAMP)
 
-.PHONY: report test lint bench leaderboard verify
+.PHONY: report test lint bench leaderboard verify docs
 
 # The report page from the committed leaderboard entries, plus fresh runs of whatever is missing or stale.
 report: $(STAMP)
@@ -44,3 +44,10 @@ bench: $(STAMP)
 	$(BIN)/python benchmarks/bench_greenhouse.py
 	$(BIN)/python benchmarks/bench_slam.py
 	$(BIN)/python benchmarks/bench_grape.py
+
+# The documentation site: a page per env family (frame, docstring, every argument from its config class),
+# built by MkDocs in strict mode (a broken link or a missing page fails) into build/site.
+docs: $(STAMP)
+	$(BIN)/pip install -q -e ".[docs]"
+	SDL_VIDEODRIVER=dummy $(BIN)/python -m agri_training.report.gallery build/docs
+	$(BIN)/python -m mkdocs build --strict

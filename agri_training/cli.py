@@ -16,9 +16,11 @@ import agri_envs  # noqa: F401  (registers the env ids)
 from agri_baselines import list_policies, policy_spec
 from agri_envs.scenarios import list_scenarios
 from agri_training import leaderboard as lb
+from agri_training.core.envs import MULTIAGENT_ENVS
 from agri_training.core.yaml_values import load_yaml
 from agri_training.evaluation.evaluate import EvalRequest, evaluate, format_summary
 from agri_training.evaluation.parallel import EpisodeError
+from agri_training.evaluation.video import ClipRequest, record
 from agri_training.report.page import build_report
 from agri_training.sweep import SUMMARY_MD, SweepRequest, parse_grid, run_sweep
 from agri_training.train import TrainRequest, train
@@ -57,6 +59,62 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
     print(format_summary(result))
     print(f"wrote {out}")
     return 0
+
+
+def _clip_request(args: argparse.Namespace, out: str | None) -> ClipRequest:
+    return ClipRequest(
+        env_id=args.env,
+        policy=args.policy,
+        seed=args.seed,
+        out=Path(out) if out else None,
+        scenario=args.scenario,
+        env_kwargs=parse_env_kwargs(args.env_kwargs or []),
+        episodes=args.episodes,
+        max_steps=args.max_steps,
+        every=args.every,
+        fps=args.fps,
+        scale=args.scale,
+    )
+
+
+def _cmd_record(args: argparse.Namespace) -> int:
+    clip = record(_clip_request(args, args.out))
+    outcomes = ", ".join(
+        f"seed {r['seed']}: {'success' if r['is_success'] else 'no success'} after {r['steps']} steps"
+        for r in clip["records"]
+    )
+    w, h = clip["size"] if clip["size"] else (0, 0)
+    print(f"wrote {clip['out']}: {clip['frames']} frames of {w}x{h} at {clip['fps']:g} fps ({outcomes})")
+    return 0
+
+
+def _cmd_watch(args: argparse.Namespace) -> int:
+    clip = record(_clip_request(args, args.out))
+    for r in clip["records"]:
+        print(f"seed {r['seed']}: {'success' if r['is_success'] else 'no success'} after {r['steps']} steps")
+    if clip["out"]:
+        print(f"wrote {clip['out']}: {clip['frames']} frames")
+    return 0
+
+
+def _add_clip_arguments(parser: argparse.ArgumentParser, out_required: bool) -> None:
+    parser.add_argument("--env", required=True, help="env id, e.g. agri_envs/GreenhouseNav-v2 or robot_chain_v0")
+    parser.add_argument("--policy", required=True, help="registered policy name (agri list) or an `agri train` run")
+    parser.add_argument("--seed", type=int, default=0, help="seed of the first episode (default 0)")
+    parser.add_argument("--scenario", default=None, help="named preset of env arguments (agri list)")
+    parser.add_argument("--env-kwargs", nargs="*", metavar="KEY=VALUE", help="extra env arguments")
+    parser.add_argument("--episodes", type=int, default=1, help="episodes, one after another (default 1)")
+    parser.add_argument("--max-steps", type=int, default=None, help="stop each episode after N steps (a short clip)")
+    parser.add_argument("--every", type=int, default=1, help="keep every k-th frame (default 1: all)")
+    parser.add_argument("--fps", type=float, default=None, help="clip frame rate (default: the env's, / --every)")
+    parser.add_argument("--scale", type=float, default=1.0, help="shrink frames by this factor in (0, 1]")
+    parser.add_argument(
+        "--out",
+        required=out_required,
+        default=None,
+        help="clip file: .gif (Pillow) or .mp4 (the 'video' extra)"
+        + ("" if out_required else "; without it a window opens"),
+    )
 
 
 def _cmd_train(args: argparse.Namespace) -> int:
@@ -211,6 +269,8 @@ def _cmd_list(args: argparse.Namespace) -> int:
     print("envs:")
     for env_id in sorted(k for k in gym.registry if k.startswith("agri_envs/")):
         print(f"  {env_id}")
+    for env_id, module in MULTIAGENT_ENVS.items():
+        print(f"  {env_id} (PettingZoo parallel env: {module})")
     print("scenarios:")
     for sc in list_scenarios():
         print(f"  {sc.env_id} {sc.name}: {sc.description}")
@@ -261,16 +321,30 @@ def build_parser() -> argparse.ArgumentParser:
     ev.add_argument("--env", required=True, help="env id, e.g. agri_envs/GreenhouseNav-v2")
     ev.add_argument("--scenario", default=None, help="named preset of env arguments (agri list)")
     ev.add_argument(
-        "--policy", required=True, help="registered policy name (agri list) or an `agri train` run directory"
+        "--policy",
+        required=True,
+        help="registered policy name (baseline or shipped learned policy: agri list), or an `agri train` run "
+        "directory (or its best/ folder); SB3 .zip files are refused (they unpickle code)",
     )
-    ev.add_argument("--episodes", type=int, default=20)
-    ev.add_argument("--seed", type=int, default=0)
+    ev.add_argument("--episodes", type=int, default=20, help="episodes to run (default 20)")
+    ev.add_argument(
+        "--seed",
+        type=int,
+        default=0,
+        help="seed of the first episode; episode i runs seed S+i (default 0; held-out suites use 100000 and up)",
+    )
     ev.add_argument("--env-kwargs", nargs="*", metavar="KEY=VALUE", help="extra env arguments")
     ev.add_argument("--traces", type=int, default=1, help="episodes that record per-step traces")
     ev.add_argument("--out", required=True, help="output JSON file")
-    ev.add_argument("--quiet", action="store_true", help="no progress bar")
+    ev.add_argument("--quiet", action="store_true", help="no progress bar or progress lines (the summary still prints)")
     add_scale_arguments(ev)
     ev.set_defaults(func=_cmd_evaluate)
+    rc = sub.add_parser("record", help="record a policy's episode headless as a GIF or MP4 clip")
+    _add_clip_arguments(rc, out_required=True)
+    rc.set_defaults(func=_cmd_record)
+    wa = sub.add_parser("watch", help="watch a policy in a window (render_mode='human'), or --out a clip")
+    _add_clip_arguments(wa, out_required=False)
+    wa.set_defaults(func=_cmd_watch)
     tr = sub.add_parser("train", help="train an SB3 policy; writes a weights-only run directory")
     tr.add_argument("--env", required=True, help="env id, e.g. agri_envs/GreenhouseNav-v2")
     tr.add_argument("--scenario", default=None, help="named preset of env arguments (agri list)")

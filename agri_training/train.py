@@ -408,7 +408,11 @@ def _make_callback(
                 from tqdm import tqdm
 
                 self.bar = tqdm(  # disable=None: no bar when stderr is not a terminal (logs)
-                    total=config["timesteps"], unit="step", desc="agri train", file=sys.stderr, disable=None
+                    total=config.get("timesteps_planned", config["timesteps"]),
+                    unit="step",
+                    desc="agri train",
+                    file=sys.stderr,
+                    disable=None,
                 )
 
         def _on_step(self) -> bool:
@@ -479,6 +483,21 @@ def _make_callback(
                 writer.writerows(self.rows)
 
     return TrainMonitor()
+
+
+def rollout_size(model: Any) -> tuple[int, str]:
+    """The steps SB3 collects between two checks of ``total_timesteps``, and what they are made of.
+
+    On-policy (PPO): ``n_steps`` per env slot; off-policy: ``train_freq`` steps per env slot (an episode
+    ``train_freq`` cannot be predicted: then one step per env slot).
+    """
+    n = int(model.n_envs)
+    if not hasattr(model, "train_freq"):
+        return int(model.n_steps) * n, f"n_steps {int(model.n_steps)} x {n} env slot(s)"
+    freq = model.train_freq
+    if str(getattr(freq.unit, "value", freq.unit)) == "step":
+        return int(freq.frequency) * n, f"train_freq {int(freq.frequency)} x {n} env slot(s)"
+    return n, f"{n} env slot(s)"
 
 
 def package_versions() -> dict[str, str]:
@@ -563,6 +582,17 @@ def train(
         verbose=0,
         **algo_kwargs,
     )
+    # SB3 collects whole rollouts: PPO n_steps per env, off-policy algorithms train_freq steps per env. It
+    # rounds the total up to them, so the bar, the log and meta.json say the number it will train, and why.
+    unit, why = rollout_size(model)
+    planned = -(-int(config["timesteps"]) // unit) * unit
+    if planned != config["timesteps"]:
+        print(
+            f"agri train: training {planned} steps, not {config['timesteps']}: SB3 collects whole rollouts of "
+            f"{why} = {unit} steps",
+            file=sys.stderr,
+        )
+    config = {**config, "timesteps_planned": planned}
     callback = _make_callback(config, run_dir, request.progress, on_eval)
     load_before = os.getloadavg()
     t0 = time.perf_counter()
@@ -570,7 +600,7 @@ def train(
     stopped_early = False
     restore = _stop_on_sigterm()
     try:
-        model.learn(total_timesteps=config["timesteps"], callback=callback, tb_log_name="run")
+        model.learn(total_timesteps=planned, callback=callback, tb_log_name="run")
     except KeyboardInterrupt:  # Ctrl-C or SIGTERM: keep what was learned, write a complete run directory
         stopped_early = True
         print(f"agri train: stopped at {model.num_timesteps} steps; writing the run directory", file=sys.stderr)
@@ -583,6 +613,9 @@ def train(
             "command": command,
             "started_utc": started,
             "wall_time_s": round(wall, 1),
+            "timesteps_requested": int(config["timesteps"]),
+            "timesteps_planned": planned,
+            "timesteps_rounding": f"whole rollouts of {why} = {unit} steps",
             "timesteps_done": int(model.num_timesteps),
             "stopped_early": stopped_early,
             "git_commit": git_commit(),

@@ -15,7 +15,7 @@ every step, for plots.
 from __future__ import annotations
 
 import time
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from typing import Any
 
 import numpy as np
@@ -95,7 +95,13 @@ class _Team:
                 trace["obstacles"] = movers[np.abs(movers[:, 0]) < 1e5].tolist()
 
 
-def run_episode(env: Any, policy: Any, seed: int, trace_keys: tuple[str, ...] | None) -> EpisodeOutput:
+def run_episode(
+    env: Any,
+    policy: Any,
+    seed: int,
+    trace_keys: tuple[str, ...] | None,
+    on_step: Callable[[int], bool] | None = None,
+) -> EpisodeOutput:
     """One episode from ``reset(seed=seed)``: its record and, with ``trace_keys``, its per-step trace.
 
     Args:
@@ -104,6 +110,8 @@ def run_episode(env: Any, policy: Any, seed: int, trace_keys: tuple[str, ...] | 
             out on a parallel env.
         seed: Reset seed.
         trace_keys: ``info`` keys to record at every step (a parallel env also knows ``positions``).
+        on_step: Called with the step count after the reset (0) and after every step (a recorder renders a
+            frame there); returning True ends the episode early.
     """
     driver: _SingleAgent | _Team = _Team(env) if is_parallel_env(env) else _SingleAgent(env)
     obs = driver.reset(seed)
@@ -115,7 +123,8 @@ def run_episode(env: Any, policy: Any, seed: int, trace_keys: tuple[str, ...] | 
     estimate: list[np.ndarray] = []
     state, start, total, steps = None, True, 0.0, 0
     t0 = time.perf_counter()
-    while not (steps and driver.done):
+    stop = on_step(0) if on_step is not None else False
+    while not (steps and driver.done) and not stop:
         action, state = policy.predict(obs, state=state, episode_start=np.array([start]), deterministic=True)
         start = False
         if localizes:  # the estimate for this observation, paired with the true pose it was taken at
@@ -126,6 +135,8 @@ def run_episode(env: Any, policy: Any, seed: int, trace_keys: tuple[str, ...] | 
         total += reward
         steps += 1
         driver.trace_step(trace)
+        if on_step is not None:
+            stop = bool(on_step(steps))
     record: dict[str, Any] = {
         "seed": seed,
         "return": total,

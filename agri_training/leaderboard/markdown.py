@@ -27,14 +27,45 @@ def _sort_key(entry: Mapping[str, Any], rank_by: Sequence[RankKey]) -> tuple[flo
 
 
 def metric_format(metric: str) -> str:
-    """The format of a metric's values in tables (rates to two decimals, ...)."""
-    if metric.endswith("_rate"):
+    """The format of a metric's values in tables: rates and ratios to 2 decimals, distances in m to 3 (mm)."""
+    if metric.endswith(("_rate", "_ratio")) or "path_length" in metric:
         return "{:.2f}"
-    if "clearance" in metric or "error" in metric or "ate" in metric:
+    if any(k in metric for k in ("coverage", "clearance", "error", "ate", "cross_track", "distance", "gap")):
         return "{:.3f}"
-    if "path_length" in metric:
-        return "{:.2f}"
     return "{:.1f}"
+
+
+#: Units of the per-episode keys behind summary metrics (``mean_<key>``, ``iqm_<key>``).
+UNITS = {
+    "episode_time": "s",
+    "path_length": "m",
+    "min_clearance": "m",
+    "ate_rmse": "m",
+    "final_position_error": "m",
+    "max_cross_track": "m",
+    "mean_cross_track": "m",
+    "mean_strip_distance": "m",
+    "max_strip_distance": "m",
+    "max_gap": "m",
+}
+
+
+def metric_label(metric: str) -> str:
+    """A summary key as a column name: ``mean_mean_strip_distance`` -> ``mean strip distance [m]``.
+
+    Means drop their prefix (every metric but a rate is a mean over episodes); IQMs keep it as "IQM".
+    """
+    key = metric
+    for prefix in ("mean_", "iqm_"):
+        if metric.startswith(prefix):
+            key = metric[len(prefix) :]
+    name = key.replace("_", " ")
+    name = ("IQM " if metric.startswith("iqm_") else "") + {
+        "episode time": "time",
+        "success rate": "success",
+        "collision rate": "collisions",
+    }.get(name, name)
+    return f"{name} [{UNITS[key]}]" if key in UNITS else name
 
 
 def episode_values(entry: Mapping[str, Any], metric: str) -> tuple[list[Any], bool]:
@@ -49,11 +80,56 @@ def episode_values(entry: Mapping[str, Any], metric: str) -> tuple[list[Any], bo
     return [], False
 
 
-def compare_entries(x: Mapping[str, Any], y: Mapping[str, Any], metric: str, higher_is_better: bool) -> Any:
-    """Paired comparison of two entries of one suite on one summary key (None when not comparable)."""
+#: Metrics that measure progress toward the task itself: compared over every episode, like the rates.
+PROGRESS_METRICS = frozenset({"coverage", "waypoints_reached"})
+
+#: Fewest episodes that both policies completed for a comparison of a secondary metric.
+MIN_COMPLETED_PAIRS = 5
+
+
+def is_conditional(metric: str) -> bool:
+    """True for a metric compared only over the episodes both policies completed (time, path length, ...).
+
+    Rates and progress metrics (:data:`PROGRESS_METRICS`) are compared over every episode; any other
+    metric describes how an episode went, and a failed episode (a crash that ends it early, a chain that
+    never arrived) makes it look better than it is.
+    """
+    if metric in ("success_rate", "collision_rate") or metric.endswith("_rate"):
+        return False
+    key = metric.split("_", 1)[1] if metric.startswith(("mean_", "iqm_")) else metric
+    return key not in PROGRESS_METRICS
+
+
+def paired_values(
+    x: Mapping[str, Any], y: Mapping[str, Any], metric: str
+) -> tuple[list[Any], list[Any], bool, int | None]:
+    """The per-episode values of two entries on one metric, paired by seed, as the comparison uses them.
+
+    Returns:
+        ``(vx, vy, binary, completed)``: for a conditional metric (:func:`is_conditional`) the values of
+        episodes that either policy failed are None (the comparison drops them) and ``completed`` counts the
+        episodes both completed; otherwise ``completed`` is None.
+    """
     vx, binary = episode_values(x, metric)
     vy, _ = episode_values(y, metric)
-    if not vx or len(vx) != len(vy):
+    if not vx or len(vx) != len(vy) or not is_conditional(metric):
+        return vx, vy, binary, None
+    sx, _ = episode_values(x, "success_rate")
+    sy, _ = episode_values(y, "success_rate")
+    both = [a and b for a, b in zip(sx, sy, strict=True)]
+    vx = [v if ok else None for v, ok in zip(vx, both, strict=True)]
+    vy = [v if ok else None for v, ok in zip(vy, both, strict=True)]
+    return vx, vy, binary, sum(both)
+
+
+def compare_entries(x: Mapping[str, Any], y: Mapping[str, Any], metric: str, higher_is_better: bool) -> Any:
+    """Paired comparison of two entries of one suite on one summary key (None when not comparable).
+
+    Secondary metrics are compared over the episodes both completed, and not at all when fewer than
+    :data:`MIN_COMPLETED_PAIRS` are.
+    """
+    vx, vy, binary, completed = paired_values(x, y, metric)
+    if not vx or len(vx) != len(vy) or (completed is not None and completed < MIN_COMPLETED_PAIRS):
         return None
     try:
         return paired_comparison(vx, vy, metric, higher_is_better, binary=binary)
@@ -69,7 +145,8 @@ def render_markdown(entries: Sequence[Mapping[str, Any]], suites: Sequence[Suite
         "<!-- Generated by `agri leaderboard render` from leaderboard/entries/*; do not edit by hand. -->",
         "",
         "Every policy is evaluated on each suite's pinned, held-out seeds (100000 and up; training never uses "
-        "them). Rows are ordered by the suite's ranking keys (point estimates, left to right). "
+        "them). Rows are ordered by the suite's ranking keys (point estimates, left to right); every column "
+        "but a rate is the mean over the episodes. "
         + INTERVALS_NOTE
         + " The column *vs #1* is the paired comparison with the first row on the first ranking key, over "
         "the same seeds: *worse* only when its interval excludes zero, otherwise *not distinguishable*. "
@@ -100,7 +177,7 @@ def render_markdown(entries: Sequence[Mapping[str, Any]], suites: Sequence[Suite
                 continue
             head = (
                 ["#", "policy", "kind", "episodes"]
-                + [f"{r.metric} {'↑' if r.higher_is_better else '↓'}" for r in suite.rank_by]
+                + [f"{metric_label(r.metric)} {'↑' if r.higher_is_better else '↓'}" for r in suite.rank_by]
                 + ["vs #1"]
             )
             lines += ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]

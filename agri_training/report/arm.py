@@ -157,29 +157,44 @@ def plot_planned_path(result: dict[str, Any], seed: int, out_dir: Path, stem: st
     ax.scatter(*pts[0], color="#27ae60", s=50, marker="o", label="home", depthshade=False)
     ax.set_xlabel("x [m]")
     ax.set_ylabel("y [m]")
-    ax.set_zlabel("z [m]")
+    ax.zaxis.set_rotate_label(False)  # matplotlib turns a rotated label upside down ("[m] z") at this view
+    ax.set_zlabel("z [m]", rotation=90)
     ax.set_title(
-        f"luo-apf, seed {seed}: order {policy.episode_metrics(0)['order']}, {len(pts)} path points, "
+        f"{result['policy']} on {result.get('label') or result['scenario']}, seed {seed}: "
+        f"order {policy.episode_metrics(0)['order']}, {len(pts)} path points, "
         f"{plan.path_length * 1000:.0f} mm (Luo Fig. 6)",
         fontsize=9,
     )
     _equal_axes(ax, np.vstack([pts] + [np.vstack([c.box_lo, c.box_hi]) for c in scene.clusters]))
     ax.view_init(elev=22, azim=-130)
-    ax.legend(loc="upper left", fontsize=8)
+    fig.legend(loc="lower center", ncol=3, fontsize=8, frameon=False)
     name = f"{stem}_path3d.png"
-    fig.tight_layout()
-    fig.savefig(out_dir / name, dpi=110)
+    fig.savefig(out_dir / name, dpi=110, bbox_inches="tight")
     plt.close(fig)
-    frame_name = f"{stem}_scene.png"
-    from PIL import Image
-
-    Image.fromarray(frame).save(out_dir / frame_name)
+    # The scene at reset is the same for every policy on this seed: one titled picture per (level, seed).
+    frame_name = f"grape_{_slug(result.get('label') or result['scenario'])}_seed{seed}_scene.png"
+    if not (out_dir / frame_name).exists():
+        fig, ax = plt.subplots(figsize=(6.4, 5.2))
+        ax.imshow(frame)
+        ax.set_axis_off()
+        ax.set_title(
+            f"{result['env_id']} on {result.get('label') or result['scenario']}, seed {seed}: the scene at reset\n"
+            f"({len(scene.clusters)} clusters in red boxes, leaves green, canes and posts brown)",
+            fontsize=9,
+        )
+        fig.savefig(out_dir / frame_name, dpi=100, bbox_inches="tight")
+        plt.close(fig)
     return [name, frame_name]
+
+
+def _slug(text: str) -> str:
+    return "".join(c if c.isalnum() or c in "-_" else "_" for c in str(text))
 
 
 def report_section(results: list[dict[str, Any]], out_dir: Path) -> str:
     """Markdown (with PNG plots written to ``out_dir``) for every GrapeHarvest-v1 result."""
     parts = []
+    shown: set[str] = set()
     for result in results:
         label = result.get("label") or result["scenario"] or "default"
         s = result["summary"]
@@ -208,15 +223,20 @@ def report_section(results: list[dict[str, Any]], out_dir: Path) -> str:
             )
             parts += ["", units_note(result), ""]
             if eps:
-                stem = f"grape_{label.replace(' ', '_')}_{result['policy']}"
-                for name in plot_planned_path(result, int(eps[0]["seed"]), out_dir, stem):
-                    parts.append(f"![{name}]({name})")
+                stem = f"grape_{_slug(label)}_{result['policy']}"
+                path3d, frame = plot_planned_path(result, int(eps[0]["seed"]), out_dir, stem)
+                parts.append(f"![{path3d}]({path3d})")
+                if frame in shown:
+                    parts.append(f"(The scene of seed {eps[0]['seed']} is pictured above.)")
+                else:
+                    shown.add(frame)
+                    parts.append(f"![{frame}]({frame})")
         fails = [e for e in eps if not e["is_success"]]
         if fails:
             parts.append(
                 "Failures: "
                 + ", ".join(
-                    f"seed {e['seed']} ({'collision' if e.get('collision') else 'plan incomplete'}, "
+                    f"seed {e['seed']} ({failure_cause(e, result.get('policy_kind') == 'learned')}, "
                     f"{e.get('harvested', '?')}/{e.get('n_clusters', '?')} cut)"
                     for e in fails
                 )
@@ -224,6 +244,13 @@ def report_section(results: list[dict[str, Any]], out_dir: Path) -> str:
         parts.append("")
     parts += ablation_rows(results)
     return "\n".join(parts)
+
+
+def failure_cause(record: dict[str, Any], learned: bool = False) -> str:
+    """Why a GrapeHarvest episode failed; a learned policy has no plan, so its failure is not called one."""
+    if record.get("collision"):
+        return "collision"
+    return "time limit before every cut" if learned else "plan incomplete"
 
 
 def ablation_rows(results: list[dict[str, Any]]) -> list[str]:

@@ -21,7 +21,10 @@ def _scene(result: dict[str, Any], seed: int) -> Any:
     return env
 
 
-def _draw_frame(ax: Any, env: Any, trace: dict[str, Any], k: int, radius: float, with_path: bool = True) -> None:
+def _draw_frame(
+    ax: Any, env: Any, trace: dict[str, Any], k: int, radius: float, span: tuple[float, float], with_path: bool = True
+) -> None:
+    """One formation snapshot at step ``k``, centred on the robots, ``span`` (width, height) metres wide."""
     from matplotlib.patches import Circle
 
     draw_geometry(ax, env.chain_map.geometry)
@@ -39,12 +42,17 @@ def _draw_frame(ax: Any, env: Any, trace: dict[str, Any], k: int, radius: float,
         ax.add_patch(Circle((x, y), radius, color="#14327f" if j == 0 else "#2f6fd0", ec="k", lw=0.4))
     if "ghost_x" in trace:
         ax.plot(trace["ghost_x"][k], trace["ghost_y"][k], marker="o", mfc="none", mec="#5050ff", ms=5)
-    xy = p[:, :2]
-    pad = 1.5
-    ax.set_xlim(xy[:, 0].min() - pad, xy[:, 0].max() + pad)
-    ax.set_ylim(xy[:, 1].min() - pad, xy[:, 1].max() + pad)
-    ax.set_xticks([])
-    ax.set_yticks([])
+    centre = 0.5 * (p[:, :2].min(axis=0) + p[:, :2].max(axis=0))
+    ax.set_xlim(centre[0] - span[0] / 2, centre[0] + span[0] / 2)
+    ax.set_ylim(centre[1] - span[1] / 2, centre[1] + span[1] / 2)
+    ax.set_aspect("equal")
+    ax.tick_params(labelsize=7)
+
+
+def _formation_span(trace: dict[str, Any], picks: Any, pad: float = 1.5) -> tuple[float, float]:
+    """One (width, height) in metres for every snapshot: the largest extent of the chain plus ``pad``."""
+    ext = np.array([np.ptp(np.asarray(trace["positions"][int(k)])[:, :2], axis=0) for k in picks])
+    return float(ext[:, 0].max() + 2 * pad), float(ext[:, 1].max() + 2 * pad)
 
 
 def report_section(results: list[dict[str, Any]], out_dir: Path) -> str:
@@ -94,11 +102,20 @@ def report_section(results: list[dict[str, Any]], out_dir: Path) -> str:
     n = len(trace["positions"])
     # Fig. 8: formation snapshots along the run.
     picks = np.linspace(0, n - 1, 6).round().astype(int)
-    fig, axes = plt.subplots(2, 3, figsize=(12, 7.5))
+    span = _formation_span(trace, picks)
+    fig, axes = plt.subplots(2, 3, figsize=(12, 2 * 4.0 * span[1] / span[0] + 1.6), layout="constrained")
     for ax, k, tag in zip(axes.ravel(), picks, "abcdef", strict=True):
-        _draw_frame(ax, env, trace, int(k), radius)
+        _draw_frame(ax, env, trace, int(k), radius, span)
         ax.set_title(f"({tag}) t = {k * env.config.control_period:.1f} s", fontsize=9)
-    fig.tight_layout()
+    for ax in axes[1]:
+        ax.set_xlabel("x [m]", fontsize=8)
+    for ax in axes[:, 0]:
+        ax.set_ylabel("y [m]", fontsize=8)
+    fig.suptitle(
+        f"{main['policy']} on {main.get('label') or main.get('scenario')}, seed {seed}: formation every "
+        f"{(picks[1] - picks[0]) * env.config.control_period:.0f} s (every panel {span[0]:.1f} x {span[1]:.1f} m)",
+        fontsize=10,
+    )
     snap = "chain_formation.png"
     fig.savefig(out_dir / snap, dpi=110)
     plt.close(fig)
@@ -111,14 +128,14 @@ def report_section(results: list[dict[str, Any]], out_dir: Path) -> str:
             ax.plot(t, d, label=f"{r['policy']} (seed {tr['seed']})")
     ax.set_xlabel("time [s]")
     ax.set_ylabel("mean distance to strip [m]")
-    ax.legend(fontsize=8)
+    ax.set_title("Straightness of the chain: mean distance of the robots to the strip", fontsize=10)
+    ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.01, 1.0), frameon=False)
     ax.grid(alpha=0.3)
-    fig.tight_layout()
     straight = "chain_straightness.png"
-    fig.savefig(out_dir / straight, dpi=110)
+    fig.savefig(out_dir / straight, dpi=110, bbox_inches="tight")
     plt.close(fig)
     # The A* path on the whole map, with the leader's driven path.
-    fig, ax = plt.subplots(figsize=(8, 5.5))
+    fig, ax = plt.subplots(figsize=(8, 6.2), layout="constrained")
     draw_geometry(ax, env.chain_map.geometry)
     blocked = env.chain_map.blocked
     xmin, ymin, xmax, ymax = env.chain_map.grid.bounds
@@ -127,12 +144,26 @@ def report_section(results: list[dict[str, Any]], out_dir: Path) -> str:
     )
     path = np.asarray(trace["astar_path"])
     lead = np.asarray([q[0] for q in trace["positions"]])
+    from matplotlib.lines import Line2D
+    from matplotlib.patches import Circle, Patch
+
     ax.plot(path[:, 0], path[:, 1], color="#c83c3c", lw=1.5, label="A* path (inflated map)")
-    ax.plot(lead[:, 0], lead[:, 1], color="#1f3c88", lw=1.0, label="leader")
-    ax.plot(*path[0], "o", color="#1f3c88")
-    ax.plot(*path[-1], "*", color="#2a9d2a", ms=12)
-    ax.legend(fontsize=8, loc="upper right")
-    fig.tight_layout()
+    ax.plot(lead[:, 0], lead[:, 1], color="#1f3c88", lw=1.0, label="leader's driven path")
+    ax.plot(*path[0], "o", color="#1f3c88", ms=8, ls="", label="start")
+    ax.plot(*path[-1], "*", color="#2a9d2a", ms=14, ls="", label="goal")
+    handles, labels = ax.get_legend_handles_labels()
+    obstacles = trace.get("obstacles", [])
+    for x, y, r in obstacles:
+        ax.add_patch(Circle((x, y), r, color="#e08a00", ec="k", lw=0.6, zorder=5))
+    if obstacles:
+        handles.append(Line2D([], [], marker="o", color="#e08a00", mec="k", ls="", ms=8))
+        labels.append("dropped obstacle (where it rests)")
+    handles.append(Patch(color="#d9d9d9"))
+    labels.append("inflated obstacles (robot radius + margin)")
+    ax.set_xlabel("x [m]")
+    ax.set_ylabel("y [m]")
+    ax.set_title(f"{main['policy']}, seed {seed}: the A* path on the map and the leader's path", fontsize=10)
+    fig.legend(handles, labels, loc="outside lower center", ncol=3, fontsize=8, frameon=False)
     amap = "chain_astar_map.png"
     fig.savefig(out_dir / amap, dpi=110)
     plt.close(fig)

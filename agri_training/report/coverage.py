@@ -14,7 +14,7 @@ import gymnasium as gym
 import numpy as np
 
 from agri_baselines.gonzalez import peak_filter
-from agri_training.report.rover import draw_geometry
+from agri_training.report.rover import draw_geometry, scene_legend_entries
 
 #: The lateral sonar whose series Fig. 9 shows (the middle one on the left).
 FIG9_SONAR = "sonar_left_middle"
@@ -86,6 +86,7 @@ def plot_paths(result: dict[str, Any], trace: dict[str, Any], episode: dict[str,
     env = _scene(result, int(trace["seed"]))
     fig, ax = plt.subplots(figsize=(9, 6))
     draw_geometry(ax, env.layout.geometry)
+    scene_legend_entries(ax, env.layout.geometry)
     for k, line in enumerate(env.corridor_lines()):
         ax.plot(line[:, 0], line[:, 1], ":", color="0.5", lw=0.8, label="corridor centre lines" if k == 0 else None)
     if episode.get("planned_path"):
@@ -98,9 +99,8 @@ def plot_paths(result: dict[str, Any], trace: dict[str, Any], episode: dict[str,
     ax.set_xlabel("x [m]")
     ax.set_ylabel("y [m]")
     ax.set_title(f"{result['policy']} ({_label(result)}), seed {trace['seed']}")
-    ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.12), ncol=2, fontsize=8)
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
+    ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.12), ncol=3, fontsize=8, frameon=False)
+    fig.savefig(path, dpi=110, bbox_inches="tight")
     plt.close(fig)
     env.close()
 
@@ -142,9 +142,8 @@ def plot_sonar(trace: dict[str, Any], path: Path, n: int = 5, eps: float = 0.3) 
     ax.set_title(
         f"Sonar peaks from vegetation echoes (Fig. 9), corridor {int(corridor[best[0]])}, seed {trace['seed']}"
     )
-    ax.legend(fontsize=8)
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
+    ax.legend(fontsize=8, loc="upper center", bbox_to_anchor=(0.5, -0.2), ncol=2, frameon=False)
+    fig.savefig(path, dpi=110, bbox_inches="tight")
     plt.close(fig)
     return float(np.std(series)), float(np.std(filt))
 
@@ -162,15 +161,14 @@ def plot_sensory_map(result: dict[str, Any], seed: int, episode: dict[str, Any],
         a.plot(odo[:, 0], odo[:, 1], "-", color="tab:red", lw=0.8, label="robot (odometry)")
     a.set_aspect("equal")
     a.set_title(f"sensory map, {len(pts)} echoes")
-    a.legend(fontsize=8, loc="upper right")
+    a.legend(fontsize=8, loc="upper center", bbox_to_anchor=(0.5, -0.12), ncol=2, frameon=False)
     draw_geometry(b, env.layout.geometry)
     b.set_title("true greenhouse")
     for ax in (a, b):
         ax.set_xlabel("x [m]")
     a.set_ylabel("y [m]")
     fig.suptitle(f"{result['policy']} ({_label(result)}), seed {seed}")
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
+    fig.savefig(path, dpi=110, bbox_inches="tight")
     plt.close(fig)
     env.close()
 

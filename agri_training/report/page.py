@@ -23,21 +23,25 @@ import math
 import re
 import sys
 import time
+import typing
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
 import gymnasium as gym
+import numpy as np
 import yaml
 
+from agri_envs.scenarios import scenario as get_scenario
 from agri_training import leaderboard as lb
 from agri_training.core.documents import git_commit
-from agri_training.core.envs import make_env
+from agri_training.core.envs import MULTIAGENT_ENVS, is_multiagent, make_env
 from agri_training.core.progress import Progress
-from agri_training.core.stats import newcombe_interval, paired_comparison, wilson_interval
+from agri_training.core.stats import bootstrap_ci, newcombe_interval, paired_comparison, wilson_interval
 from agri_training.evaluation.episode import run_episode
 from agri_training.evaluation.evaluate import INTERVALS_NOTE
 from agri_training.evaluation.policies import load_policy
+from agri_training.evaluation.video import ClipRequest, record
 from agri_training.learned.zoo import ZOO_DIR
 
 #: Per-env report sections: env id -> ``"module:function"`` (see the module docstring).
@@ -52,12 +56,6 @@ SECTION_HOOKS: dict[str, str] = {
 #: with theirs by an interval of the difference, not by eye.
 PAPER_RATES: dict[str, tuple[int, int, str]] = {
     "grape-table2": (9, 10, "Luo et al. 2018, Table 2"),
-}
-
-#: The suite whose baseline results are drawn as bands on an env's learning curves (default: its first).
-CURVE_SUITES: dict[str, str] = {
-    "agri_envs/GreenhouseNav-v2": "greenhouse-sim-loop",
-    "agri_envs/GrapeHarvest-v1": "grape-table2",
 }
 
 #: Equivalence margins for "matches": rates within +-0.10; other metrics within +-5 % of the reference mean.
@@ -77,9 +75,12 @@ How to read the numbers:
   with a true rate as low as 84 %. Means use a percentile bootstrap over episodes.
 - A policy *beats* another only where the paired comparison's interval of the difference excludes zero; it
   *matches* only where that interval lies within a small margin (0.10 for rates, 5 % of the other's mean
-  for times and lengths). Everything else is *not distinguishable* with these episodes. A policy that is
-  worse on a suite's first ranking metric (success) is never said to beat another on the others: its
-  failed episodes end early, which makes it look faster without being so.
+  for times and lengths). Everything else is *not distinguishable* with these episodes.
+- Secondary metrics (time, path length, clearance, cross-track, path ratio, ...) are compared only over
+  the episodes that both policies completed, and not at all (*n/a*) when fewer than 5 are: a failed
+  episode ends early, which makes a policy look faster or straighter without being so. Rates and progress
+  (coverage, waypoints reached) are compared over every episode. A policy that is worse on a suite's first
+  ranking metric (success) is never said to beat another on the others, nor a better one to be worse.
 - **P** marks *privileged* policies: they use what a real robot would not have (such as the true pose),
   so they show what the controller could do with perfect localization, not what the robot does.
 """
@@ -182,6 +183,7 @@ def _level_document(row: Row, k: int, seeds: list[int], bar: Any) -> dict[str, A
         "suite": row.suite.name,
         "label": level["label"],
         "policy": entry["policy"]["name"],
+        "policy_kind": entry["policy"]["kind"],
         "privileged": bool(entry.get("privileged")),
         "seed": row.suite.seed_start,
         "env_kwargs": level["env_kwargs"],
@@ -222,10 +224,14 @@ def _margin(metric: str, reference: float) -> float:
 
 
 def compare(x: Mapping[str, Any], y: Mapping[str, Any], metric: str, higher_is_better: bool) -> Any:
-    """Paired comparison of entry ``x`` with entry ``y`` on a suite metric, with the report's margins."""
-    vx, binary = lb.episode_values(x, metric)
-    vy, _ = lb.episode_values(y, metric)
-    if not vx or len(vx) != len(vy):
+    """Paired comparison of entry ``x`` with entry ``y`` on a suite metric, with the report's margins.
+
+    Secondary metrics (time, path length, clearance, cross-track, path ratio, ...) are compared over the
+    episodes both policies completed (:func:`agri_training.leaderboard.paired_values`); with fewer than
+    :data:`agri_training.leaderboard.MIN_COMPLETED_PAIRS` of them, not at all (None).
+    """
+    vx, vy, binary, completed = lb.paired_values(x, y, metric)
+    if not vx or len(vx) != len(vy) or (completed is not None and completed < lb.MIN_COMPLETED_PAIRS):
         return None
     finite = [float(v) for v in vy if v is not None and math.isfinite(float(v))]
     if not finite:
@@ -237,14 +243,14 @@ def compare(x: Mapping[str, Any], y: Mapping[str, Any], metric: str, higher_is_b
         return None
 
 
-_UNITS = {"episode_time": "s", "path_length": "m", "min_clearance": "m", "ate_rmse": "m", "final_position_error": "m"}
+def _completed(x: Mapping[str, Any], y: Mapping[str, Any], metric: str) -> tuple[int | None, int]:
+    """(episodes both completed or None for an unconditional metric, episodes in all) of a pair."""
+    vx, _, _, completed = lb.paired_values(x, y, metric)
+    return completed, len(vx)
 
 
 def _metric_name(metric: str) -> str:
-    key = metric.replace("mean_", "").replace("iqm_", "")
-    name = ("IQM " if metric.startswith("iqm_") else "") + key.replace("_", " ")
-    name = {"episode time": "time", "success rate": "success", "collision rate": "collisions"}.get(name, name)
-    return f"{name} [{_UNITS[key]}]" if key in _UNITS else name
+    return lb.metric_label(metric)
 
 
 def _pairs(group: Sequence[Row]) -> list[tuple[Row, Row]]:
@@ -273,26 +279,42 @@ def comparison_table(group: Sequence[Row]) -> tuple[list[str], list[str]]:
         wins: list[str] = []
         losses: list[str] = []
         same: list[str] = []
-        primary_lost = False
+        primary = "inconclusive"
         for i, rk in enumerate(suite.rank_by):
             c = compare(a.entry, b.entry, rk.metric, rk.higher_is_better)
+            completed, n = _completed(a.entry, b.entry, rk.metric)
             if c is None:
-                cells.append("n/a")
+                cells.append(
+                    f"n/a: both completed {completed} of {n} episodes"
+                    if completed is not None and completed < lb.MIN_COMPLETED_PAIRS
+                    else "n/a"
+                )
                 continue
             fmt = "{:+" + lb.metric_format(rk.metric)[2:]
-            word = {"better": "**X better**", "worse": "**X worse**", "matches": "match", "inconclusive": "-"}
+            verdict = c.verdict
+            if i == 0:
+                primary = verdict
+            # The one that succeeds less often is never said to do better on the others, nor the one that
+            # succeeds more often worse: the episodes both completed are too few a share to rank them on.
+            elif (primary == "worse" and verdict == "better") or (primary == "better" and verdict == "worse"):
+                verdict = "not claimed"
+            word = {
+                "better": "**X better**",
+                "worse": "**X worse**",
+                "matches": "match",
+                "inconclusive": "-",
+                "not claimed": f"- (not claimed: X succeeds {'less' if primary == 'worse' else 'more'} often)",
+            }
+            over = f" over the {completed} episodes both completed" if completed is not None else ""
             cells.append(
                 f"{fmt.format(c.difference)} [{fmt.format(c.ci[0])}, {fmt.format(c.ci[1])}], "
-                f"P(X better) {c.prob_improvement:.2f}; {word[c.verdict]}"
+                f"P(X better) {c.prob_improvement:.2f}; {word[verdict]}{over}"
             )
             text = (
-                f"{_metric_name(rk.metric)} ({fmt.format(c.difference)} [{fmt.format(c.ci[0])}, {fmt.format(c.ci[1])}])"
+                f"{_metric_name(rk.metric)} ({fmt.format(c.difference)} [{fmt.format(c.ci[0])}, {fmt.format(c.ci[1])}]"
+                f"{'; ' + over.strip() if over else ''})"
             )
-            if i == 0 and c.verdict == "worse":
-                primary_lost = True
-            if primary_lost and i > 0 and c.verdict == "better":
-                continue  # e.g. "faster" only because its failed episodes ended early: not a win
-            {"better": wins, "worse": losses, "matches": same}.get(c.verdict, []).append(text)
+            {"better": wins, "worse": losses, "matches": same}.get(verdict, []).append(text)
         lines.append("| " + " | ".join(cells) + " |")
         parts = []
         if wins:
@@ -347,6 +369,7 @@ def find_runs(runs_dir: Path) -> list[dict[str, Any]]:
     csvs = sorted(set(runs_dir.rglob("progress.csv")) | set(runs_dir.rglob("*curve*.csv")))
     for path in csvs:
         env_id = None
+        config: Mapping[str, Any] = {}
         for folder in (path.parent, path.parent.parent):
             for name in ("config.yaml", "config.yml", "config.json", "run.json", "meta.json"):
                 cfg = folder / name
@@ -357,6 +380,7 @@ def find_runs(runs_dir: Path) -> list[dict[str, Any]]:
                         continue
                     if isinstance(doc, Mapping):
                         env_id = doc.get("env_id") or doc.get("env")
+                        config = doc
                 if env_id:
                     break
             if env_id:
@@ -366,7 +390,9 @@ def find_runs(runs_dir: Path) -> list[dict[str, Any]]:
         with open(path, newline="") as f:
             rows = list(csv.DictReader(f))
         if rows:
-            runs.append({"env_id": env_id, "name": str(path.parent.relative_to(runs_dir)), "rows": rows})
+            runs.append(
+                {"env_id": env_id, "name": str(path.parent.relative_to(runs_dir)), "rows": rows, "config": config}
+            )
     return runs
 
 
@@ -399,11 +425,104 @@ def _curve(rows: list[dict[str, str]]) -> tuple[str, str, list[float], list[floa
     return None
 
 
-def learning_curves(env_id: str, runs: list[dict[str, Any]], rows: Sequence[Row], out_dir: Path) -> list[str]:
-    """Markdown: learning curves of the env's runs with each baseline as a horizontal band (its 95 % interval).
+#: Env arguments that change what a policy observes or how it commands, not the task or the scene: a run
+#: and a suite that differ only in these are drawn together (a learned rover on the true pose against
+#: ``harik-apf`` on its SLAM pose, both on the same scene).
+POLICY_SIDE_KWARGS = frozenset({"localization", "full_scan", "control", "max_ee_step", "max_ee_rotation"})
 
-    Success-rate curves get the baselines' success rates on the env's first suite; return curves get their
-    mean returns (the same reward only when the run trained on the suite's arguments: said in the caption).
+
+def run_env_kwargs(run: Mapping[str, Any]) -> dict[str, Any] | None:
+    """The env arguments of a run's periodic evaluation (its scenario's preset, then its ``env_kwargs``).
+
+    None when the run's config does not say (an SB3 ``progress.csv`` with a bare config): then it cannot be
+    matched with a suite.
+    """
+    config = run.get("config") or {}
+    if "env_kwargs" not in config and not config.get("scenario"):
+        return None
+    kwargs: dict[str, Any] = {}
+    if config.get("scenario"):
+        try:
+            kwargs.update(get_scenario(run["env_id"], str(config["scenario"])).env_kwargs)
+        except ValueError:
+            return None
+    kwargs.update(config.get("env_kwargs") or {})
+    return kwargs
+
+
+def _task_kwargs(kwargs: Mapping[str, Any]) -> dict[str, Any]:
+    return {k: v for k, v in kwargs.items() if k not in POLICY_SIDE_KWARGS}
+
+
+def curve_suite(run: Mapping[str, Any], suites: Sequence[lb.Suite]) -> lb.Suite | None:
+    """The suite of the run's task and scene: same env id, same env arguments (less the policy-side ones).
+
+    Sweeping suites (several levels) never match: a curve has one scene.
+    """
+    kwargs = run_env_kwargs(run)
+    if kwargs is None:
+        return None
+    for suite in suites:
+        if suite.env_id == run["env_id"] and not suite.sweep:
+            if _task_kwargs(suite.env_kwargs) == _task_kwargs(kwargs):
+                return suite
+    return None
+
+
+def _baseline_groups(base: Sequence[Row], key: str) -> list[tuple[str, float, tuple[float, float]]]:
+    """Baselines with the same value and interval merged into one line: ``(label, value, (lo, hi))``."""
+    groups: dict[tuple[float, float, float], list[str]] = {}
+    for b in base:
+        s = b.entry["summary"]
+        if s.get(key) is None:
+            continue
+        lo, hi = s.get(f"{key}_ci") or (s[key], s[key])
+        groups.setdefault((round(float(s[key]), 3), round(float(lo), 3), round(float(hi), 3)), []).append(
+            b.entry["policy"]["name"]
+        )
+    return [
+        (f"{', '.join(names)}: {v:.2f} [{lo:.2f}, {hi:.2f}] (baseline{'s' if len(names) > 1 else ''})", v, (lo, hi))
+        for (v, lo, hi), names in groups.items()
+    ]
+
+
+_Curve = tuple[str, str, list[float], list[float]]
+
+
+def seed_groups(curves: Sequence[tuple[dict[str, Any], _Curve]]) -> list[list[tuple[dict[str, Any], _Curve]]]:
+    """Runs grouped by configuration: the same config (but the seed) and the same logged key, in order."""
+    groups: dict[str, list[tuple[dict[str, Any], _Curve]]] = {}
+    for run, c in curves:
+        config = {k: v for k, v in (run.get("config") or {}).items() if k != "seed"}
+        key = json.dumps(config, sort_keys=True, default=str) + c[0] if config else f"{run['name']}:{c[0]}"
+        groups.setdefault(key, []).append((run, c))
+    return list(groups.values())
+
+
+def across_seeds(curves: Sequence[_Curve]) -> tuple[list[float], list[float], list[float], list[float]]:
+    """Mean over seeds at the steps every seed logged, with a 95 % bootstrap interval of that mean."""
+    common = sorted(set.intersection(*(set(c[2]) for c in curves)))
+    values = [[dict(zip(c[2], c[3], strict=True))[x] for c in curves] for x in common]
+    cis = [bootstrap_ci(v) for v in values]
+    return common, [float(np.mean(v)) for v in values], [c[0] for c in cis], [c[1] for c in cis]
+
+
+def _common_name(names: Sequence[str]) -> str:
+    """``runs/sweep/seed0``, ``runs/sweep/seed1`` -> ``runs/sweep/seed*``."""
+    prefix = names[0]
+    for n in names[1:]:
+        while not n.startswith(prefix):
+            prefix = prefix[:-1]
+    return (prefix or "runs") + "*"
+
+
+def learning_curves(env_id: str, runs: list[dict[str, Any]], rows: Sequence[Row], out_dir: Path) -> list[str]:
+    """Markdown: learning curves of the env's runs, each against the baselines of its own task and scene.
+
+    A run is drawn with the baselines' 95 % bands of the suite with its env id and env arguments
+    (:func:`curve_suite`); a run that no suite matches is drawn alone, with a note. Success-rate points
+    carry their Wilson interval over the run's evaluation episodes; return curves get the baselines' mean
+    returns.
     """
     mine = [r for r in runs if r["env_id"] == env_id]
     if not mine:
@@ -423,48 +542,133 @@ def learning_curves(env_id: str, runs: list[dict[str, Any]], rows: Sequence[Row]
             curves.append((run, c))
     if not curves:
         return ["Training runs were found, but none logs a success rate or a return."]
-    env_suites = [r.suite for r in rows if r.suite.env_id == env_id]
-    first_suite = next((su for su in env_suites if su.name == CURVE_SUITES.get(env_id)), None) or next(
-        iter(env_suites), None
-    )
-    base = [
-        r for r in rows if first_suite and r.suite.name == first_suite.name and r.entry["policy"]["kind"] == "baseline"
-    ]
-    out = []
-    for kind in ("success", "return"):
-        sel = [(run, c) for run, c in curves if (kind == "success") == ("success" in c[0])]
-        if not sel:
-            continue
-        fig, ax = plt.subplots(figsize=(8, 4.5))
-        colours = plt.get_cmap("tab10")
-        for i, b in enumerate(base):
-            s = b.entry["summary"]
-            key = "success_rate" if kind == "success" else "mean_return"
-            if s.get(key) is None:
+    env_suites = list({r.suite.name: r.suite for r in rows if r.suite.env_id == env_id}.values())
+    by_suite: dict[str | None, list[tuple[dict[str, Any], tuple[str, str, list[float], list[float]]]]] = {}
+    for run, c in curves:
+        suite = curve_suite(run, env_suites)
+        by_suite.setdefault(suite.name if suite else None, []).append((run, c))
+    out: list[str] = []
+    for suite_name, group in by_suite.items():
+        base = [r for r in rows if r.suite.name == suite_name and r.entry["policy"]["kind"] == "baseline"]
+        for kind in ("success", "return"):
+            sel = [(run, c) for run, c in group if (kind == "success") == ("success" in c[0])]
+            if not sel:
                 continue
-            lo, hi = s.get(f"{key}_ci") or (s[key], s[key])
-            col = colours(i + 5)
-            ax.axhspan(lo, hi, color=col, alpha=0.18, lw=0)
-            ax.axhline(s[key], color=col, ls="--", lw=1.2, label=f"{b.entry['policy']['name']} (baseline, 95 % CI)")
-        for i, (run, (_, label, xs, ys)) in enumerate(sel):
-            ax.plot(xs, ys, color=colours(i), lw=1.6, label=f"{run['name']} ({label})")
-        if kind == "success":
-            ax.set_ylim(-0.03, 1.03)
-        ax.set_xlabel("training steps (policy decisions, as --timesteps counts them)")
-        ax.set_ylabel("success rate" if kind == "success" else "episode return")
-        ax.set_title(f"{env_id}: learning curves, baselines as bands ({first_suite.name if first_suite else ''})")
-        ax.grid(alpha=0.3)
-        ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8, frameon=False)
-        name = f"{env_id.split('/')[-1]}_learning_{kind}.png"
-        fig.savefig(out_dir / name, dpi=110, bbox_inches="tight")
-        plt.close(fig)
-        out += [f"![{name}]({name})", ""]
-    if any("success" not in c[0] for _, c in sel):
-        out.append(
-            "Return curves are comparable with the baseline bands only where the run trained on the suite's "
-            "env arguments."
-        )
+            fig, ax = plt.subplots(figsize=(8, 4.5))
+            colours = plt.get_cmap("tab10")
+            key = "success_rate" if kind == "success" else "mean_return"
+            for i, (label, v, (lo, hi)) in enumerate(_baseline_groups(base, key)):
+                col = colours(i + 5)
+                ax.axhspan(lo, hi, color=col, alpha=0.15, lw=0, zorder=1)
+                ax.axhline(v, color=col, ls="--", lw=1.2, label=label, zorder=2)
+            for i, members in enumerate(seed_groups(sel)):
+                col = colours(i)
+                if len(members) > 1:  # one configuration over several training seeds: mean and interval
+                    xs, mean, low, high = across_seeds([c for _, c in members])
+                    for _, (_, _, mx, my) in members:
+                        ax.plot(mx, my, color=col, lw=0.6, alpha=0.35, zorder=3)
+                    ax.fill_between(xs, low, high, color=col, alpha=0.2, lw=0, zorder=3)
+                    ax.plot(
+                        xs,
+                        mean,
+                        color=col,
+                        lw=2.0,
+                        marker="o",
+                        ms=4,
+                        zorder=4,
+                        label=f"{_common_name([r['name'] for r, _ in members])} ({members[0][1][1]}; mean of "
+                        f"{len(members)} seeds, 95 % bootstrap interval across seeds; thin: each seed)",
+                    )
+                    continue
+                run, (_, label, xs, ys) = members[0]
+                n = (run.get("config") or {}).get("eval_episodes")
+                counted = f"{n} episodes per point" if n else "episodes per point not logged"
+                ax.plot(
+                    xs,
+                    ys,
+                    color=col,
+                    lw=1.6,
+                    marker="o",
+                    ms=4,
+                    zorder=4,
+                    label=f"{run['name']} ({label}; {counted})",
+                )
+                if kind == "success" and n:
+                    ci = [wilson_interval(round(y * int(n)), int(n)) for y in ys]
+                    ax.fill_between(xs, [c[0] for c in ci], [c[1] for c in ci], color=col, alpha=0.15, lw=0, zorder=3)
+            if kind == "success":
+                ax.set_ylim(-0.03, 1.05)
+            ax.set_xlabel("training steps (policy decisions, as --timesteps counts them)")
+            ax.set_ylabel("success rate (95 % interval shaded)" if kind == "success" else "episode return")
+            where = f"baselines on suite {suite_name}" if suite_name else "no suite of the same task and scene"
+            ax.set_title(f"{env_id}: learning curves ({where})", fontsize=10)
+            ax.grid(alpha=0.3)
+            ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8, frameon=False)
+            stem = env_id.split("/")[-1] + (f"_{suite_name}" if suite_name else "_own-scene")
+            name = f"{stem}_learning_{kind}.png"
+            fig.savefig(out_dir / name, dpi=110, bbox_inches="tight")
+            plt.close(fig)
+            out += [f"![{name}]({name})", ""]
+        names = ", ".join(f"`{run['name']}`" for run, _ in group)
+        if suite_name is None:
+            out += [
+                f"{names}: no suite has this run's env arguments (its task and scene), so no baseline is drawn "
+                "beside it; bands from another scene would not compare like with like.",
+                "",
+            ]
+        elif not base:
+            out += [f"{names}: suite `{suite_name}` has the same task and scene but no baseline entry to draw.", ""]
+        else:
+            out += [f"{names} against the baselines of suite `{suite_name}` (same env arguments).", ""]
     return out
+
+
+# ---------------------------------------------------------------- clips
+
+#: Most frames of an env's clip in the report (the episode is sampled evenly), and their shrink factor.
+CLIP_FRAMES = 60
+CLIP_SCALE = 0.5
+
+
+def env_clip(env_id: str, rows: Sequence[Row], out_dir: Path) -> list[str]:
+    """Markdown: a short GIF of one representative episode of the env, and what it shows.
+
+    The episode: on the env's first suite where a baseline succeeds, the first unprivileged such baseline
+    (the paper's robot) on its first successful seed, re-run from its seed as the entry counted it.
+    """
+    for suite_name in dict.fromkeys(r.suite.name for r in rows if r.suite.env_id == env_id):
+        group = [r for r in rows if r.suite.name == suite_name and r.entry["policy"]["kind"] == "baseline"]
+        group.sort(key=lambda r: bool(r.entry.get("privileged")))
+        for r in group:
+            found = next(
+                ((lv, e) for lv in r.entry["levels"] for e in lv["episodes"] if e["is_success"] and e.get("steps")),
+                None,
+            )
+            if found is None:
+                continue
+            level, episode = found
+            name = f"{_anchor(env_id.split('/')[-1])}_clip.gif"
+            every = max(1, math.ceil(int(episode["steps"]) / CLIP_FRAMES))
+            clip = record(
+                ClipRequest(
+                    env_id,
+                    lb.policy_argument(r.entry["policy"]),
+                    seed=int(episode["seed"]),
+                    out=out_dir / name,
+                    env_kwargs=level["env_kwargs"],
+                    every=every,
+                    fps=10.0,
+                    scale=CLIP_SCALE,
+                )
+            )
+            return [
+                f"`{r.entry['policy']['name']}` on `{level['label']}`, seed {episode['seed']} (a success): one frame "
+                f"every {every} step(s) of {episode['steps']}, {clip['frames']} frames at 10 fps. Record any "
+                f"policy with `agri record --env {env_id} --policy NAME --seed S --out clip.gif`.",
+                "",
+                f"![{name}]({name})",
+            ]
+    return []
 
 
 # ---------------------------------------------------------------- the page
@@ -473,11 +677,15 @@ def learning_curves(env_id: str, runs: list[dict[str, Any]], rows: Sequence[Row]
 def _env_blurb(env_id: str) -> str:
     """The first paragraph of the env class's docstring (its Description), or ''."""
     try:
-        entry = gym.spec(env_id).entry_point
-        if not isinstance(entry, str):
-            return ""
-        module, attr = entry.split(":")
-        doc = getattr(importlib.import_module(module), attr).__doc__ or ""
+        if is_multiagent(env_id):  # a PettingZoo module: the class its parallel_env returns
+            factory = importlib.import_module(MULTIAGENT_ENVS[env_id]).parallel_env
+            doc = typing.get_type_hints(factory)["return"].__doc__ or ""
+        else:
+            entry = gym.spec(env_id).entry_point
+            if not isinstance(entry, str):
+                return ""
+            module, attr = entry.split(":")
+            doc = getattr(importlib.import_module(module), attr).__doc__ or ""
     except Exception:  # noqa: BLE001 - a missing description must not break the report
         return ""
     text = re.sub(r"^#+ *Description\s*", "", doc.strip())
@@ -534,7 +742,15 @@ def build_report(
     runs = find_runs(runs_dir) + zoo_runs()
     env_ids = list(dict.fromkeys(s.env_id for s in suites))
 
-    parts = ["# agri_envs evaluation report", "", INTRO, "Envs in this report:", ""]
+    parts = ["# agri_envs evaluation report", "", INTRO]
+    if episodes is not None:
+        parts += [
+            f"**Quick look: {episodes} episodes per suite level** (`--episodes {episodes}`), evaluated afresh "
+            "instead of the committed entries. Intervals from so few episodes are wide or degenerate; read the "
+            "claims below as a smoke test, not as results.",
+            "",
+        ]
+    parts += ["Envs in this report:", ""]
     parts += [f"- [{e}](#{_anchor(e)})" for e in env_ids]
     parts += ["", "## Who wins where", ""]
     claims_all = []
@@ -583,6 +799,9 @@ def build_report(
             except ImportError as exc:
                 section = f"(plots unavailable: {exc})"
             parts += ["### Paper reproduction and plots", "", section, ""]
+        clip = env_clip(env_id, rows, out_dir)
+        if clip:
+            parts += ["### A representative episode", "", *clip, ""]
     commits = sorted({r.entry["git_commit"][:10] for r in rows})
     parts += [
         "## How this report was made",

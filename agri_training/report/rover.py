@@ -45,6 +45,25 @@ def draw_geometry(ax: Any, geometry: Geometry) -> None:
     ax.set_aspect("equal")
 
 
+_KIND_NAMES = {
+    Kind.WALL: "walls",
+    Kind.POST: "posts",
+    Kind.PLANT: "plants",
+    Kind.LEAF: "leaves",
+    Kind.TREE: "trees",
+    Kind.OBSTACLE: "obstacles",
+}
+
+
+def scene_legend_entries(ax: Any, geometry: Geometry) -> None:
+    """Legend entries (empty proxies) for every kind of object the scene holds: plants, posts, trees, ..."""
+    kinds = {int(k) for k in geometry.circle_kinds} | {int(k) for k in geometry.polygon_kinds}
+    kinds |= {int(k) for k, w in zip(geometry.capsule_kinds, geometry.capsules[:, 4], strict=True) if w > 0}
+    for kind, name in _KIND_NAMES.items():
+        if int(kind) in kinds:
+            ax.plot([], [], marker="s", ls="", ms=7, color=_KIND_COLOURS[kind], label=name)
+
+
 def scene_of(result: dict[str, Any], seed: int) -> Any:
     """Rebuild the env of a result at ``seed`` (same arguments) and return it after reset."""
     env = gym.make(result["env_id"], **result["env_kwargs"])
@@ -59,9 +78,23 @@ def _trajectory_axes(ax: Any, result: dict[str, Any], trace: dict[str, Any], leg
     e = env.unwrapped
     geometry = e.layout.geometry
     waypoints = e.layout.waypoints
+    crowd = getattr(e, "crowd", None)
+    people = np.array(crowd.pos, float) if crowd is not None and int(getattr(crowd, "n", 0)) > 0 else np.zeros((0, 2))
     env.close()
     x, y = np.array(data["x"], float), np.array(data["y"], float)
     draw_geometry(ax, geometry)
+    scene_legend_entries(ax, geometry)
+    if len(people):
+        ax.scatter(
+            people[:, 0],
+            people[:, 1],
+            s=40,
+            facecolors="none",
+            edgecolors="#e07000",
+            lw=1.4,
+            zorder=5,
+            label="people at the start (they walk)",
+        )
     ax.plot(x, y, color="#2859c8", lw=1.4, label="robot (true pose)")
     for kx, ky, what in (("est_x", "est_y", "odometry"), ("slam_x", "slam_y", "SLAM")):
         est_x = np.array([np.nan if v is None else v for v in data.get(kx, [])], float)
@@ -166,7 +199,7 @@ def plot_panels(
             if lab not in labels:
                 handles.append(h)
                 labels.append(lab)
-    fig.legend(handles, labels, loc="outside lower center", ncol=len(labels), fontsize=8, frameon=False)
+    fig.legend(handles, labels, loc="outside lower center", ncol=min(len(labels), 5), fontsize=8, frameon=False)
     fig.suptitle(textwrap.fill(title, 100), fontsize=11)
     fig.savefig(out_dir / name, dpi=100)
     plt.close(fig)
@@ -189,23 +222,32 @@ ROVER_NOTES = (
 LOST_LOCALIZATION = 0.25
 
 
-def failure_cause(record: dict[str, Any]) -> str:
-    """Why an episode failed, from its record: collision, lost localization, blocked in front, or stuck."""
+def failure_cause(record: dict[str, Any], learned: bool = False) -> str:
+    """Why an episode failed, from its record: collision, lost localization, blocked in front, or stuck.
+
+    A learned policy has no APF and no safety stop, so its failures are not named after them.
+    """
     if record.get("collision"):
         return "collision"
     if (record.get("final_position_error") or 0.0) > LOST_LOCALIZATION:
         return "localization lost"
+    if learned:
+        return "time limit (stopped with something in front)" if record.get("blocked_at_end") else "time limit"
     if record.get("blocked_at_end"):
         return "waiting at the safety stop (something stays in front)"
     return "time limit while free to move (APF local minimum or too slow)"
 
 
-def failure_counts(episodes: list[dict[str, Any]]) -> str:
+def _learned(result: dict[str, Any]) -> bool:
+    return result.get("policy_kind") == "learned"
+
+
+def failure_counts(episodes: list[dict[str, Any]], learned: bool = False) -> str:
     """``"2 localization lost, 1 collision"``: failed episodes counted by cause, most frequent first."""
     causes: dict[str, int] = {}
     for e in episodes:
         if not e["is_success"]:
-            cause = failure_cause(e)
+            cause = failure_cause(e, learned)
             causes[cause] = causes.get(cause, 0) + 1
     return ", ".join(f"{n} {cause}" for cause, n in sorted(causes.items(), key=lambda kv: -kv[1]))
 
@@ -215,14 +257,14 @@ def failure_lines(result: dict[str, Any]) -> list[str]:
     failed = [e for e in result["episodes"] if not e["is_success"]]
     if not failed:
         return ["No failures."]
-    counts = failure_counts(failed)
+    counts = failure_counts(failed, _learned(result))
     lines = [f"Failures: {len(failed)} of {len(result['episodes'])} ({counts}).", ""]
     for e in failed:
         extra = ""
         if e.get("final_position_error") is not None:
             extra = f", final localization error {e['final_position_error']:.2f} m"
         lines.append(
-            f"- seed {e['seed']}: {failure_cause(e)} after {e.get('episode_time', 0):.1f} s, "
+            f"- seed {e['seed']}: {failure_cause(e, _learned(result))} after {e.get('episode_time', 0):.1f} s, "
             f"{e.get('waypoints_reached', '?')}/{e.get('n_waypoints', '?')} waypoints{extra}"
         )
     return lines
@@ -246,7 +288,7 @@ def policy_table(results: list[dict[str, Any]]) -> list[str]:
     for r in results:
         s = r["summary"]
         failed = [e for e in r["episodes"] if not e["is_success"]]
-        fails = failure_counts(failed) or "none"
+        fails = failure_counts(failed, _learned(r)) or "none"
         stops = f"{s['mean_safety_stops']:.2f}" if s.get("mean_safety_stops") is not None else "-"
         waiting = f"{s['mean_blocked_time']:.1f}" if s.get("mean_blocked_time") is not None else "-"
         rows.append(
@@ -319,7 +361,11 @@ def report_section(results: list[dict[str, Any]], out_dir: Path) -> str:
                 names = plot_trace(r, t, out_dir, _slug(f"greenhouse_{suite}_{r['policy']}"))
                 parts += [f"![{n}]({n})" for n in names] + [""]
         fails = [
-            (r, t, f"{r['policy']} on {_where(r)}, seed {t['seed']}: {failure_cause(_record(r, t['seed']))}")
+            (
+                r,
+                t,
+                f"{r['policy']} on {_where(r)}, seed {t['seed']}: {failure_cause(_record(r, t['seed']), _learned(r))}",
+            )
             for r in group
             for t in r["traces"]
             if not t.get("is_success", True)
@@ -398,16 +444,26 @@ def plot_repeatability(
     env = scene_of(result, trace["seed"])
     geometry = env.unwrapped.layout.geometry
     env.close()
-    fig, (ax, bx) = plt.subplots(1, 2, figsize=(13, 5.2), gridspec_kw={"width_ratios": [1.7, 1]})
+    xmin, ymin, xmax, ymax = geometry.bounds
+    aspect = (ymax - ymin + 0.4) / (xmax - xmin + 0.4)
+    fig, (ax, bx) = plt.subplots(
+        2,
+        1,
+        figsize=(10, 10 * aspect + 4.6),
+        gridspec_kw={"height_ratios": [10 * aspect + 0.8, 3.2]},
+        layout="constrained",
+    )
     draw_geometry(ax, geometry)
+    scene_legend_entries(ax, geometry)
     n = len(stats["paths"])
-    colours = plt.get_cmap("tab10")(np.arange(max(1, n)) % 10)
+    cmap = plt.get_cmap("viridis", max(1, n))
+    colours = cmap(np.arange(max(1, n)))
     styles = ["-", "--", ":", "-."]
     # Cycle 1 drawn thickest and underneath, each later one thinner on top: where the cycles coincide (the
     # point of the experiment) every colour still shows as a band edge.
     widths = np.linspace(5.0, 0.8, max(1, n))
     for c, (p, col) in enumerate(zip(stats["paths"], colours, strict=True)):
-        ax.plot(p[:, 0], p[:, 1], color=col, lw=widths[c], ls=styles[(c // 10) % 4], label=f"cycle {c + 1}")
+        ax.plot(p[:, 0], p[:, 1], color=col, lw=widths[c], ls=styles[(c // 10) % 4])
     ax.set_xlabel("x [m]")
     ax.set_ylabel("y [m]")
     spread = max((w for _, w in stats["spread"]), default=0.0)
@@ -416,7 +472,15 @@ def plot_repeatability(
         f"(true path; later cycles stay within {spread:.2f} m of cycle 1)",
         fontsize=10,
     )
-    ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8, frameon=False)
+    from matplotlib.cm import ScalarMappable
+    from matplotlib.colors import BoundaryNorm
+
+    bar = fig.colorbar(
+        ScalarMappable(BoundaryNorm(np.arange(0.5, n + 1.5), cmap.N), cmap), cax=ax.inset_axes((1.02, 0.0, 0.02, 1.0))
+    )
+    bar.set_label("cycle (1 thickest, underneath)")
+    bar.set_ticks(list(range(1, n + 1)))
+    ax.legend(loc="upper left", bbox_to_anchor=(0.0, -0.12), ncol=6, fontsize=8, frameon=False)
     cyc = np.arange(1, n + 1)
     if stats["has_estimate"] and stats["drift"]:
         bx.plot(cyc[: len(stats["drift"])], stats["drift"], "o-", color="#d08020", label="pose drift at cycle end")
@@ -430,9 +494,8 @@ def plot_repeatability(
     bx.set_xticks(cyc)
     bx.set_title("drift and spread per cycle (Harik Fig. 17)", fontsize=10)
     bx.grid(alpha=0.3)
-    bx.legend(fontsize=8)
+    bx.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.01, 1.0), frameon=False)
     name = f"{stem}_cycles.png"
-    fig.tight_layout()
     fig.savefig(out_dir / name, dpi=110, bbox_inches="tight")
     plt.close(fig)
     return name

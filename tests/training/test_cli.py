@@ -102,3 +102,21 @@ def test_failures_are_counted_by_cause():
     lines = failure_lines({"episodes": episodes})
     assert lines[0].startswith("Failures: 4 of 5") and sum(ln.startswith("- seed") for ln in lines) == 4
     assert failure_lines({"episodes": episodes[4:]}) == ["No failures."]
+
+
+def test_evaluate_help_explains_every_option(capsys):
+    import pytest
+
+    with pytest.raises(SystemExit):
+        main(["evaluate", "--help"])
+    text = " ".join(capsys.readouterr().out.split())
+    assert "run directory" in text and "refused" in text
+    assert "episodes to run (default 20)" in text and "episode i runs seed S+i" in text
+    assert "--quiet no progress bar" in text
+
+
+def test_list_names_every_env_family(capsys):
+    assert main(["list"]) == 0
+    envs = capsys.readouterr().out.split("scenarios:")[0]
+    for env_id in ("GreenhouseNav-v2", "GreenhouseCoverage-v0", "robot_chain_v0", "GrapeHarvest-v1"):
+        assert env_id in envs

@@ -36,8 +36,10 @@ def test_committed_suites_are_valid_and_held_out():
     assert {s.env_id for s in suites} >= {"agri_envs/GreenhouseNav-v2", "agri_envs/GrapeHarvest-v1"}
     for s in suites:
         # per level; the long repeatability missions (10 loops each) run fewer
-        assert s.seed_start >= lb.HELD_OUT_SEED and s.episodes * len(s.levels()) >= lb.MIN_EPISODES or (
-            int(s.env_kwargs.get("mission_cycles", 1)) * s.episodes >= lb.MIN_EPISODES
+        assert (
+            s.seed_start >= lb.HELD_OUT_SEED
+            and s.episodes * len(s.levels()) >= lb.MIN_EPISODES
+            or (int(s.env_kwargs.get("mission_cycles", 1)) * s.episodes >= lb.MIN_EPISODES)
         )
         assert len(s.sha256) == 64 and s.rank_by
 
@@ -215,3 +217,13 @@ def test_learned_policy_reference_pins_the_weights(tmp_path):
     with pytest.raises(ValueError, match="not found"):
         lb.policy_argument(ref)
     assert lb.policy_reference("luo-apf") == {"kind": "baseline", "name": "luo-apf", "privileged": False}
+
+
+def test_leaderboard_columns_have_display_names_and_readable_precision():
+    md = lb.render_markdown(lb.load_entries(lb.ENTRIES_DIR), lb.load_suites(lb.SUITES_DIR))
+    assert "mean_mean" not in md and "success_rate ↑" not in md
+    assert "| mean strip distance [m] ↓ |" in md and "| max cross track [m] ↓ |" in md
+    coverage = md.split("### coverage-almeria")[1].split("###")[0]
+    assert "1.000 [1.000, 1.000]" in coverage  # coverage to 3 decimals, not "1.0 [1.0, 1.0]"
+    assert lb.metric_format("success_rate") == "{:.2f}" and lb.metric_format("mean_max_cross_track") == "{:.3f}"
+    assert lb.metric_label("iqm_episode_time") == "IQM time [s]"

@@ -8,7 +8,8 @@ import yaml
 
 from agri_training import leaderboard as lb
 from agri_training.cli import main
-from agri_training.report.page import Row, comparison_table, find_runs, markdown_to_html
+from agri_training.core.stats import newcombe_paired_interval
+from agri_training.report.page import Row, comparison_table, find_runs, markdown_to_html, zoo_runs
 
 SUITE = {
     "name": "tiny-rover",
@@ -72,10 +73,16 @@ def test_report_from_entries_and_fresh_runs(tmp_path, capsys):
         "harik-apf.json",
         "ppo-greenhouse-nav.json",
     ]
-    assert "GreenhouseNav-v2_learning_success.png" in md and "_d_alpha.png" in md and "_trajectory.png" in md
+    assert "GreenhouseNav-v2_greenhouse-default_learning_success.png" not in md  # the fake run has no scene: no bands
+    assert "_d_alpha.png" in md and "_trajectory.png" in md
+    from PIL import Image
+
+    assert "![greenhousenav-v2_clip.gif](greenhousenav-v2_clip.gif)" in md
+    assert Image.open(out / "greenhousenav-v2_clip.gif").n_frames >= 10
     for line in md.splitlines():
         if line.startswith("!["):
             assert (out / line.split("(")[1].rstrip(")")).stat().st_size > 10_000
+    assert scan_report_tables(md, lb.load_entries(entries) + lb.load_entries(out / "results")) == []
     html = (out / "report.html").read_text()
     assert "<table>" in html and "<img" in html and "<h2 id='who-wins-where'>" in html
     assert json.loads((out / "summary.json").read_text())[0]["suite"] == "tiny-rover"
@@ -95,11 +102,16 @@ def test_claims_only_where_the_interval_supports_them():
     slow = _entry("slow", [True] * 20, [80.0 + 0.1 * i for i in range(20)])
     table, claims = comparison_table([Row(suite, fast, True), Row(suite, slow, True)])
     # 20/20 against 20/20: no claim on success; 30 s faster on every seed: a supported claim on time
-    assert claims == ["tiny-rover: `fast` beats `slow` on time [s] (-30.0 [-30.0, -30.0])."]
+    assert claims == [
+        "tiny-rover: `fast` beats `slow` on time [s] (-30.0 [-30.0, -30.0]; over the 20 episodes both completed)."
+    ]
     assert "+0.00 [-0.16, +0.16]" in table[2]
     near = _entry("near", [True] * 19 + [False], [50.0 + 0.1 * i for i in range(20)])
     _, claims = comparison_table([Row(suite, near, True), Row(suite, fast, True)])
-    assert claims == ["tiny-rover: `fast` matches `near` on time [s] (+0.0 [+0.0, +0.0])."]  # nothing on success
+    # nothing on success; time over the 19 episodes both completed
+    assert claims == [
+        "tiny-rover: `fast` matches `near` on time [s] (+0.0 [+0.0, +0.0]; over the 19 episodes both completed)."
+    ]
 
 
 def test_a_policy_that_fails_more_is_not_said_to_be_faster():
@@ -110,7 +122,76 @@ def test_a_policy_that_fails_more_is_not_said_to_be_faster():
     table, claims = comparison_table([Row(suite, crashing, True), Row(suite, steady, True)])
     assert len(claims) == 1 and claims[0].startswith("tiny-rover: `crashing` is worse than `steady` on success")
     assert "beats" not in claims[0] and "time" not in claims[0]
-    assert "**X better**" in table[2]  # the table still shows the raw time difference
+    # the table shows the time difference over the 10 episodes both completed, without a verdict
+    assert "not claimed: X succeeds less often" in table[2] and "over the 10 episodes both completed" in table[2]
+    assert "**X better**" not in table[2]
+
+
+def test_secondary_metrics_are_compared_over_episodes_both_completed():
+    suite = lb.parse_suite(SUITE)
+    # fails 18 of 20 (early, hence "fast"): only 2 episodes both completed, too few to compare times
+    failing = _entry("failing", [True, True] + [False] * 18, [10.0] * 20, kind="learned")
+    steady = _entry("steady", [True] * 20, [80.0 + 0.1 * i for i in range(20)])
+    table, claims = comparison_table([Row(suite, failing, True), Row(suite, steady, True)])
+    assert "n/a: both completed 2 of 20 episodes" in table[2] and "better" not in table[2].replace("P(X better)", "")
+    assert "time" not in claims[0]
+    # the same time on the shared successes: a match over them, however short the failures were
+    mixed = _entry("mixed", [True] * 15 + [False] * 5, [80.0 + 0.1 * i for i in range(15)] + [5.0] * 5)
+    table, claims = comparison_table([Row(suite, mixed, True), Row(suite, steady, True)])
+    assert "match over the 15 episodes both completed" in table[2]
+
+
+def _success_contradicts(table_line, success):
+    """Why a paired-table row's verdicts contradict the success rates (or None)."""
+    cells = [c.strip() for c in table_line.strip().strip("|").split("|")]
+    x, y = (n.strip("` ") for n in cells[0].split(" vs "))
+    sx, sy = success[x], success[y]
+    lo, hi = newcombe_paired_interval(sx, sy)
+    for cell in cells[2:]:  # the secondary metrics
+        for word, contradicted in (("**X better**", hi < 0), ("**X worse**", lo > 0)):
+            if word not in cell:
+                continue
+            if contradicted:
+                return f"{cells[0]}: {word} though the success rates say otherwise ({sum(sx)} vs {sum(sy)})"
+            both = sum(a and b for a, b in zip(sx, sy, strict=True))
+            if f"over the {both} episodes both completed" not in cell and "episodes both completed" in cell:
+                return f"{cells[0]}: compared over other episodes than the {both} both completed"
+            if "episodes both completed" in cell and both < lb.MIN_COMPLETED_PAIRS:
+                return f"{cells[0]}: compared over {both} episodes"
+    return None
+
+
+def scan_report_tables(md, entries):
+    """Every paired-table row of a report page checked against the success rates of its entries."""
+    suite = None
+    problems = []
+    for line in md.splitlines():
+        if line.startswith("#### "):
+            suite = line[5:].split(" (v")[0]
+        elif line.startswith("| `") and " vs `" in line.split("|")[1]:
+            success = {
+                e["policy"]["name"]: lb.episode_values(e, "success_rate")[0]
+                for e in entries
+                if e["suite"]["name"] == suite
+            }
+            problem = _success_contradicts(line, success)
+            if problem:
+                problems.append(f"{suite}: {problem}")
+    return problems
+
+
+def test_committed_entries_make_no_claim_their_success_rates_contradict():
+    suites, entries = lb.load_suites(lb.SUITES_DIR), lb.load_entries(lb.ENTRIES_DIR)
+    md = []
+    for suite in suites:
+        group = [Row(suite, e, True) for e in entries if e["suite"]["name"] == suite.name]
+        if len(group) > 1:
+            md += [f"#### {suite.name} (v{suite.version})", *comparison_table(group)[0]]
+    assert sum(line.startswith("| `") for line in md) >= 10
+    assert scan_report_tables("\n".join(md), entries) == []
+    # e.g. ppo-greenhouse-nav (0.10 on greenhouse-corridor) is not "better" on time or path length there
+    corridor = "\n".join(md).split("#### greenhouse-corridor")[1].split("####")[0]
+    assert "**X better**" not in corridor
 
 
 def test_learned_policies_are_compared_with_every_baseline():
@@ -157,3 +238,94 @@ def test_progress_names_the_block_and_prints_no_rows_per_episode(capsys, monkeyp
     assert "[1/2] harik-apf-gt on GreenhouseNav-v2 [a]" in err and "[2/2] harik-apf-gt on GreenhouseNav-v2 [b]" in err
     assert "4/4" in err and "success 2/2 of 2" in err  # one bar over the whole run (its ETA), per-block counts
     assert "seed" not in err and [d["label"] for d in docs] == ["a", "b"]
+
+
+def test_learning_curves_only_against_baselines_of_the_same_task_and_scene(tmp_path):
+    from agri_training.report.page import curve_suite, learning_curves
+
+    suites = {s.name: s for s in lb.load_suites(lb.SUITES_DIR)}
+    zoo = {run["name"]: run for run in zoo_runs()}
+    # the reach learner trained on one cluster: not the table2 scenes (2-5 clusters, return home)
+    assert curve_suite(zoo["zoo/sac-her-grape-reach"], list(suites.values())).name == "grape-reach"
+    # the rover trained on the default scene (people walking): greenhouse-default, not sim-loop
+    assert curve_suite(zoo["zoo/ppo-greenhouse-nav"], list(suites.values())).name == "greenhouse-default"
+    entries = lb.load_entries(lb.ENTRIES_DIR)
+    nav = [Row(s, e, True) for s in suites.values() for e in entries if e["suite"]["name"] == s.name]
+    md = "\n".join(learning_curves("agri_envs/GreenhouseNav-v2", [zoo["zoo/ppo-greenhouse-nav"]], nav, tmp_path))
+    assert "GreenhouseNav-v2_greenhouse-default_learning_success.png" in md and "sim-loop" not in md
+    # a run on a scene no suite has: drawn alone, with a note
+    other = {**zoo["zoo/ppo-greenhouse-nav"], "config": {"env_kwargs": {"n_rows": 7}}, "name": "mine"}
+    md = "\n".join(learning_curves("agri_envs/GreenhouseNav-v2", [other], nav, tmp_path))
+    assert "no suite has this run's env arguments" in md and "_own-scene_learning_success.png" in md
+
+
+def test_failure_labels_of_learned_policies_use_no_controller_words():
+    from agri_training.report import arm, rover
+
+    stuck = {"is_success": False, "collision": False, "blocked_at_end": False}
+    assert "APF" in rover.failure_cause(stuck) and "APF" not in rover.failure_cause(stuck, learned=True)
+    blocked = {**stuck, "blocked_at_end": True}
+    assert "safety stop" not in rover.failure_cause(blocked, learned=True)
+    assert arm.failure_cause(stuck) == "plan incomplete" and "plan" not in arm.failure_cause(stuck, learned=True)
+    lines = rover.failure_lines({"policy_kind": "learned", "episodes": [{**stuck, "seed": 1}]})
+    assert not any("APF" in line for line in lines)
+
+
+def test_every_env_section_has_a_description_line():
+    from agri_training.report.page import _env_blurb
+
+    for env_id in ("robot_chain_v0", "agri_envs/GreenhouseNav-v2", "agri_envs/GrapeHarvest-v1"):
+        assert len(_env_blurb(env_id)) > 40, env_id
+
+
+def test_grape_figures_name_their_policy_and_the_scene_is_drawn_once(tmp_path, monkeypatch):
+    import matplotlib
+
+    matplotlib.use("Agg")
+    from matplotlib.axes import Axes
+
+    from agri_training.report.arm import plot_planned_path
+
+    titles = []
+    set_title = Axes.set_title
+    monkeypatch.setattr(
+        Axes, "set_title", lambda self, text, *a, **k: titles.append(text) or set_title(self, text, *a, **k)
+    )
+    suite = lb.load_suite(lb.SUITES_DIR / "grape-table2.yaml")
+    files = []
+    for policy in ("luo-apf", "luo-apf-attract-only"):
+        result = {
+            "env_id": suite.env_id,
+            "env_kwargs": dict(suite.env_kwargs),
+            "policy": policy,
+            "scenario": "table2",
+            "label": "grape-table2",
+        }
+        files.append(plot_planned_path(result, 100000, tmp_path, f"grape_{policy}"))
+    assert titles[0].startswith("luo-apf on grape-table2") and titles[2].startswith("luo-apf-attract-only on")
+    assert "the scene at reset" in titles[1] and len(titles) == 3  # one scene picture for both policies
+    assert files[0][1] == files[1][1] and files[0][0] != files[1][0]
+
+
+def test_learning_curves_across_seeds_show_the_mean_and_an_interval(tmp_path):
+    from agri_training.report.page import across_seeds, learning_curves, seed_groups
+
+    runs = []
+    for seed in range(3):
+        config = {
+            "env_id": "agri_envs/GreenhouseNav-v2",
+            "env_kwargs": {"n_rows": 7},
+            "seed": seed,
+            "eval_episodes": 10,
+        }
+        rows = [{"timesteps": str(k * 100), "success_rate": str(min(1.0, k * 0.1 + 0.1 * seed))} for k in range(6)]
+        runs.append({"env_id": config["env_id"], "name": f"sweep/seed{seed}", "rows": rows, "config": config})
+    other = {**runs[0], "name": "other", "config": {**runs[0]["config"], "algo": "sac"}}
+    curves = [(r, ("success_rate", "success rate", [float(x["timesteps"]) for x in r["rows"]],
+                   [float(x["success_rate"]) for x in r["rows"]])) for r in [*runs, other]]  # fmt: skip
+    groups = seed_groups(curves)
+    assert [len(g) for g in groups] == [3, 1]
+    xs, mean, lo, hi = across_seeds([c for _, c in groups[0]])
+    assert xs[:2] == [0.0, 100.0] and abs(mean[1] - 0.2) < 1e-9 and lo[1] < mean[1] < hi[1]
+    md = "\n".join(learning_curves("agri_envs/GreenhouseNav-v2", runs, [], tmp_path))
+    assert "_own-scene_learning_success.png" in md

@@ -191,3 +191,13 @@ def test_exponent_numbers_in_overrides_are_floats():
     hp = parse_env_kwargs(["algo_kwargs={learning_rate: 1e-4, clip_range: lin_2e-1}", "eval_freq=5E3"])
     assert hp == {"algo_kwargs": {"learning_rate": 1e-4, "clip_range": "lin_2e-1"}, "eval_freq": 5000.0}
     assert isinstance(hp["algo_kwargs"]["learning_rate"], float)
+
+
+def test_timesteps_are_rounded_up_to_whole_rollouts_and_said_so(tmp_path, capsys):
+    out = tmp_path / "rounded"
+    # n_steps 32 x 2 envs: 100 steps cannot be trained; SB3 trains 128 and the run says so
+    train(TrainRequest(ENV_ID, "ppo", out, seed=3, timesteps=100, overrides=TINY_HP, progress=False), "test")
+    meta = json.loads((out / "meta.json").read_text())
+    assert meta["timesteps_requested"] == 100 and meta["timesteps_planned"] == 128 == meta["timesteps_done"]
+    assert meta["timesteps_rounding"] == "whole rollouts of n_steps 32 x 2 env slot(s) = 64 steps"
+    assert "training 128 steps, not 100" in capsys.readouterr().err

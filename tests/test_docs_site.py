@@ -1,0 +1,48 @@
+"""The documentation site: a page per env family with its frame and its full argument table, strict build."""
+
+import dataclasses
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+import yaml
+
+from agri_training.core.envs import make_env
+from agri_training.report.gallery import ENV_PAGES, build_docs_source
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+@pytest.fixture(scope="module")
+def site_source(tmp_path_factory):
+    out = tmp_path_factory.mktemp("site") / "docs"
+    build_docs_source(out)
+    return out
+
+
+@pytest.mark.parametrize(("name", "env_id"), [(name, env_id) for name, env_id, _ in ENV_PAGES])
+def test_every_env_page_shows_its_frame_and_every_argument(site_source, name, env_id):
+    page = (site_source / f"{name}.md").read_text()
+    assert f"![{env_id} at reset]({name}.png)" in page and (site_source / f"{name}.png").stat().st_size > 5_000
+    env = make_env(env_id, {})
+    config = getattr(env, "unwrapped", env).config
+    env.close()
+    table = page.split("## Arguments of ")[1]
+    for f in dataclasses.fields(config):
+        assert f"| `{f.name}` |" in table, f.name
+    assert "## Description" in page and "## Version History" in page
+
+
+def test_the_site_builds_in_strict_mode(site_source):
+    pytest.importorskip("mkdocs")
+    config = yaml.safe_load((ROOT / "mkdocs.yml").read_text())
+    config.update(docs_dir="docs", site_dir="site")
+    cfg = site_source.parent / "mkdocs.yml"
+    cfg.write_text(yaml.safe_dump(config))
+    run = subprocess.run(
+        [sys.executable, "-m", "mkdocs", "build", "--strict", "-f", str(cfg)], capture_output=True, text=True
+    )
+    assert run.returncode == 0, run.stderr
+    assert "WARNING" not in run.stderr
+    assert (site_source.parent / "site" / "robot-chain" / "index.html").is_file()
