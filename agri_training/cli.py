@@ -9,14 +9,12 @@ import sys
 from pathlib import Path
 from typing import Any
 
-import gymnasium as gym
 import yaml
 
-import agri_envs  # noqa: F401  (registers the env ids)
+import agri_envs
 from agri_baselines import list_policies, policy_spec
 from agri_envs.scenarios import list_scenarios
 from agri_training import leaderboard as lb
-from agri_training.core.envs import MULTIAGENT_ENVS
 from agri_training.core.yaml_values import load_yaml
 from agri_training.evaluation.evaluate import EvalRequest, evaluate, format_summary
 from agri_training.evaluation.parallel import EpisodeError
@@ -267,10 +265,9 @@ def _cmd_leaderboard(args: argparse.Namespace) -> int:
 
 def _cmd_list(args: argparse.Namespace) -> int:
     print("envs:")
-    for env_id in sorted(k for k in gym.registry if k.startswith("agri_envs/")):
-        print(f"  {env_id}")
-    for env_id, module in MULTIAGENT_ENVS.items():
-        print(f"  {env_id} (PettingZoo parallel env: {module})")
+    for env_id in agri_envs.env_ids():
+        parallel = agri_envs.is_parallel_id(env_id)
+        print(f"  {env_id}" + (f" (PettingZoo parallel env: {agri_envs.PARALLEL_ENVS[env_id]})" if parallel else ""))
     print("scenarios:")
     for sc in list_scenarios():
         print(f"  {sc.env_id} {sc.name}: {sc.description}")

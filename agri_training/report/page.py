@@ -32,10 +32,11 @@ import gymnasium as gym
 import numpy as np
 import yaml
 
+import agri_envs
 from agri_envs.scenarios import scenario as get_scenario
 from agri_training import leaderboard as lb
 from agri_training.core.documents import git_commit
-from agri_training.core.envs import MULTIAGENT_ENVS, is_multiagent, make_env
+from agri_training.core.envs import is_multiagent, make_env
 from agri_training.core.progress import Progress
 from agri_training.core.stats import bootstrap_ci, newcombe_interval, paired_comparison, wilson_interval
 from agri_training.evaluation.episode import run_episode
@@ -678,7 +679,7 @@ def _env_blurb(env_id: str) -> str:
     """The first paragraph of the env class's docstring (its Description), or ''."""
     try:
         if is_multiagent(env_id):  # a PettingZoo module: the class its parallel_env returns
-            factory = importlib.import_module(MULTIAGENT_ENVS[env_id]).parallel_env
+            factory = importlib.import_module(agri_envs.PARALLEL_ENVS[env_id]).parallel_env
             doc = typing.get_type_hints(factory)["return"].__doc__ or ""
         else:
             entry = gym.spec(env_id).entry_point
