@@ -29,7 +29,8 @@ TRAINING_LAYERS = (
 #: them optional (torch and what builds on it, plotting, Ray, pybullet, video).
 DEFERRABLE = {
     "torch", "stable_baselines3", "sb3_contrib", "supersuit", "matplotlib", "ray", "optuna", "pybullet",
-    "pybullet_data", "moviepy", "pygame", "tqdm", "tensorboard", "psutil", "numba", "scipy", "PIL",
+    "pybullet_data", "moviepy", "imageio", "imageio_ffmpeg", "pygame", "tqdm", "tensorboard", "psutil", "numba",
+    "scipy", "PIL", "mkdocs",
 }  # fmt: skip
 
 
