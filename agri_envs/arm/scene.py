@@ -297,6 +297,30 @@ def sample_scene(rng: np.random.Generator, params: SceneParams) -> Scene:
     return sample_scene_and_configurations(rng, params)[0]
 
 
+def vine_obstacles(rng: np.random.Generator, top: float, n_canes: int) -> list[Obstacle]:
+    """The vine's wood around the clusters: the cordon at ``top``, the trunk and ``n_canes`` canes (random y).
+
+    Draws one uniform for the trunk, then one per cane, in that order (the scene's random stream).
+    """
+    obstacles = [
+        Obstacle("cordon", np.array([ROW_X - 0.02, -0.7, top - 0.02]), np.array([ROW_X + 0.02, 0.7, top + 0.02])),
+    ]
+    trunk_y = rng.uniform(-0.4, 0.4)
+    obstacles.append(
+        Obstacle(
+            "trunk",
+            np.array([ROW_X - 0.03, trunk_y - 0.03, -BASE_HEIGHT]),
+            np.array([ROW_X + 0.03, trunk_y + 0.03, top - 0.02]),
+        )
+    )
+    for _ in range(n_canes):
+        y = rng.uniform(-0.6, 0.6)
+        obstacles.append(
+            Obstacle("cane", np.array([ROW_X - 0.01, y - 0.01, top - 0.55]), np.array([ROW_X + 0.01, y + 0.01, top]))
+        )
+    return obstacles
+
+
 def sample_scene_reference(rng: np.random.Generator, params: SceneParams) -> Scene:
     """:func:`sample_scene` as first written, all in numpy: the oracle the fast sampler is tested against."""
     n = int(rng.integers(params.min_clusters, params.max_clusters + 1))
@@ -349,22 +373,7 @@ def _try_scene_reference(rng: np.random.Generator, params: SceneParams, n: int) 
     if len(clusters) < n:
         return None
     top = max(c.cut_point[2] for c in clusters) + 0.14
-    obstacles = [
-        Obstacle("cordon", np.array([ROW_X - 0.02, -0.7, top - 0.02]), np.array([ROW_X + 0.02, 0.7, top + 0.02])),
-    ]
-    trunk_y = rng.uniform(-0.4, 0.4)
-    obstacles.append(
-        Obstacle(
-            "trunk",
-            np.array([ROW_X - 0.03, trunk_y - 0.03, -BASE_HEIGHT]),
-            np.array([ROW_X + 0.03, trunk_y + 0.03, top - 0.02]),
-        )
-    )
-    for _ in range(params.n_canes):
-        y = rng.uniform(-0.6, 0.6)
-        obstacles.append(
-            Obstacle("cane", np.array([ROW_X - 0.01, y - 0.01, top - 0.55]), np.array([ROW_X + 0.01, y + 0.01, top]))
-        )
+    obstacles = vine_obstacles(rng, top, params.n_canes)
     for o in obstacles:
         if not check.free_with(o.lo, o.hi, []):
             return None
@@ -567,22 +576,7 @@ def _try_scene(
     if len(clusters) < n:
         return None
     top = max(c.cut_point[2] for c in clusters) + 0.14
-    obstacles = [
-        Obstacle("cordon", np.array([ROW_X - 0.02, -0.7, top - 0.02]), np.array([ROW_X + 0.02, 0.7, top + 0.02])),
-    ]
-    trunk_y = rng.uniform(-0.4, 0.4)
-    obstacles.append(
-        Obstacle(
-            "trunk",
-            np.array([ROW_X - 0.03, trunk_y - 0.03, -BASE_HEIGHT]),
-            np.array([ROW_X + 0.03, trunk_y + 0.03, top - 0.02]),
-        )
-    )
-    for _ in range(params.n_canes):
-        y = rng.uniform(-0.6, 0.6)
-        obstacles.append(
-            Obstacle("cane", np.array([ROW_X - 0.01, y - 0.01, top - 0.55]), np.array([ROW_X + 0.01, y + 0.01, top]))
-        )
+    obstacles = vine_obstacles(rng, top, params.n_canes)
     for o in obstacles:
         if not check.free_with(_Box(o.lo, o.hi), None):
             return None
