@@ -280,10 +280,14 @@ class MouthDetector:
 
     This project's own entry logic (the paper gives none). The sonar looks at the row ends: a reading
     below ``closed_range`` is a row end (or the plants beside it), above ``open_range`` it looks down a
-    corridor. The decision is taken on eq. 1's filtered readings, so a burst of echoes slipping into the
-    foliage does not open a mouth: a mouth opens when the filtered reading rises above ``open_range`` after
-    at least ``min_closed`` row-end readings, and closes when it falls below ``closed_range``; an open
-    stretch shorter than ``min_width`` is dropped (a gap between plants). Eq. 1 accepts a real change only
+    corridor. The decision is taken on the readings through eq. 1's peak filter (its own instance), so a
+    burst of echoes slipping into the foliage does not open a mouth: a mouth opens when the filtered reading
+    rises above ``open_range`` after at least ``min_closed`` row-end readings, and closes when it falls
+    below ``closed_range``; an open stretch shorter than ``min_width`` is dropped (a gap between plants).
+    Looking down a corridor of plants the beam reads anything from ``open_range`` to its maximum range, and
+    eq. 1 takes such a string of readings for peaks (each differs by more than ``eps`` from most of the
+    window) and holds the row end's value: the readings are therefore saturated at ``open_range + eps / 2``
+    before the filter, which keeps every distinction the decision needs. Eq. 1 accepts a real change only
     once it fills most of its window, later on a ramp (the cone sliding past a row end) than on a step, so
     the mouth's ends are dated by the raw readings: where the run of raw readings above (below)
     ``closed_range`` that the filter has just accepted began. The same threshold at both ends makes the
@@ -295,10 +299,19 @@ class MouthDetector:
         min_width: Shortest open stretch that counts as a mouth (m).
         min_closed: Row-end readings needed before a mouth counts (the corridor just left is no mouth).
         memory: Raw readings kept to date the ends.
+        filter_n: Eq. 1's window n.
+        filter_eps: Eq. 1's threshold eps (m).
     """
 
     def __init__(
-        self, open_range: float, closed_range: float, min_width: float, min_closed: int = 2, memory: int = 40
+        self,
+        open_range: float,
+        closed_range: float,
+        min_width: float,
+        min_closed: int = 2,
+        memory: int = 40,
+        filter_n: int = 5,
+        filter_eps: float = 0.3,
     ) -> None:
         if not open_range >= closed_range:
             raise ValueError(f"MouthDetector: open_range ({open_range}) must be >= closed_range ({closed_range})")
@@ -307,11 +320,13 @@ class MouthDetector:
         self.min_width = min_width
         self.min_closed = min_closed
         self.memory = memory
+        self.filter = PeakFilter(filter_n, filter_eps)
         self.reset()
 
     def reset(self) -> None:
         """Forget the readings (a new headland crossing)."""
         self._raw: deque[tuple[float, float]] = deque(maxlen=self.memory)
+        self.filter.reset()
         self.closed = 0
         self.opened_at: float | None = None
 
@@ -329,18 +344,18 @@ class MouthDetector:
             start = s
         return start
 
-    def update(self, s: float, raw: float, filtered: float) -> tuple[float, float] | None:
+    def update(self, s: float, raw: float) -> tuple[float, float] | None:
         """Feed one reading taken at travelled distance ``s``; a mouth ``(start, end)`` when one closes.
 
         Args:
             s: Distance travelled along the headland (m).
             raw: The sonar's raw reading (m).
-            filtered: The same reading through eq. 1's peak filter (m).
 
         Returns:
             None, or the travelled distances (m) at which the sonar entered and left the mouth.
         """
         self._raw.append((s, float(raw)))
+        filtered = self.filter(min(float(raw), self.open_range + 0.5 * self.filter.eps))
         if filtered < self.closed_range:
             self.closed += 1
             if self.opened_at is not None:
@@ -473,8 +488,13 @@ class PseudoReactiveController:
         self.row_count = 0
         self.arc = False
         self.end_mark: tuple[float, float] | None = None
-        self.mouth_front = MouthDetector(self.p.side_open, self.p.row_end_range, self.p.mouth_width)
-        self.mouth_middle = MouthDetector(self.p.side_open, self.p.row_end_range, 0.0)
+        p = self.p
+        self.mouth_front = MouthDetector(
+            p.side_open, p.row_end_range, p.mouth_width, filter_n=p.filter_n, filter_eps=p.filter_eps
+        )
+        self.mouth_middle = MouthDetector(
+            p.side_open, p.row_end_range, p.mouth_width, filter_n=p.filter_n, filter_eps=p.filter_eps
+        )
         self.across_heading = 0.0
         self.entry: float | None = None  # travelled distance along the headland of the next centre line
 
@@ -541,15 +561,16 @@ class PseudoReactiveController:
         across = self.across_heading
         s = (x - self.mark[0]) * math.cos(across) + (y - self.mark[1]) * math.sin(across)
         i_front, i_mid = (LF, LM) if self.turn_side > 0 else (RF, RM)
-        found = self.mouth_front.update(s, float(sonar[i_front]), float(filt[i_front]))
-        middle = self.mouth_middle.update(s, float(sonar[i_mid]), float(filt[i_mid]))
+        found = self.mouth_front.update(s, float(sonar[i_front]))
+        middle = self.mouth_middle.update(s, float(sonar[i_mid]))
         if filt[i_mid] < p.row_end_range:
             self.row_count += 1
             self.seen_row = self.seen_row or self.row_count >= 2
         if self.entry is None:
             if found is not None:
                 self.entry = 0.5 * (found[0] + found[1]) + float(self.mounts[i_front, 0])
-            elif middle is not None:  # the front sonar missed it: the middle one's mouth is behind the robot
+            elif middle is not None and not self.mouth_front.is_open:
+                # The front sonar missed it: the middle one's mouth, behind the robot.
                 self.entry = 0.5 * (middle[0] + middle[1]) + float(self.mounts[i_mid, 0])
         v = p.cruise_speed * slow
         if self.mouth_front.is_open:

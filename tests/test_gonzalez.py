@@ -181,10 +181,12 @@ def test_sensory_map_eq2_places_echoes():
 
 def _headland_readings(centre, half_width, rng, burst_at=None):
     """Lateral sonar readings every 4 cm along a headland: row ends (1.0 m), the plants beside them (1.6 m), a
-    ramp where the cone slides past a row end, far echoes down the corridor whose centre line is at ``centre``."""
+    ramp where the cone slides past a row end, and echoes from 2.6 to 4 m down the corridor of plants whose
+    centre line is at ``centre``."""
     s = np.arange(0.0, 3.0, 0.04)
     d = np.abs(s - centre)
-    r = np.where(d < half_width, 3.8, np.where(d < half_width + 0.15, 3.8 - (d - half_width) / 0.15 * 2.2, 1.6))
+    far = rng.uniform(2.6, 4.0, len(s))  # eq. 1 alone takes such a string for peaks
+    r = np.where(d < half_width, far, np.where(d < half_width + 0.15, 3.8 - (d - half_width) / 0.15 * 2.2, 1.6))
     r = np.where(d > half_width + 0.6, 1.0, r)
     r = r + rng.normal(0.0, 0.02, len(s))
     if burst_at is not None:  # two echoes slipping into the foliage, far beyond the row end
@@ -197,9 +199,8 @@ def _headland_readings(centre, half_width, rng, burst_at=None):
 def test_mouth_detector_finds_the_corridor_centre_line_through_the_peak_filter(centre):
     rng = np.random.default_rng(0)
     s, raw = _headland_readings(centre, 0.25, rng, burst_at=centre - 0.9)
-    filt = peak_filter(raw)
     det = MouthDetector(open_range=2.5, closed_range=2.0, min_width=0.15)
-    mouths = [m for m in (det.update(a, b, c) for a, b, c in zip(s, raw, filt, strict=True)) if m is not None]
+    mouths = [m for m in (det.update(a, b) for a, b in zip(s, raw, strict=True)) if m is not None]
     assert len(mouths) == 1  # the burst of foliage echoes is no mouth
     start, end = mouths[0]
     # The filter accepts the opening ramp later than the closing step; the raw-dated ends are symmetric.
@@ -210,7 +211,7 @@ def test_mouth_detector_ignores_the_corridor_just_left_and_short_gaps():
     det = MouthDetector(open_range=2.5, closed_range=2.0, min_width=0.15)
     # Open from the start (still looking down the corridor it left), then a row end, then a 0.08 m gap.
     readings = [3.8] * 10 + [1.0] * 10 + [3.8] * 2 + [1.0] * 10
-    out = [det.update(0.04 * k, r, r) for k, r in enumerate(readings)]
+    out = [det.update(0.04 * k, r) for k, r in enumerate(readings)]
     assert all(m is None for m in out) and not det.is_open
     with pytest.raises(ValueError, match="open_range"):
         MouthDetector(open_range=1.0, closed_range=2.0, min_width=0.1)
