@@ -290,7 +290,8 @@ class MouthDetector:
     before the filter, which keeps every distinction the decision needs. Eq. 1 accepts a real change only
     once it fills most of its window, later on a ramp (the cone sliding past a row end) than on a step, so
     the mouth's ends are dated by the raw readings: where the run of raw readings above (below)
-    ``closed_range`` that the filter has just accepted began. The same threshold at both ends makes the
+    ``closed_range`` that the filter has just accepted began (a single reading of the other side inside
+    the run does not end it). The same threshold at both ends makes the
     middle of the mouth the corridor's centre line.
 
     Args:
@@ -336,11 +337,20 @@ class MouthDetector:
         return self.opened_at is not None
 
     def _run_start(self, is_open: bool) -> float:
-        """Travelled distance of the first raw reading of the latest run on the open (closed) side."""
+        """Travelled distance of the first raw reading of the latest run on the open (closed) side.
+
+        A single reading of the other side does not end the run: past a row end, echoes slipping into the
+        foliage read long now and then, and would otherwise date the end of a mouth late.
+        """
         start = self._raw[-1][0]
+        other = 0
         for s, r in reversed(self._raw):
             if (r >= self.closed_range) != is_open:
-                break
+                other += 1
+                if other == 2:
+                    break
+                continue
+            other = 0
             start = s
         return start
 

