@@ -282,8 +282,9 @@ class MouthDetector:
     below ``closed_range`` is a row end (or the plants beside it), above ``open_range`` it looks down a
     corridor. The decision is taken on the readings through eq. 1's peak filter (its own instance), so a
     burst of echoes slipping into the foliage does not open a mouth: a mouth opens when the filtered reading
-    rises above ``open_range`` after at least ``min_closed`` row-end readings, and closes when it falls
-    below ``closed_range``; an open stretch shorter than ``min_width`` is dropped (a gap between plants).
+    rises above ``open_range`` after at least ``min_closed`` row-end readings, and closes once it has stayed
+    below ``closed_range`` for ``confirm`` readings (leaves reaching into the corridor close it only
+    briefly); an open stretch shorter than ``min_width`` is dropped (a gap between plants).
     Looking down a corridor of plants the beam reads anything from ``open_range`` to its maximum range, and
     eq. 1 takes such a string of readings for peaks (each differs by more than ``eps`` from most of the
     window) and holds the row end's value: the readings are therefore saturated at ``open_range + eps / 2``
@@ -302,6 +303,7 @@ class MouthDetector:
         memory: Raw readings kept to date the ends.
         filter_n: Eq. 1's window n.
         filter_eps: Eq. 1's threshold eps (m).
+        confirm: Filtered row-end readings that close a mouth.
     """
 
     def __init__(
@@ -313,6 +315,7 @@ class MouthDetector:
         memory: int = 40,
         filter_n: int = 5,
         filter_eps: float = 0.3,
+        confirm: int = 5,
     ) -> None:
         if not open_range >= closed_range:
             raise ValueError(f"MouthDetector: open_range ({open_range}) must be >= closed_range ({closed_range})")
@@ -322,6 +325,7 @@ class MouthDetector:
         self.min_closed = min_closed
         self.memory = memory
         self.filter = PeakFilter(filter_n, filter_eps)
+        self.confirm = confirm
         self.reset()
 
     def reset(self) -> None:
@@ -330,6 +334,7 @@ class MouthDetector:
         self.filter.reset()
         self.closed = 0
         self.opened_at: float | None = None
+        self._closing: tuple[float, int] | None = None  # (dated end, filtered row-end readings since)
 
     @property
     def is_open(self) -> bool:
@@ -369,12 +374,16 @@ class MouthDetector:
         if filtered < self.closed_range:
             self.closed += 1
             if self.opened_at is not None:
-                start, self.opened_at = self.opened_at, None
-                end = self._run_start(False)
-                if end - start >= self.min_width:
-                    return start, end
-        elif filtered > self.open_range and self.opened_at is None and self.closed >= self.min_closed:
-            self.opened_at = self._run_start(True)
+                end, count = self._closing or (self._run_start(False), 0)
+                self._closing = (end, count + 1)
+                if count + 1 >= self.confirm:
+                    start, self.opened_at, self._closing = self.opened_at, None, None
+                    if end - start >= self.min_width:
+                        return start, end
+        elif filtered > self.open_range:
+            self._closing = None  # it opened again: leaves, not the next row end
+            if self.opened_at is None and self.closed >= self.min_closed:
+                self.opened_at = self._run_start(True)
         return None
 
 

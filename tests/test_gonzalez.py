@@ -217,6 +217,14 @@ def test_mouth_detector_ignores_the_corridor_just_left_and_short_gaps():
         MouthDetector(open_range=1.0, closed_range=2.0, min_width=0.1)
 
 
+def test_mouth_detector_leaves_reaching_into_the_corridor_close_it_only_briefly():
+    det = MouthDetector(open_range=2.5, closed_range=2.0, min_width=0.15, filter_n=1, confirm=5)
+    readings = [1.0] * 10 + [3.8] * 15 + [1.2] * 3 + [3.8] * 10 + [1.0] * 10
+    out = [m for m in (det.update(0.04 * k, r) for k, r in enumerate(readings)) if m is not None]
+    assert len(out) == 1
+    np.testing.assert_allclose(out[0], [0.04 * 10, 0.04 * 38])
+
+
 @pytest.mark.parametrize(
     ("kw", "bound"),
     [
