@@ -304,6 +304,8 @@ class MouthDetector:
         filter_n: Eq. 1's window n.
         filter_eps: Eq. 1's threshold eps (m).
         confirm: Filtered row-end readings that close a mouth.
+        merge_gap: A mouth that opens within this distance (m) of the last one's end continues it (leaves
+            that closed it for longer than ``confirm`` readings).
     """
 
     def __init__(
@@ -316,6 +318,7 @@ class MouthDetector:
         filter_n: int = 5,
         filter_eps: float = 0.3,
         confirm: int = 5,
+        merge_gap: float = 0.3,
     ) -> None:
         if not open_range >= closed_range:
             raise ValueError(f"MouthDetector: open_range ({open_range}) must be >= closed_range ({closed_range})")
@@ -326,6 +329,7 @@ class MouthDetector:
         self.memory = memory
         self.filter = PeakFilter(filter_n, filter_eps)
         self.confirm = confirm
+        self.merge_gap = merge_gap
         self.reset()
 
     def reset(self) -> None:
@@ -335,6 +339,7 @@ class MouthDetector:
         self.closed = 0
         self.opened_at: float | None = None
         self._closing: tuple[float, int] | None = None  # (dated end, filtered row-end readings since)
+        self.last: tuple[float, float] | None = None  # the last mouth found
 
     @property
     def is_open(self) -> bool:
@@ -378,7 +383,10 @@ class MouthDetector:
                 self._closing = (end, count + 1)
                 if count + 1 >= self.confirm:
                     start, self.opened_at, self._closing = self.opened_at, None, None
+                    if self.last is not None and start - self.last[1] <= self.merge_gap:
+                        start = self.last[0]
                     if end - start >= self.min_width:
+                        self.last = (start, end)
                         return start, end
         elif filtered > self.open_range:
             self._closing = None  # it opened again: leaves, not the next row end
@@ -585,23 +593,26 @@ class PseudoReactiveController:
         if filt[i_mid] < p.row_end_range:
             self.row_count += 1
             self.seen_row = self.seen_row or self.row_count >= 2
-        if self.entry is None:
-            if found is not None:
-                self.entry = 0.5 * (found[0] + found[1]) + float(self.mounts[i_front, 0])
-            elif middle is not None and not self.mouth_front.is_open:
-                # The front sonar missed it: the middle one's mouth, behind the robot.
-                self.entry = 0.5 * (middle[0] + middle[1]) + float(self.mounts[i_mid, 0])
+        if found is not None:  # a later mouth (or one merged with the last) replaces the estimate
+            self.entry = 0.5 * (found[0] + found[1]) + float(self.mounts[i_front, 0])
+        elif self.entry is None and middle is not None and not self.mouth_front.is_open:
+            # The front sonar missed it: the middle one's mouth, behind the robot.
+            self.entry = 0.5 * (middle[0] + middle[1]) + float(self.mounts[i_mid, 0])
         v = p.cruise_speed * slow
         if self.mouth_front.is_open:
             v = min(v, p.across_speed)
         if self.entry is not None:
             remaining = self.entry - s
-            confirmed = self.mouth_middle.is_open or filt[i_mid] > p.side_open
+            # The middle sonar confirms the mouth when it entered it before the centre line.
+            m_start = self.mouth_middle.opened_at
+            confirmed = m_start is not None and m_start <= self.entry + p.entry_tolerance
             if confirmed and abs(remaining) <= p.entry_tolerance:
                 self.phase, self.turn_start, self.arc = "turn2", heading, False
                 return self._turn(heading)
-            if not confirmed and remaining < -p.confirm_overrun:
-                self.entry = None  # the middle sonar never looked down it: no mouth
+            if not confirmed and (remaining < -p.confirm_overrun or m_start is not None):
+                # The middle sonar never looked down it, or only past its supposed centre line: the front
+                # sonar's mouth was a wrong one (leaves closed it early); look on.
+                self.entry = None
             elif not confirmed and remaining <= p.entry_tolerance:
                 v = min(v, 0.05)  # creep on until the middle sonar looks down the mouth too
             else:
