@@ -179,7 +179,18 @@ register_policy(
         name="apoorva-chain",
         env_id="robot_chain_v0",
         entry_point="agri_baselines.apoorva_chain:make_apoorva_chain",
-        description="Apoorva 2018: A* + ghost robot, sonar potential field, leader/follower chain, elastic strip",
+        description=(
+            "Apoorva 2018: A* + ghost robot, sonar potential field, leader/follower chain, elastic strip laid "
+            "along the leader's trail (a departure from Alg. 6's straight line, which crosses walls)"
+        ),
+    )
+)
+register_policy(
+    PolicySpec(
+        name="apoorva-chain-alg6",
+        env_id="robot_chain_v0",
+        entry_point="agri_baselines.apoorva_chain:make_apoorva_chain_alg6",
+        description="Ablation of apoorva-chain: the printed Alg. 6 strip (the straight line from first to last robot)",
     )
 )
 register_policy(

@@ -275,6 +275,126 @@ class SensoryMap:
 # --------------------------------------------------------------------------------------------------
 
 
+class MouthDetector:
+    """Finds a corridor's mouth in one lateral sonar's readings while crossing the headland.
+
+    This project's own entry logic (the paper gives none). The sonar looks at the row ends: a reading
+    below ``closed_range`` is a row end (or the plants beside it), above ``open_range`` it looks down a
+    corridor. The decision is taken on the readings through eq. 1's peak filter (its own instance), so a
+    burst of echoes slipping into the foliage does not open a mouth: a mouth opens when the filtered reading
+    rises above ``open_range`` after at least ``min_closed`` row-end readings, and closes once it has stayed
+    below ``closed_range`` for ``confirm`` readings (leaves reaching into the corridor close it only
+    briefly); an open stretch shorter than ``min_width`` is dropped (a gap between plants).
+    Looking down a corridor of plants the beam reads anything from ``open_range`` to its maximum range, and
+    eq. 1 takes such a string of readings for peaks (each differs by more than ``eps`` from most of the
+    window) and holds the row end's value: the readings are therefore saturated at ``open_range + eps / 2``
+    before the filter, which keeps every distinction the decision needs. Eq. 1 accepts a real change only
+    once it fills most of its window, later on a ramp (the cone sliding past a row end) than on a step, so
+    the mouth's ends are dated by the raw readings: where the run of raw readings above (below)
+    ``closed_range`` that the filter has just accepted began (a single reading of the other side inside
+    the run does not end it). The same threshold at both ends makes the
+    middle of the mouth the corridor's centre line.
+
+    Args:
+        open_range: Filtered readings above this look down a corridor (m).
+        closed_range: Readings below this see a row end (m).
+        min_width: Shortest open stretch that counts as a mouth (m).
+        min_closed: Row-end readings needed before a mouth counts (the corridor just left is no mouth).
+        memory: Raw readings kept to date the ends.
+        filter_n: Eq. 1's window n.
+        filter_eps: Eq. 1's threshold eps (m).
+        confirm: Filtered row-end readings that close a mouth.
+        merge_gap: A mouth that opens within this distance (m) of the last one's end continues it (leaves
+            that closed it for longer than ``confirm`` readings).
+    """
+
+    def __init__(
+        self,
+        open_range: float,
+        closed_range: float,
+        min_width: float,
+        min_closed: int = 2,
+        memory: int = 40,
+        filter_n: int = 5,
+        filter_eps: float = 0.3,
+        confirm: int = 5,
+        merge_gap: float = 0.3,
+    ) -> None:
+        if not open_range >= closed_range:
+            raise ValueError(f"MouthDetector: open_range ({open_range}) must be >= closed_range ({closed_range})")
+        self.open_range = open_range
+        self.closed_range = closed_range
+        self.min_width = min_width
+        self.min_closed = min_closed
+        self.memory = memory
+        self.filter = PeakFilter(filter_n, filter_eps)
+        self.confirm = confirm
+        self.merge_gap = merge_gap
+        self.reset()
+
+    def reset(self) -> None:
+        """Forget the readings (a new headland crossing)."""
+        self._raw: deque[tuple[float, float]] = deque(maxlen=self.memory)
+        self.filter.reset()
+        self.closed = 0
+        self.opened_at: float | None = None
+        self._closing: tuple[float, int] | None = None  # (dated end, filtered row-end readings since)
+        self.last: tuple[float, float] | None = None  # the last mouth found
+
+    @property
+    def is_open(self) -> bool:
+        """True while the sonar looks down a mouth (after a row end)."""
+        return self.opened_at is not None
+
+    def _run_start(self, is_open: bool) -> float:
+        """Travelled distance of the first raw reading of the latest run on the open (closed) side.
+
+        A single reading of the other side does not end the run: past a row end, echoes slipping into the
+        foliage read long now and then, and would otherwise date the end of a mouth late.
+        """
+        start = self._raw[-1][0]
+        other = 0
+        for s, r in reversed(self._raw):
+            if (r >= self.closed_range) != is_open:
+                other += 1
+                if other == 2:
+                    break
+                continue
+            other = 0
+            start = s
+        return start
+
+    def update(self, s: float, raw: float) -> tuple[float, float] | None:
+        """Feed one reading taken at travelled distance ``s``; a mouth ``(start, end)`` when one closes.
+
+        Args:
+            s: Distance travelled along the headland (m).
+            raw: The sonar's raw reading (m).
+
+        Returns:
+            None, or the travelled distances (m) at which the sonar entered and left the mouth.
+        """
+        self._raw.append((s, float(raw)))
+        filtered = self.filter(min(float(raw), self.open_range + 0.5 * self.filter.eps))
+        if filtered < self.closed_range:
+            self.closed += 1
+            if self.opened_at is not None:
+                end, count = self._closing or (self._run_start(False), 0)
+                self._closing = (end, count + 1)
+                if count + 1 >= self.confirm:
+                    start, self.opened_at, self._closing = self.opened_at, None, None
+                    if self.last is not None and start - self.last[1] <= self.merge_gap:
+                        start = self.last[0]
+                    if end - start >= self.min_width:
+                        self.last = (start, end)
+                        return start, end
+        elif filtered > self.open_range:
+            self._closing = None  # it opened again: leaves, not the next row end
+            if self.opened_at is None and self.closed >= self.min_closed:
+                self.opened_at = self._run_start(True)
+        return None
+
+
 @dataclasses.dataclass(frozen=True)
 class PseudoReactiveParams:
     """Gains and thresholds of the pseudo-reactive controller (the paper's are "obtained heuristically").
@@ -292,8 +412,15 @@ class PseudoReactiveParams:
         row_end_range: Crossing the headland, the turn-side sonar sees a row end closer than this (m).
         exit_distance: Distance driven after the turn-side middle sonar sees the rows end, before the first
             90 deg turn (m).
-        entry_offset: Distance driven after the turn-side sonar looks down the next corridor, before the
-            second 90 deg turn (m). The sonar's cone sees far only near the corridor's centre line.
+        mouth_width: Shortest open stretch of the turn-side front sonar that counts as a corridor's mouth
+            (m, :class:`MouthDetector`).
+        across_speed: Speed along the headland once the front lateral sonar looks down a mouth (m/s): the
+            robot must stop on the mouth's centre line within its acceleration limit.
+        brake_decel: Deceleration the approach to the mouth's centre line plans with (m/s^2), below the
+            robot's limit.
+        entry_tolerance: The second turn starts within this distance of the mouth's centre line (m).
+        confirm_overrun: Past the centre line by more than this without the middle sonar looking down the
+            mouth too, the mouth is dropped as a false one (m).
         min_corridor: Distance driven between rows before a corridor end may be detected (m).
         end_confirm: The turn side must stay open over this distance before the corridor end counts (m).
         k_heading: Heading gain (1/s).
@@ -314,7 +441,11 @@ class PseudoReactiveParams:
     side_open: float = 2.5
     row_end_range: float = 2.0
     exit_distance: float = 0.55
-    entry_offset: float = 0.15
+    mouth_width: float = 0.15
+    across_speed: float = 0.2
+    brake_decel: float = 0.2
+    entry_tolerance: float = 0.03
+    confirm_overrun: float = 0.3
     min_corridor: float = 2.0
     end_confirm: float = 0.45
     k_heading: float = 1.2
@@ -338,10 +469,20 @@ class PseudoReactiveController:
     """The pseudo-reactive corridor follower of sec. 3.2 for one robot (no map).
 
     Phases: ``corridor`` (go straight with centering and inclined-corridor correction), ``exit`` (drive out
-    past the rows), ``turn1`` (turn 90 deg by the compass), ``across`` (go straight along the headland until
-    the turn-side sonar sees the next corridor's mouth), ``turn2`` (second 90 deg turn) and ``stop`` (a wall
-    ahead at a corridor end: no further corridor). The turn rule: the first turn goes to the open side; each
-    corridor end takes two turns to one side, the next end two turns to the other.
+    past the rows), ``turn1`` (turn 90 deg by the compass), ``across`` (go straight along the headland, at
+    right angles to the corridor's heading, until the robot stands on the next corridor's centre line),
+    ``turn2`` (second 90 deg turn, on the spot) and ``stop`` (a wall ahead at a corridor end: no further
+    corridor). The turn rule: the first turn goes to the open side; each corridor end takes two turns to one
+    side, the next end two turns to the other.
+
+    Corridor entry (this project's own; the paper gives none): crossing the headland, the turn-side front
+    lateral sonar, 0.6 m ahead of the robot's centre, finds the next mouth in its eq. 1-filtered readings
+    (:class:`MouthDetector`: an open stretch after a row end, at least ``mouth_width`` long); the middle of
+    that stretch is the corridor's centre line, which the robot's centre reaches 0.6 m later. The robot
+    slows once the front sonar looks down a mouth, brakes onto the centre line (backing up if it overran),
+    and turns on the spot there once the middle lateral sonar also looks down the mouth; a mouth the middle
+    sonar never confirms is dropped. Entering, the robot centres on the front lateral pair before the middle
+    pair is between the rows.
 
     Args:
         params: Gains and thresholds.
@@ -374,6 +515,15 @@ class PseudoReactiveController:
         self.row_count = 0
         self.arc = False
         self.end_mark: tuple[float, float] | None = None
+        p = self.p
+        self.mouth_front = MouthDetector(
+            p.side_open, p.row_end_range, p.mouth_width, filter_n=p.filter_n, filter_eps=p.filter_eps
+        )
+        self.mouth_middle = MouthDetector(
+            p.side_open, p.row_end_range, p.mouth_width, filter_n=p.filter_n, filter_eps=p.filter_eps
+        )
+        self.across_heading = 0.0
+        self.entry: float | None = None  # travelled distance along the headland of the next centre line
 
     def _travelled(self, x: float, y: float) -> float:
         if self.mark is None:
@@ -407,34 +557,20 @@ class PseudoReactiveController:
             return self._straight(heading, self.reference, p.cruise_speed * slow)
         if self.phase == "turn1":
             if abs(_wrap(heading - self.turn_start)) >= math.pi / 2:
-                self.phase, self.mark, self.seen_row = "across", (x, y), False
+                # Along the headland at right angles to the corridor's heading (not to the heading the turn
+                # began at, which the centering had swung by up to max_center_angle).
+                self.across_heading = _wrap(self.reference + self.turn_side * math.pi / 2)
+                self.phase, self.mark, self.seen_row, self.entry = "across", (x, y), False, None
                 self._fresh_filters()  # readings taken while rotating say nothing about the row ends
-                return self._straight(heading, self.turn_start + self.turn_side * math.pi / 2, 0.0)
+                self.mouth_front.reset()
+                self.mouth_middle.reset()
+                return self._straight(heading, self.across_heading, 0.0)
             return self._turn(heading)
         if self.phase == "across":
-            across = self.turn_start + self.turn_side * math.pi / 2
-            side = filt[LM] if self.turn_side > 0 else filt[RM]
-            if side < p.row_end_range:
-                self.row_count += 1
-                self.seen_row, self.mark = self.seen_row or self.row_count >= 2, None
-            elif self.seen_row and side > p.side_open:
-                if self.mark is None:
-                    self.mark = (x, y)
-                if self._travelled(x, y) >= p.entry_offset:
-                    self.phase, self.turn_start, self.arc = "turn2", heading, False
-                    return self._turn(heading)
-            if front < p.stop_distance + 0.15:
-                if self.seen_row:
-                    # A wall ahead past a row end: the last corridor runs along the wall. The robot cannot
-                    # drive on to its centre line, so it turns in along an arc (as the first turn does).
-                    self.phase, self.turn_start, self.arc = "turn2", heading, True
-                    return self._turn(heading)
-                self.phase, self.behaviour = "stop", "stop"
-                return 0.0, 0.0
-            return self._straight(heading, across, p.cruise_speed * slow)
+            return self._across(sonar, filt, heading, x, y, slow)
         if self.phase == "turn2":
             if abs(_wrap(heading - self.turn_start)) >= math.pi / 2:
-                self.reference = _wrap(self.turn_start + self.turn_side * math.pi / 2)
+                self.reference = _wrap(self.across_heading + self.turn_side * math.pi / 2)
                 self.turns += 2
                 self.phase, self.in_rows, self.mark = "corridor", 0.0, (x, y)
                 self._fresh_filters()
@@ -442,6 +578,57 @@ class PseudoReactiveController:
             return self._turn(heading)
         self.behaviour = "stop"
         return 0.0, 0.0
+
+    def _across(
+        self, sonar: np.ndarray, filt: np.ndarray, heading: float, x: float, y: float, slow: float
+    ) -> tuple[float, float]:
+        """Cross the headland to the next corridor's centre line (see the class docstring), then turn."""
+        p = self.p
+        assert self.mark is not None
+        across = self.across_heading
+        s = (x - self.mark[0]) * math.cos(across) + (y - self.mark[1]) * math.sin(across)
+        i_front, i_mid = (LF, LM) if self.turn_side > 0 else (RF, RM)
+        found = self.mouth_front.update(s, float(sonar[i_front]))
+        middle = self.mouth_middle.update(s, float(sonar[i_mid]))
+        if filt[i_mid] < p.row_end_range:
+            self.row_count += 1
+            self.seen_row = self.seen_row or self.row_count >= 2
+        if found is not None:  # a later mouth (or one merged with the last) replaces the estimate
+            self.entry = 0.5 * (found[0] + found[1]) + float(self.mounts[i_front, 0])
+        elif self.entry is None and middle is not None and not self.mouth_front.is_open:
+            # The front sonar missed it: the middle one's mouth, behind the robot.
+            self.entry = 0.5 * (middle[0] + middle[1]) + float(self.mounts[i_mid, 0])
+        v = p.cruise_speed * slow
+        if self.mouth_front.is_open:
+            v = min(v, p.across_speed)
+        if self.entry is not None:
+            remaining = self.entry - s
+            # The middle sonar confirms the mouth when it entered it before the centre line.
+            m_start = self.mouth_middle.opened_at
+            confirmed = m_start is not None and m_start <= self.entry + p.entry_tolerance
+            if confirmed and abs(remaining) <= p.entry_tolerance:
+                self.phase, self.turn_start, self.arc = "turn2", heading, False
+                return self._turn(heading)
+            if not confirmed and (remaining < -p.confirm_overrun or m_start is not None):
+                # The middle sonar never looked down it, or only past its supposed centre line: the front
+                # sonar's mouth was a wrong one (leaves closed it early); look on.
+                self.entry = None
+            elif not confirmed and remaining <= p.entry_tolerance:
+                v = min(v, 0.05)  # creep on until the middle sonar looks down the mouth too
+            else:
+                # Brake onto the centre line within brake_decel (v = sqrt(2 a d), linear near it); back up
+                # if the robot overran it.
+                speed = min(p.across_speed, math.sqrt(2 * p.brake_decel * abs(remaining)), abs(remaining))
+                v = min(v, speed) if remaining > 0 else -speed
+        if filt[FRONT] < p.stop_distance + 0.15:
+            if self.seen_row:
+                # A wall ahead past a row end: the last corridor runs along the wall. The robot cannot
+                # drive on to its centre line, so it turns in along an arc (as the first turn does).
+                self.phase, self.turn_start, self.arc = "turn2", heading, True
+                return self._turn(heading)
+            self.phase, self.behaviour = "stop", "stop"
+            return 0.0, 0.0
+        return self._straight(heading, across, v)
 
     def _fresh_filters(self) -> None:
         for f in self.filters:
@@ -482,6 +669,9 @@ class PseudoReactiveController:
         offset = 0.0
         if between_rows:
             offset = 0.5 * (float(np.mean(left[lv])) - float(np.mean(right[rv])))
+        elif lv[0] and rv[0]:
+            # Entering: only the front lateral pair is between the rows yet; centre on it.
+            offset = 0.5 * (float(left[0]) - float(right[0]))
         target = self.reference + max(-p.max_center_angle, min(p.max_center_angle, p.k_center * offset))
         # Corridor end: the front and middle sonars of the turn side (undecided: either side) no longer see a row.
         if self.in_rows >= p.min_corridor:

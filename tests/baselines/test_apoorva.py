@@ -111,11 +111,61 @@ def test_apoorva_chain_leads_the_chain_to_the_goal():
 def test_paper_preset_success_rate_and_strip_effect(first_seed):
     seeds = range(first_seed, first_seed + 20)
     with_strip = _run("apoorva-chain", seeds, n_robots=4, n_dynamic_obstacles=1)
+    alg6 = _run("apoorva-chain-alg6", seeds, n_robots=4, n_dynamic_obstacles=1)
     without = _run("apoorva-chain-no-strip", seeds, n_robots=4, n_dynamic_obstacles=1)
     assert np.mean([i["is_success"] for i in with_strip]) >= 0.95
-    assert np.mean([i["mean_strip_distance"] for i in with_strip]) < np.mean(
-        [i["mean_strip_distance"] for i in without]
-    )
+    # The printed strip straightens the chain toward the first-last line (Sec. 5.4).
+    assert np.mean([i["mean_strip_distance"] for i in alg6]) < np.mean([i["mean_strip_distance"] for i in without])
+
+
+def test_path_strip_pulls_toward_the_trail_where_it_may():
+    # An L-shaped trail: up the y axis to (0, 3), then right along y = 3 (the leader is at its end).
+    trail = ac.Polyline(np.array([[0.0, 0.0], [0.0, 3.0], [3.0, 3.0]]))
+    p = np.array([[3.0, 3.0], [1.5, 3.2], [0.1, 1.5], [0.5, 0.5], [-0.2, -0.5]])
+    lo, hi = np.zeros(5), np.full(5, trail.length)
+    forces, feet, s = ac.path_strip_forces(p, trail, lo, hi, gain=1.0, max_force=10.0, reach=0.4)
+    np.testing.assert_allclose(feet[1:3], [[1.5, 3.0], [0.0, 1.5]], atol=1e-9)
+    np.testing.assert_allclose(forces[1:3], [[0.0, -0.2], [-0.1, 0.0]], atol=1e-9)  # Distance * Fix_force
+    # Robot 3 is 0.5 m from the trail (beyond reach): not pulled; the ends hold the strip; nothing pulls
+    # toward the straight line from the first to the last robot, which crosses the corner.
+    np.testing.assert_allclose(forces[[0, 3, 4]], 0.0)
+    # Out of chain order (foot ahead of its predecessor's) or still before the trail's start: not pulled.
+    q = np.array([[3.0, 3.0], [0.1, 1.0], [0.1, 2.0], [0.0, -0.3], [0.0, -1.0]])
+    forces, _, s = ac.path_strip_forces(q, trail, lo, hi, gain=1.0, max_force=10.0, reach=0.4)
+    assert s[2] > s[1] and np.allclose(forces[2], 0.0) and np.allclose(forces[3], 0.0)
+    np.testing.assert_allclose(forces[1], [-0.1, 0.0], atol=1e-9)
+    # The search window keeps a robot on its own stretch of the trail.
+    _, _, s = ac.path_strip_forces(q, trail, np.zeros(5), np.full(5, 0.5), 1.0, 10.0)
+    assert s[1] == pytest.approx(0.5)
+
+
+def test_strip_target_never_lies_in_an_occupied_cell():
+    # Eight robots round the office's corners and doors: every robot's target on the strip along the leader's
+    # trail lies on free floor (a robot's disc there touches nothing static); the printed Alg. 6's foot
+    # points on the straight first-last line fall into walls in the same episode.
+    env = robot_chain_v0.parallel_env(n_robots=8, scene="office", n_dynamic_obstacles=0)
+    policy = make_policy("apoorva-chain", env)
+    obs, _ = env.reset(seed=8000)
+    cmap = env.chain_map
+    radius = env.config.robot_radius
+
+    def clearance(points):
+        cells = np.array([cmap.cell(q) for q in points])
+        return cmap.wall_distance[cells[:, 0], cells[:, 1]]
+
+    start, line_in_wall, checked = True, 0, 0
+    while env.agents:
+        actions, _ = policy.predict(obs, episode_start=np.array([start]))
+        start = False
+        xy = np.array([[env.robots[k].pose[0], env.robots[k].pose[1]] for k in range(8)])
+        if policy.strip_feet is not None:
+            assert clearance(policy.strip_feet[1:-1]).min() >= radius - cmap.grid.resolution
+            checked += 1
+        a, e = xy[0], xy[-1] - xy[0]
+        t = np.clip(((xy - a) @ e) / max(float(e @ e), 1e-12), 0.0, 1.0)
+        line_in_wall += int(clearance((a + t[:, None] * e)[1:-1]).min() < radius)
+        obs, _, _, _, infos = env.step(actions)
+    assert infos["robot_0"]["is_success"] and checked > 100 and line_in_wall > 20
 
 
 def test_default_params_stop_before_the_env_delta():

@@ -8,7 +8,7 @@ import pytest
 
 import agri_envs  # noqa: F401
 from agri_baselines import coverage_path, make_policy
-from agri_baselines.gonzalez import PeakFilter, PurePursuit, SensoryMap, peak_filter
+from agri_baselines.gonzalez import MouthDetector, PeakFilter, PurePursuit, SensoryMap, peak_filter
 from agri_baselines.gonzalez_planner import CoveragePlannerParams, plan_coverage
 from agri_envs.scenes.greenhouse import LayoutParams, generate_layout
 from agri_envs.sim2d.gridmap import rasterize
@@ -177,6 +177,84 @@ def test_sensory_map_eq2_places_echoes():
     assert np.allclose(m.as_array(), [[1.0 - 0.2 - 0.3, 2.5]])
     m.add(1.0, 2.0, 0.0, np.array([4.0]))  # no echo
     assert len(m.as_array()) == 1
+
+
+def _headland_readings(centre, half_width, rng, burst_at=None):
+    """Lateral sonar readings every 4 cm along a headland: row ends (1.0 m), the plants beside them (1.6 m), a
+    ramp where the cone slides past a row end, and echoes from 2.6 to 4 m down the corridor of plants whose
+    centre line is at ``centre``."""
+    s = np.arange(0.0, 3.0, 0.04)
+    d = np.abs(s - centre)
+    far = rng.uniform(2.6, 4.0, len(s))  # eq. 1 alone takes such a string for peaks
+    r = np.where(d < half_width, far, np.where(d < half_width + 0.15, 3.8 - (d - half_width) / 0.15 * 2.2, 1.6))
+    r = np.where(d > half_width + 0.6, 1.0, r)
+    r = r + rng.normal(0.0, 0.02, len(s))
+    if burst_at is not None:  # two echoes slipping into the foliage, far beyond the row end
+        k = int(burst_at / 0.04)
+        r[k : k + 2] = 3.9
+    return s, r
+
+
+@pytest.mark.parametrize("centre", [1.2, 1.53, 2.0])
+def test_mouth_detector_finds_the_corridor_centre_line_through_the_peak_filter(centre):
+    rng = np.random.default_rng(0)
+    s, raw = _headland_readings(centre, 0.25, rng, burst_at=centre - 0.9)
+    det = MouthDetector(open_range=2.5, closed_range=2.0, min_width=0.15)
+    mouths = [m for m in (det.update(a, b) for a, b in zip(s, raw, strict=True)) if m is not None]
+    assert len(mouths) == 1  # the burst of foliage echoes is no mouth
+    start, end = mouths[0]
+    # The filter accepts the opening ramp later than the closing step; the raw-dated ends are symmetric.
+    assert 0.5 * (start + end) == pytest.approx(centre, abs=0.05)
+
+
+def test_mouth_detector_ignores_the_corridor_just_left_and_short_gaps():
+    det = MouthDetector(open_range=2.5, closed_range=2.0, min_width=0.15)
+    # Open from the start (still looking down the corridor it left), then a row end, then a 0.08 m gap.
+    readings = [3.8] * 10 + [1.0] * 10 + [3.8] * 2 + [1.0] * 10
+    out = [det.update(0.04 * k, r) for k, r in enumerate(readings)]
+    assert all(m is None for m in out) and not det.is_open
+    with pytest.raises(ValueError, match="open_range"):
+        MouthDetector(open_range=1.0, closed_range=2.0, min_width=0.1)
+
+
+def test_mouth_detector_leaves_reaching_into_the_corridor_close_it_only_briefly():
+    det = MouthDetector(open_range=2.5, closed_range=2.0, min_width=0.15, filter_n=1, confirm=5)
+    readings = [1.0] * 10 + [3.8] * 15 + [1.2] * 3 + [3.8] * 10 + [1.0] * 10
+    out = [m for m in (det.update(0.04 * k, r) for k, r in enumerate(readings)) if m is not None]
+    assert len(out) == 1
+    np.testing.assert_allclose(out[0], [0.04 * 10, 0.04 * 38])
+
+
+@pytest.mark.parametrize(
+    ("kw", "bound"),
+    [
+        ({"growth": 1.0}, 0.15),
+        # Echoes slipping into the foliage past the row ends make the mouth's far end look later.
+        ({"vegetation_echo_prob": 0.5}, 0.25),
+    ],
+)
+def test_pseudo_reactive_enters_each_corridor_near_its_centre_line(kw, bound):
+    # Seed 8002 at growth 1.0 failed before the entry logic (turned 0.33 m off the centre line, into the crop).
+    env = gym.make("agri_envs/GreenhouseCoverage-v0", localization="odometry", **kw)
+    policy = make_policy("gonzalez-pseudo-reactive", env)
+    obs, _ = env.reset(seed=8002)
+    centres = np.array(env.unwrapped.layout.corridors)
+    start, offsets, last = True, [], None
+    while True:
+        action, _ = policy.predict(obs, episode_start=np.array([start]))
+        start = False
+        phase = policy.controller.phase
+        if phase == "turn2" and last == "across" and not policy.controller.arc:
+            x, y = env.unwrapped.robot.pose[:2]
+            k = int(np.argmin(np.abs(centres[:, 0, 1] - y)))
+            line = centres[k]
+            offsets.append(abs(y - np.interp(x, line[:, 0], line[:, 1])))
+        last = phase
+        obs, _, terminated, truncated, info = env.step(action)
+        if terminated or truncated:
+            break
+    assert info["is_success"] and info["crop_contacts"] == 0
+    assert len(offsets) >= 2 and max(offsets) < bound
 
 
 def test_deliberative_solves_default_preset():

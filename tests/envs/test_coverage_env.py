@@ -130,3 +130,13 @@ def test_coverage_task_bins_cross_track_and_success():
 def test_config_describe_lists_every_argument():
     rows = GreenhouseCoverageConfig().describe()
     assert {r[0] for r in rows} == set(GreenhouseCoverageConfig.field_names())
+
+
+@pytest.mark.parametrize("kwargs", [{"row_bend": 0.15}, {"row_incline": 0.03}, {"corridor_width_jitter": 0.3}])
+def test_a_corridor_with_exactly_the_margin_is_accepted(kwargs):
+    """Each leaves 0.9 m (0.899997 m after tan()) of the 1.4 m corridor: the 0.2 m margin, to the millimetre."""
+    env = gym.make(ENV_ID, **kwargs)
+    env.reset(seed=0)
+    env.close()
+    with pytest.raises(ValueError, match="narrowest corridor"):
+        gym.make(ENV_ID, **{k: v * 1.05 for k, v in kwargs.items()})
