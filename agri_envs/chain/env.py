@@ -126,7 +126,8 @@ class RobotChainEnv(ParallelEnv):  # type: ignore[misc]
 
     ## Baselines
 
-    ``apoorva-chain`` (A* + ghost + sonar potential field + elastic strip) and ``apoorva-chain-no-strip``.
+    ``apoorva-chain`` (A* + ghost + sonar potential field + elastic strip along the leader's trail), and its
+    ablations ``apoorva-chain-alg6`` (the printed strip) and ``apoorva-chain-no-strip``.
 
     ## Version History
 
