@@ -10,7 +10,8 @@ from gymnasium.utils.env_checker import check_env
 from rollouts import assert_same, rollout
 
 import agri_envs  # noqa: F401
-from agri_envs.arm.grape_harvest import GrapeHarvestConfig, GrapeHarvestEnv
+from agri_envs.arm.config import GrapeHarvestConfig
+from agri_envs.arm.grape_harvest import GrapeHarvestEnv
 from agri_envs.arm.kinematics import nearest_ik
 from agri_envs.arm.robot_model import flange_pose_for_tip, tip_pose
 from agri_envs.arm.scene import HOME_Q, harvest_configurations

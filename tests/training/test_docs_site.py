@@ -11,7 +11,7 @@ import yaml
 from agri_training.core.envs import make_env
 from agri_training.report.gallery import ENV_PAGES, build_docs_source
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 
 
 @pytest.fixture(scope="module")
