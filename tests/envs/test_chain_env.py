@@ -1,42 +1,20 @@
-"""robot_chain_v0: PettingZoo API/seed/max-cycles/render tests, SuperSuit vectorisation, invariants, errors."""
+"""robot_chain_v0: SuperSuit vectorisation, invariants, errors (its PettingZoo API tests: test_env_conformance.py)."""
 
 import numpy as np
 import pytest
-from pettingzoo.test import api_test, max_cycles_test, parallel_api_test, parallel_seed_test, render_test, seed_test
 
 from agri_envs.chain import robot_chain_v0
-from agri_envs.scenes import EXAMPLE_MAP
 
-COMBOS = [
-    {"n_robots": 1},
-    {"n_robots": 2, "n_dynamic_obstacles": 0},
-    {"n_robots": 4},
-    {"n_robots": 16, "office_width": 18.0, "office_height": 12.0, "min_goal_distance": 3.0},
-    {"n_robots": 4, "scene": "greenhouse", "n_rows": 2},
-    {"n_robots": 3, "scene": "map", "map_yaml": str(EXAMPLE_MAP), "min_goal_distance": 2.0},
-]
-
-
-@pytest.mark.parametrize("kwargs", COMBOS, ids=lambda k: "-".join(f"{a}={b}" for a, b in k.items() if a != "map_yaml"))
-def test_parallel_and_aec_api(kwargs):
-    parallel_api_test(robot_chain_v0.parallel_env(terminate_on_collision=False, **kwargs), num_cycles=60)
-    api_test(robot_chain_v0.env(terminate_on_collision=False, **kwargs), num_cycles=20)
+# The PettingZoo API, seed, max-cycles and render tests, over argument sets, are in test_env_conformance.py.
 
 
 def test_seeding_is_deterministic():
-    seed_test(lambda: robot_chain_v0.env(n_robots=3, sonar_noise_std=0.05), num_cycles=30)
-    parallel_seed_test(lambda: robot_chain_v0.parallel_env(n_robots=3, sonar_noise_std=0.05), num_cycles=30)
     a, b = robot_chain_v0.parallel_env(n_robots=4), robot_chain_v0.parallel_env(n_robots=4)
     oa, _ = a.reset(seed=5)
     ob, _ = b.reset(seed=5)
     oc, _ = b.reset(seed=6)
     assert all(np.array_equal(oa[k], ob[k]) for k in oa)
     assert not all(np.array_equal(oa[k], oc[k]) for k in oa)
-
-
-def test_max_cycles_and_render():
-    max_cycles_test(robot_chain_v0)
-    render_test(lambda render_mode=None: robot_chain_v0.env(render_mode=render_mode, n_robots=3, render_width=200))
 
 
 def test_supersuit_vector_env_for_parameter_sharing():
@@ -149,17 +127,6 @@ def test_wrong_types_are_named_and_leave_the_env_working():
         for x, y in zip(a, b, strict=True):
             assert x.keys() == y.keys()
             assert all(np.array_equal(x[k], y[k]) if isinstance(x[k], np.ndarray) else x[k] == y[k] for k in x)
-
-
-def test_frames_keep_one_shape_across_episodes():
-    for kwargs in ({"n_robots": 2}, {"n_robots": 2, "scene": "greenhouse"}):
-        env = robot_chain_v0.parallel_env(render_mode="rgb_array", render_width=200, **kwargs)
-        shapes = set()
-        for seed in range(3):
-            env.reset(seed=seed)
-            shapes.add(env.render().shape)
-        env.close()
-        assert len(shapes) == 1, shapes
 
 
 def _to_goal(env):

@@ -1,4 +1,5 @@
-"""Gymnasium's own env tests, written after its ``tests/envs/test_envs.py``, over every registered env.
+"""The peers' own env tests over every env of the package: Gymnasium's for the Gymnasium ids (written after its
+``tests/envs/test_envs.py``), PettingZoo's for the parallel envs (its ``pettingzoo.test`` suite).
 
 The ids come from ``gym.registry`` (every ``agri_envs/`` id), so an env added later is covered without
 editing this file; each runs with its defaults and, where listed in ``EXTRA_KWARGS``, with more argument
@@ -14,6 +15,7 @@ with errors that name them, leaving the env working.
 from __future__ import annotations
 
 import dataclasses
+import importlib
 import pickle
 import subprocess
 import sys
@@ -25,8 +27,10 @@ import gymnasium as gym
 import numpy as np
 import pytest
 from gymnasium.utils.env_checker import check_env, data_equivalence
+from pettingzoo.test import api_test, max_cycles_test, parallel_api_test, parallel_seed_test, render_test, seed_test
 
 import agri_envs
+from agri_envs.scenes import EXAMPLE_MAP
 
 ENV_IDS = sorted(env_id for env_id in gym.registry if env_id.startswith("agri_envs/"))
 
@@ -346,3 +350,56 @@ def test_one_registry_builds_every_env_of_both_kinds():
             env.close()
     with pytest.raises(ValueError, match="unknown env id 'CartPole-v1'.*robot_chain_v0"):
         agri_envs.make("CartPole-v1")
+
+
+# ---------------------------------------------------------------- PettingZoo envs (agri_envs.PARALLEL_ENVS)
+
+PARALLEL_IDS = sorted(agri_envs.PARALLEL_ENVS)
+
+#: Argument sets beyond the defaults, per PettingZoo id (robot counts, scenes, a loaded map).
+PARALLEL_EXTRA_KWARGS: dict[str, list[dict[str, Any]]] = {
+    "robot_chain_v0": [
+        {"n_robots": 1},
+        {"n_robots": 2, "n_dynamic_obstacles": 0},
+        {"n_robots": 16, "office_width": 18.0, "office_height": 12.0, "min_goal_distance": 3.0},
+        {"n_robots": 4, "scene": "greenhouse", "n_rows": 2},
+        {"n_robots": 3, "scene": "map", "map_yaml": str(EXAMPLE_MAP), "min_goal_distance": 2.0},
+    ],
+}
+PARALLEL_CASES = [
+    pytest.param(env_id, kwargs, id=env_id + "".join(f"-{k}={v}" for k, v in kwargs.items() if k != "map_yaml"))
+    for env_id in PARALLEL_IDS
+    for kwargs in [{}, *PARALLEL_EXTRA_KWARGS.get(env_id, [])]
+]
+
+
+def versioned_module(env_id: str) -> Any:
+    """The env's versioned PettingZoo module (``parallel_env``, ``env``, ``raw_env``)."""
+    return importlib.import_module(agri_envs.PARALLEL_ENVS[env_id])
+
+
+@pytest.mark.parametrize(("env_id", "kwargs"), PARALLEL_CASES)
+def test_pettingzoo_parallel_and_aec_api(env_id, kwargs):
+    module = versioned_module(env_id)
+    parallel_api_test(module.parallel_env(terminate_on_collision=False, **kwargs), num_cycles=60)
+    api_test(module.env(terminate_on_collision=False, **kwargs), num_cycles=20)
+
+
+@pytest.mark.parametrize("env_id", PARALLEL_IDS)
+def test_pettingzoo_seeding_max_cycles_and_render(env_id):
+    module = versioned_module(env_id)
+    seed_test(lambda: module.env(sonar_noise_std=0.05), num_cycles=30)
+    parallel_seed_test(lambda: module.parallel_env(sonar_noise_std=0.05), num_cycles=30)
+    max_cycles_test(module)
+    render_test(lambda render_mode=None: module.env(render_mode=render_mode, render_width=200))
+
+
+@pytest.mark.parametrize(("env_id", "kwargs"), PARALLEL_CASES[:1] + PARALLEL_CASES[4:5])
+def test_pettingzoo_frames_keep_one_shape_across_episodes(env_id, kwargs):
+    env = agri_envs.make(env_id, render_mode="rgb_array", render_width=200, **kwargs)
+    shapes = set()
+    for seed in range(3):
+        env.reset(seed=seed)
+        shapes.add(env.render().shape)
+    env.close()
+    assert len(shapes) == 1, shapes
