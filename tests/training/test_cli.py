@@ -47,40 +47,14 @@ def test_evaluate_writes_json(tmp_path, capsys):
 
 
 def test_evaluate_errors_are_clear(tmp_path, capsys):
-    rc = main(
-        [
-            "evaluate",
-            "--env",
-            "agri_envs/GreenhouseNav-v2",
-            "--policy",
-            "harik-apf-gt",
-            "--episodes",
-            "1",
-            "--env-kwargs",
-            "n_row=2",
-            "--out",
-            str(tmp_path / "x.json"),
-            "--quiet",
-        ]
-    )
-    assert rc == 2 and "n_row" in capsys.readouterr().err
-    rc = main(
-        [
-            "evaluate",
-            "--env",
-            "agri_envs/GreenhouseNav-v2",
-            "--policy",
-            "harik-apf-gt",
-            "--episodes",
-            "1",
-            "--env-kwargs",
-            "full_scan=false",
-            "--out",
-            str(tmp_path / "x.json"),
-            "--quiet",
-        ]
-    )
-    assert rc == 2 and "needs full_scan=True" in capsys.readouterr().err
+    def evaluate_with(env_kwargs: str) -> int:
+        out = str(tmp_path / "x.json")
+        env = "agri_envs/GreenhouseNav-v2"
+        args = ["--policy", "harik-apf-gt", "--episodes", "1", "--env-kwargs", env_kwargs, "--out", out, "--quiet"]
+        return main(["evaluate", "--env", env, *args])
+
+    assert evaluate_with("n_row=2") == 2 and "n_row" in capsys.readouterr().err
+    assert evaluate_with("full_scan=false") == 2 and "needs full_scan=True" in capsys.readouterr().err
     rc = main(["evaluate", "--env", "agri_envs/GreenhouseNav-v2", "--policy", "nope", "--out", "x.json"])
     assert rc == 2 and "unknown policy" in capsys.readouterr().err
 
