@@ -11,7 +11,6 @@ import numpy as np
 from agri_envs._config import StrictConfig, param
 from agri_envs.arm.scene import SceneParams
 
-MAX_CLUSTERS = 5
 ARM_FEATURES = 15  # joints normalised (6), clamp position (3), approach axis (3), pallet axis (3)
 BOX_FEATURES = 7  # present, lo (3), hi (3)
 GOAL_FEATURES = 9  # cut point (3), approach axis (3), pallet axis (3)

@@ -154,12 +154,6 @@ class SceneParams:
     feasible: bool = False
 
 
-def _rotate(v: np.ndarray, axis: np.ndarray, angle: float) -> np.ndarray:
-    """Rodrigues' rotation of ``v`` about the unit ``axis``."""
-    c, s = math.cos(angle), math.sin(angle)
-    return v * c + np.cross(axis, v) * s + axis * np.dot(axis, v) * (1 - c)
-
-
 def make_cluster(rng: np.random.Generator, cut: np.ndarray, tilt_max: float) -> Cluster:
     """A cluster with its cutting point at ``cut``, approached from the base side with a random lean."""
     return _build_cluster(cut, _cluster_draws(rng, tilt_max))
@@ -181,16 +175,17 @@ def _cluster_draws(rng: np.random.Generator, tilt_max: float) -> tuple[float, ..
 def _build_cluster(cut: np.ndarray, draws: tuple[float, ...]) -> Cluster:
     """The cluster of :func:`make_cluster` from its draws.
 
-    Written out in Python floats, operation for operation what the numpy version computed (``_rotate``,
-    ``np.cross``, the berry rings), so the result is bit for bit the same, only without the overhead of
-    numpy calls on 3-vectors (``tests/envs/test_grape_harvest_env.py`` checks it against that version). The
-    one dot product of ``_rotate`` (the approach with the z axis) is a sum of exact zeros.
+    Written out in Python floats, operation for operation what the numpy version computed (Rodrigues'
+    rotation of the down axis about the approach, ``np.cross``, the berry rings), so the result is bit for bit
+    the same, only without the overhead of numpy calls on 3-vectors (``tests/envs/test_grape_harvest_env.py``
+    checks it against that version). The rotation's one dot product (the approach with the z axis) is a sum
+    of exact zeros.
     """
     jitter, tilt, length, radius = draws[:4]
     cx, cy, cz = float(cut[0]), float(cut[1]), float(cut[2])
     yaw = math.atan2(cy, cx) + jitter
     a0, a1, a2 = math.cos(yaw), math.sin(yaw), 0.0
-    # _rotate((0, 0, -1), approach, tilt) = v c + (approach x v) s + approach (approach . v) (1 - c)
+    # Rodrigues: rotate v = (0, 0, -1) about the approach a by tilt: v c + (a x v) s + a (a . v) (1 - c)
     c, s = math.cos(tilt), math.sin(tilt)
     v0, v1, v2 = 0.0, 0.0, -1.0
     x0, x1, x2 = a1 * v2 - a2 * v1, a2 * v0 - a0 * v2, a0 * v1 - a1 * v0

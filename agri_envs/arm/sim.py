@@ -111,7 +111,6 @@ class ArmSim:
         self.robot = pb.loadURDF(str(URDF_PATH), useFixedBase=True, physicsClientId=self.client)
         self._shapes = 0  # collision and visual shapes made since the world was last emptied
         self._boxes_body = -1  # the multibody whose links are the scene's boxes (-1: none)
-        self._n_boxes = 0
         self._removed: set[int] = set()  # boxes of harvested clusters, out of the scene
         self._visual_bodies: list[int] = []  # per cluster: wire box, berries, peduncle; then obstacle boxes
         self._scene: Scene | None = None  # loaded, its visual bodies not made yet
@@ -209,7 +208,6 @@ class ArmSim:
         self._visual_bodies, self._boxes_body, self._removed = [], -1, set()
         los = [cl.box_lo for cl in scene.clusters] + [ob.lo for ob in scene.obstacles]
         his = [cl.box_hi for cl in scene.clusters] + [ob.hi for ob in scene.obstacles]
-        self._n_boxes = len(los)
         if los:
             n = len(los)
             shapes = [
