@@ -66,10 +66,8 @@ class GreenhouseCoverageConfig(StrictConfig):
 
     def validate(self) -> None:
         """Check that the narrowest corridor still lets the 0.7 m wide robot pass with 0.2 m to spare."""
-        lp = self.layout_params()
-        free = self.corridor_width - lp.max_narrowing() - 2 * lp.max_intrusion()
-        # Compared in millimetres: an inclined row's tan() leaves 0.899997 m of a nominal 0.9 m (refused before).
-        if round(free, 3) < round(fito.WIDTH + 0.2, 3):
+        free = self.layout_params().narrowest_free_width()
+        if free < round(fito.WIDTH + 0.2, 3):
             raise ValueError(
                 f"GreenhouseCoverageConfig: the narrowest corridor keeps only {free:.2f} m free (corridor_width "
                 f"minus corridor_width_jitter, row_incline and row_bend narrowing, and leaves at "

@@ -120,8 +120,8 @@ class GreenhouseNavConfig(StrictConfig):
             raise ValueError("GreenhouseNavConfig: map_yaml and waypoints apply only to scene='map'.")
         if self.scene != "greenhouse":
             return
-        free = self.corridor_width - 2 * self.layout_params().max_intrusion()
-        if free < rover.WIDTH + 0.2:
+        free = self.layout_params().narrowest_free_width()
+        if free < round(rover.WIDTH + 0.2, 3):
             raise ValueError(
                 f"GreenhouseNavConfig: at growth={self.growth} the corridors keep only {free:.2f} m free; "
                 f"the {rover.WIDTH} m wide robot needs {rover.WIDTH + 0.2:.2f} m: increase corridor_width "

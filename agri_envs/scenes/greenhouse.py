@@ -64,6 +64,14 @@ class LayoutParams:
         reach = max(plant + g * LEAF_REACH + LEAF_RADIUS, TREE_RADIUS[0] + g * (TREE_RADIUS[1] - TREE_RADIUS[0]))
         return max(0.0, reach + self.plant_jitter - 0.5 * self.row_width)
 
+    def narrowest_free_width(self) -> float:
+        """Free width (m) of the narrowest corridor these parameters can generate, to the millimetre.
+
+        The nominal width less the jitter, incline and bend narrowing and the plants' reach from both rows.
+        Rounded, so that a margin met exactly passes: an inclined row's ``tan`` leaves 0.899997 m of 0.9 m.
+        """
+        return round(self.corridor_width - self.max_narrowing() - 2 * self.max_intrusion(), 3)
+
     @property
     def width(self) -> float:
         """Inner length of the greenhouse along the rows (m)."""
