@@ -27,7 +27,16 @@ from agri_envs.arm.presets import REACH_PRESET  # pure data: no pybullet
 
 __version__ = "0.1.0"
 
-__all__ = ["PARALLEL_ENVS", "__version__", "env_ids", "env_version", "is_parallel_id", "make", "register_envs"]
+__all__ = [
+    "PARALLEL_ENVS",
+    "__version__",
+    "env_ids",
+    "env_version",
+    "is_parallel_env",
+    "is_parallel_id",
+    "make",
+    "register_envs",
+]
 
 # ---------------------------------------------------------------- PettingZoo envs
 
@@ -81,6 +90,11 @@ def env_ids() -> list[str]:
 def is_parallel_id(env_id: str) -> bool:
     """Whether ``env_id`` names a PettingZoo (parallel, multi-agent) env of the package."""
     return env_id in PARALLEL_ENVS
+
+
+def is_parallel_env(env: Any) -> bool:
+    """Whether ``env`` is a PettingZoo parallel env (per-agent dicts) rather than a Gymnasium one."""
+    return hasattr(env, "possible_agents") and hasattr(env, "state")
 
 
 def env_version(env_id: str) -> str:

@@ -53,10 +53,9 @@ import gymnasium as gym
 import numpy as np
 import yaml
 
-import agri_envs  # noqa: F401  (registers the env ids)
+import agri_envs
 from agri_envs.scenarios import scenario as get_scenario
 from agri_training.core.documents import git_commit
-from agri_training.core.envs import is_multiagent, is_parallel_env, make_env
 from agri_training.core.yaml_values import load_yaml
 from agri_training.evaluation.episode import run_episode
 from agri_training.learned.curricula import apply_train_wrappers
@@ -217,7 +216,7 @@ def resolve_config(request: TrainRequest) -> dict[str, Any]:
         raise ValueError(f"vec_env must be 'dummy' or 'subproc', got {vec_env!r}")
     algo_kwargs = dict(hp.get("algo_kwargs", {}) or {})
     her = dict(hp.get("her", {}) or {}) if request.her else None
-    if is_multiagent(request.env_id):  # one parameter-shared policy for every agent (see parameter_sharing)
+    if agri_envs.is_parallel_id(request.env_id):  # one parameter-shared policy for every agent (see parameter_sharing)
         if request.algo != "ppo" or request.her:
             raise ValueError(f"{request.env_id} trains a parameter-shared PPO: --algo ppo, without --her")
         for key in ("wrappers", "train_wrappers", "train_env_kwargs"):
@@ -321,9 +320,9 @@ def make_vec_env(config: Mapping[str, Any]) -> Any:
     from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv, VecMonitor, VecNormalize
 
     venv: Any
-    if is_multiagent(config["env_id"]):
+    if agri_envs.is_parallel_id(config["env_id"]):
         env_id, env_kwargs = config["env_id"], dict(config["env_kwargs"])
-        venv = make_shared_vec_env(lambda: make_env(env_id, env_kwargs), config["n_envs"])
+        venv = make_shared_vec_env(lambda: agri_envs.make(env_id, **env_kwargs), config["n_envs"])
         venv = VecMonitor(venv, info_keywords=("is_success",))
     else:
         fns = [_env_factory(config, i) for i in range(config["n_envs"])]
@@ -347,7 +346,7 @@ class _LivePolicy:
     def __init__(self, model: Any, env: Any, config: Mapping[str, Any]) -> None:
         self.model = model
         self.config = config
-        self.multiagent = is_parallel_env(env)
+        self.multiagent = agri_envs.is_parallel_env(env)
         self.replay = ObservationReplay([] if self.multiagent else observation_chain(env, config["wrappers"])[1])
         self._hold = HeldActions(config["action_repeat"])
         self.network: PolicyNetwork | None = None
@@ -399,8 +398,8 @@ def _make_callback(
 
         def _on_training_start(self) -> None:
             self.eval_env = (
-                make_env(config["env_id"], config["env_kwargs"])
-                if is_multiagent(config["env_id"])
+                agri_envs.make(config["env_id"], **config["env_kwargs"])
+                if agri_envs.is_parallel_id(config["env_id"])
                 else gym.make(config["env_id"], **config["env_kwargs"])
             )
             self.live = _LivePolicy(self.model, self.eval_env, config)

@@ -20,8 +20,8 @@ from typing import Any
 
 import numpy as np
 
+import agri_envs
 from agri_training.core.documents import EpisodeOutput, jsonable
-from agri_training.core.envs import is_parallel_env
 
 
 class _SingleAgent:
@@ -113,7 +113,7 @@ def run_episode(
         on_step: Called with the step count after the reset (0) and after every step (a recorder renders a
             frame there); returning True ends the episode early.
     """
-    driver: _SingleAgent | _Team = _Team(env) if is_parallel_env(env) else _SingleAgent(env)
+    driver: _SingleAgent | _Team = _Team(env) if agri_envs.is_parallel_env(env) else _SingleAgent(env)
     obs = driver.reset(seed)
     single = isinstance(driver, _SingleAgent)
     trace: dict[str, list[Any]] = {k: [] for k in trace_keys} if trace_keys else {}

@@ -34,8 +34,8 @@ from typing import Any
 
 import gymnasium as gym
 
+import agri_envs
 from agri_training.core.documents import EpisodeOutput
-from agri_training.core.envs import make_env
 from agri_training.core.pool import limit_torch_threads, run_items
 from agri_training.evaluation.episode import run_episode
 from agri_training.evaluation.policies import load_policy
@@ -99,7 +99,7 @@ def _env_for(job: EpisodeJob) -> tuple[gym.Env[Any, Any], tuple[str, ...]]:
         return _CACHE[key]
     while len(_CACHE) >= _CACHE_SIZE:
         _CACHE.popitem(last=False)[1][0].close()
-    env = make_env(job.env_id, job.env_kwargs)
+    env = agri_envs.make(job.env_id, **job.env_kwargs)
     _CACHE[key] = (env, tuple(getattr(env, "unwrapped", env).metadata.get("trace_keys", ())))
     return _CACHE[key]
 

@@ -7,13 +7,13 @@ with Pillow; MP4s need the ``video`` extra (``pip install -e ".[video]"``: image
 
 The same in Python::
 
+    import agri_envs
     import numpy as np
-    from agri_training.core.envs import make_env
     from agri_training.evaluation.policies import EvalRequest, load_policy, resolve_env_kwargs
 
     # the env arguments the policy needs (harik-apf-gt: full scan, true pose), as agri evaluate resolves them
     kwargs, _ = resolve_env_kwargs(EvalRequest("agri_envs/GreenhouseNav-v2", "harik-apf-gt"))
-    env = make_env("agri_envs/GreenhouseNav-v2", {**kwargs, "render_mode": "rgb_array"})
+    env = agri_envs.make("agri_envs/GreenhouseNav-v2", **kwargs, render_mode="rgb_array")
     policy = load_policy("harik-apf-gt", env)  # a baseline, a zoo policy or an `agri train` run folder
     obs, info = env.reset(seed=0)
     frames, state, start, done = [env.render()], None, True, False
@@ -33,7 +33,7 @@ from typing import Any
 
 import numpy as np
 
-from agri_training.core.envs import make_env
+import agri_envs
 from agri_training.evaluation.episode import run_episode
 from agri_training.evaluation.policies import EvalRequest, load_policy, resolve_env_kwargs
 
@@ -103,7 +103,7 @@ def record(request: ClipRequest) -> dict[str, Any]:
     headless = request.out is not None
     if request.out is not None and Path(request.out).suffix.lower() == ".mp4":  # fail before the episode, not after it
         _mp4_writer_module()
-    env = make_env(request.env_id, {**kwargs, "render_mode": "rgb_array" if headless else "human"})
+    env = agri_envs.make(request.env_id, **{**kwargs, "render_mode": "rgb_array" if headless else "human"})
     frames: list[np.ndarray] = []
     records = []
 

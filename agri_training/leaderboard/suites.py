@@ -30,7 +30,6 @@ from typing import Any
 import yaml
 
 import agri_envs
-from agri_training.core.envs import is_multiagent
 
 #: First evaluation seed of every suite; training must never use seeds at or above it.
 HELD_OUT_SEED = 100_000
@@ -114,7 +113,7 @@ class Suite:
             raise ValueError(f"name must be lowercase letters, digits and '-', got {self.name!r}")
         if not isinstance(self.version, int) or self.version < 1:
             raise ValueError(f"version must be an integer >= 1, got {self.version!r}")
-        if not (self.env_id.startswith("agri_envs/") or is_multiagent(self.env_id)):
+        if not (self.env_id.startswith("agri_envs/") or agri_envs.is_parallel_id(self.env_id)):
             raise ValueError(f"env_id must be an agri_envs id or a multi-agent env of the package, got {self.env_id!r}")
         if self.seed_start < HELD_OUT_SEED:
             raise ValueError(f"seeds.start must be >= {HELD_OUT_SEED} (held out from training), got {self.seed_start}")

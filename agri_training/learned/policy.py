@@ -31,7 +31,7 @@ import gymnasium as gym
 import numpy as np
 import yaml
 
-from agri_training.core.envs import is_parallel_env
+import agri_envs
 from agri_training.learned.inference import PolicyNetwork
 from agri_training.learned.parameter_sharing import predict_shared
 
@@ -416,7 +416,7 @@ class LearnedPolicy:
         self.config = read_config(folder)
         self.folder = folder
         #: True on a PettingZoo parallel env: one shared network acts for every agent (per-agent dicts).
-        self.multiagent = is_parallel_env(env)
+        self.multiagent = agri_envs.is_parallel_env(env)
         chain: list[gym.ObservationWrapper[Any, Any, Any]] = []
         if self.multiagent:
             if self.config.get("wrappers"):

@@ -20,9 +20,9 @@ from typing import Any
 
 import numpy as np
 
+import agri_envs
 from agri_baselines import list_policies
 from agri_envs.scenarios import list_scenarios
-from agri_training.core.envs import make_env
 
 #: Env families of the site: (page name, env id, preset ids that share the page).
 ENV_PAGES = (
@@ -86,7 +86,7 @@ def env_page(name: str, env_id: str, aliases: tuple[str, ...], out_dir: Path) ->
     """Write the env's frame (``NAME.png``) and return its page's Markdown."""
     from PIL import Image
 
-    env = make_env(env_id, {"render_mode": "rgb_array"})
+    env = agri_envs.make(env_id, **{"render_mode": "rgb_array"})
     try:
         env.reset(seed=0)
         frame = np.asarray(env.render(), dtype=np.uint8)

@@ -36,7 +36,6 @@ import agri_envs
 from agri_envs.scenarios import scenario as get_scenario
 from agri_training import leaderboard as lb
 from agri_training.core.documents import git_commit
-from agri_training.core.envs import is_multiagent, make_env
 from agri_training.core.progress import Progress
 from agri_training.core.stats import bootstrap_ci, newcombe_interval, paired_comparison, wilson_interval
 from agri_training.evaluation.episode import run_episode
@@ -197,7 +196,7 @@ def _level_document(row: Row, k: int, seeds: list[int], bar: Any) -> dict[str, A
     if not seeds:
         return doc
     bar.start_block(f"traces: {doc['policy']} on {doc['label']}")
-    env = make_env(doc["env_id"], doc["env_kwargs"])
+    env = agri_envs.make(doc["env_id"], **doc["env_kwargs"])
     try:
         name = lb.policy_argument(entry["policy"])
         keys = tuple(getattr(env, "unwrapped", env).metadata.get("trace_keys", ()))
@@ -678,7 +677,7 @@ def env_clip(env_id: str, rows: Sequence[Row], out_dir: Path) -> list[str]:
 def _env_blurb(env_id: str) -> str:
     """The first paragraph of the env class's docstring (its Description), or ''."""
     try:
-        if is_multiagent(env_id):  # a PettingZoo module: the class its parallel_env returns
+        if agri_envs.is_parallel_id(env_id):  # a PettingZoo module: the class its parallel_env returns
             factory = importlib.import_module(agri_envs.PARALLEL_ENVS[env_id]).parallel_env
             doc = typing.get_type_hints(factory)["return"].__doc__ or ""
         else:

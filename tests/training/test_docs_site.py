@@ -1,3 +1,4 @@
+
 """The documentation site: a page per env family with its frame and its full argument table, strict build."""
 
 import dataclasses
@@ -8,7 +9,7 @@ from pathlib import Path
 import pytest
 import yaml
 
-from agri_training.core.envs import make_env
+import agri_envs
 from agri_training.report.gallery import ENV_PAGES, build_docs_source
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -25,7 +26,7 @@ def site_source(tmp_path_factory):
 def test_every_env_page_shows_its_frame_and_every_argument(site_source, name, env_id):
     page = (site_source / f"{name}.md").read_text()
     assert f"![{env_id} at reset]({name}.png)" in page and (site_source / f"{name}.png").stat().st_size > 5_000
-    env = make_env(env_id, {})
+    env = agri_envs.make(env_id, **{})
     config = getattr(env, "unwrapped", env).config
     env.close()
     table = page.split("## Arguments of ")[1]

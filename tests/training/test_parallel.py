@@ -1,14 +1,14 @@
+
 """Episodes on worker processes and Ray tasks give the serial run's records; failures name their seed."""
 
 import json
 import sys
 
-import gymnasium as gym
 import pytest
 
+import agri_envs
 from agri_baselines import list_policies
 from agri_training.cli import main
-from agri_training.core.envs import is_multiagent, make_env
 from agri_training.evaluation import parallel
 from agri_training.evaluation.episode import run_episode
 from agri_training.evaluation.evaluate import evaluate, evaluate_many
@@ -67,7 +67,7 @@ def test_reused_env_equals_fresh_one(spec):
         parallel.clear_cache()
     assert all(r["ok"] for r in reused), reused
     for seed, r in zip(seeds, reused, strict=True):
-        env = make_env(spec.env_id, kwargs) if is_multiagent(spec.env_id) else gym.make(spec.env_id, **kwargs)
+        env = agri_envs.make(spec.env_id, **kwargs)
         try:
             keys = tuple(getattr(env, "unwrapped", env).metadata.get("trace_keys", ()))
             fresh = run_episode(env, load_policy(spec.name, env), seed, keys)

@@ -1,3 +1,4 @@
+
 """Parameter-shared PPO for the robot chain: the SuperSuit vector env, a tiny run, weights-only reloading."""
 
 import json
@@ -7,8 +8,8 @@ import pytest
 import torch
 import yaml
 
+import agri_envs
 from agri_training.cli import main
-from agri_training.core.envs import make_env
 from agri_training.evaluation.policies import load_policy
 from agri_training.learned.parameter_sharing import make_shared_vec_env
 from agri_training.learned.policy import LearnedPolicy
@@ -37,7 +38,7 @@ def chain_run(tmp_path_factory):
 
 
 def _tiny_vec_env(n_envs=2):
-    return make_shared_vec_env(lambda: make_env(ENV_ID, TINY_ENV), n_envs)
+    return make_shared_vec_env(lambda: agri_envs.make(ENV_ID, **TINY_ENV), n_envs)
 
 
 def test_one_slot_per_robot_seeded_like_sb3():
@@ -49,7 +50,7 @@ def test_one_slot_per_robot_seeded_like_sb3():
     again = venv.reset()
     np.testing.assert_array_equal(first, again)
     # copy i resets from seed + i, like SB3's own vector envs
-    env = make_env(ENV_ID, TINY_ENV)
+    env = agri_envs.make(ENV_ID, **TINY_ENV)
     obs, _ = env.reset(seed=8)
     np.testing.assert_array_equal(first[3:6], np.stack([obs[a] for a in env.possible_agents]))
     venv.seed(9)
@@ -105,7 +106,7 @@ def test_the_reloaded_shared_policy_acts_like_the_model_in_memory(tmp_path):
     run = tmp_path / "run"
     save_weights(model, run)
     (run / "config.yaml").write_text(yaml.safe_dump({**config, "algo_kwargs": {}, "policy_kwargs": {}}))
-    env = make_env(ENV_ID, TINY_ENV)
+    env = agri_envs.make(ENV_ID, **TINY_ENV)
     policy = load_policy(str(run), env)
     assert isinstance(policy, LearnedPolicy) and policy.multiagent
     state = model.policy.state_dict()
