@@ -36,6 +36,7 @@ __all__ = [
     "is_parallel_id",
     "make",
     "register_envs",
+    "training_distribution",
 ]
 
 # ---------------------------------------------------------------- PettingZoo envs
@@ -108,6 +109,29 @@ def env_version(env_id: str) -> str:
     if env_id in registry and env_id.startswith("agri_envs/"):
         return env_id.rsplit("-", 1)[-1]
     raise ValueError(f"unknown env id {env_id!r}; known: {', '.join(env_ids())}")
+
+
+# ---------------------------------------------------------------- training distributions
+
+#: Gymnasium ids whose env declares a training distribution -> its config class (``module:Class``).
+_DISTRIBUTION_CONFIGS: dict[str, str] = {
+    "agri_envs/GreenhouseNav-v2": "agri_envs.rover.config:GreenhouseNavConfig",
+}
+
+
+def training_distribution(env_id: str) -> tuple[Any, dict[str, Any]] | None:
+    """``(distribution, default arguments)`` of an env that declares a training distribution, else None.
+
+    The distribution is the :class:`~agri_envs.scenes.distribution.SceneDistribution` that
+    ``scene_distribution="training"`` draws each episode's scene from; the defaults fill in the arguments a
+    suite leaves out when asking whether it lies outside (:meth:`~agri_envs.scenes.distribution.
+    SceneDistribution.lies_outside`).
+    """
+    if env_id not in _DISTRIBUTION_CONFIGS:
+        return None
+    module, name = _DISTRIBUTION_CONFIGS[env_id].split(":")
+    config = getattr(importlib.import_module(module), name)
+    return config(scene_distribution="training").distribution(), config().to_dict()
 
 
 def make(env_id: str, **kwargs: Any) -> Any:

@@ -13,6 +13,7 @@ evaluated. The keys:
 | ``vec_env`` | ``dummy`` (one process) or ``subproc`` (one process per env) |
 | ``env_kwargs`` | ``gym.make`` arguments (after the scenario's) |
 | ``train_env_kwargs`` | ``gym.make`` arguments of the training envs only, over ``env_kwargs`` |
+| ``eval_env_kwargs`` | ``gym.make`` arguments of the periodic evaluation only, over ``env_kwargs`` |
 | ``wrappers`` | observation wrappers by name, innermost first (see ``learned.WRAPPERS``) |
 | ``action_repeat`` | env steps per action (1: every step); evaluation holds actions the same way |
 | ``train_wrappers`` | training-only curricula by name, inside ``wrappers`` (see ``curricula.TRAIN_WRAPPERS``) |
@@ -88,6 +89,7 @@ HYPERPARAM_KEYS = (
     "vec_env",
     "env_kwargs",
     "train_env_kwargs",
+    "eval_env_kwargs",
     "wrappers",
     "train_wrappers",
     "action_repeat",
@@ -219,7 +221,7 @@ def resolve_config(request: TrainRequest) -> dict[str, Any]:
     if agri_envs.is_parallel_id(request.env_id):  # one parameter-shared policy for every agent (see parameter_sharing)
         if request.algo != "ppo" or request.her:
             raise ValueError(f"{request.env_id} trains a parameter-shared PPO: --algo ppo, without --her")
-        for key in ("wrappers", "train_wrappers", "train_env_kwargs"):
+        for key in ("wrappers", "train_wrappers", "train_env_kwargs", "eval_env_kwargs"):
             if hp.get(key):
                 raise ValueError(f"{request.env_id}: {key} apply to Gymnasium envs only; leave '{key}' empty")
         if int(hp.get("action_repeat", 1)) != 1:
@@ -229,6 +231,7 @@ def resolve_config(request: TrainRequest) -> dict[str, Any]:
         "scenario": request.scenario,
         "env_kwargs": env_kwargs,
         "train_env_kwargs": dict(hp.get("train_env_kwargs", {}) or {}),
+        "eval_env_kwargs": dict(hp.get("eval_env_kwargs", {}) or {}),
         "algo": request.algo,
         "her": her,
         "seed": request.seed,
@@ -269,24 +272,32 @@ def _env_factory(config: Mapping[str, Any], rank: int) -> Callable[[], gym.Env[A
 
 
 def check_same_spaces(config: Mapping[str, Any]) -> None:
-    """Refuse ``train_env_kwargs`` that give the training env other spaces than the evaluation env.
+    """Refuse ``train_env_kwargs`` or ``eval_env_kwargs`` that give their env other spaces than ``env_kwargs``'s.
 
     Raises:
         ValueError: When the observation or action spaces differ.
     """
-    evaluation = gym.make(config["env_id"], **config["env_kwargs"])
-    training = gym.make(config["env_id"], **{**config["env_kwargs"], **config["train_env_kwargs"]})
-    same = (
-        evaluation.observation_space == training.observation_space
-        and evaluation.action_space == training.action_space
-    )
-    evaluation.close()
-    training.close()
-    if not same:
-        raise ValueError(
-            f"train_env_kwargs {config['train_env_kwargs']} change the env's spaces; the policy must act in the "
-            "evaluation env (env_kwargs) too"
+    reference = gym.make(config["env_id"], **config["env_kwargs"])
+    for key in ("train_env_kwargs", "eval_env_kwargs"):
+        if not config.get(key):
+            continue
+        other = gym.make(config["env_id"], **{**config["env_kwargs"], **config[key]})
+        same = (
+            reference.observation_space == other.observation_space and reference.action_space == other.action_space
         )
+        other.close()
+        if not same:
+            reference.close()
+            raise ValueError(
+                f"{key} {config[key]} change the env's spaces; the policy must act in the evaluation env "
+                "(env_kwargs) too"
+            )
+    reference.close()
+
+
+def eval_env_kwargs(config: Mapping[str, Any]) -> dict[str, Any]:
+    """The arguments of the periodic evaluation's env: ``env_kwargs`` with ``eval_env_kwargs`` over them."""
+    return {**config["env_kwargs"], **(config.get("eval_env_kwargs") or {})}
 
 
 def make_repeating(env_id: str, env_kwargs: Mapping[str, Any], repeat: int) -> gym.Env[Any, Any]:
@@ -400,7 +411,7 @@ def _make_callback(
             self.eval_env = (
                 agri_envs.make(config["env_id"], **config["env_kwargs"])
                 if agri_envs.is_parallel_id(config["env_id"])
-                else gym.make(config["env_id"], **config["env_kwargs"])
+                else gym.make(config["env_id"], **eval_env_kwargs(config))
             )
             self.live = _LivePolicy(self.model, self.eval_env, config)
             if progress:
@@ -548,7 +559,7 @@ def train(
     run_dir = Path(request.out)
     if (run_dir / CONFIG_FILE).exists():
         raise ValueError(f"{run_dir} already holds a run; pass another --out")
-    if config["train_env_kwargs"]:
+    if config["train_env_kwargs"] or config["eval_env_kwargs"]:
         check_same_spaces(config)
     run_dir.mkdir(parents=True, exist_ok=True)
     command = command or " ".join(shlex.quote(a) for a in ["agri", *sys.argv[1:]])

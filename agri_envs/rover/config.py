@@ -9,7 +9,9 @@ import numpy as np
 
 from agri_envs._config import StrictConfig, param
 from agri_envs.rover import robot as rover
+from agri_envs.rover.distribution import DISTRIBUTIONS
 from agri_envs.rover.task import RewardWeights
+from agri_envs.scenes.distribution import SceneDistribution
 from agri_envs.scenes.greenhouse import LayoutParams
 from agri_envs.scenes.office import CorridorParams
 
@@ -44,6 +46,11 @@ class GreenhouseNavConfig(StrictConfig):
     n_trees: int = param(0, "trees placed at random plant positions (Harik Fig. 10)", low=0, high=50)
     layout_seed: int = param(
         -1, "seed of the scene layout; -1 draws a new layout every episode", low=-1, high=2**31 - 1
+    )
+    scene_distribution: str = param(
+        "off",
+        "scenes drawn per episode (see Starting State)",
+        choices=("off", *DISTRIBUTIONS),
     )
     office_length: float = param(14.0, "corridor length (scene='corridor')", unit="m", low=6.0, high=60.0)
     office_width: float = param(1.6, "corridor width (scene='corridor')", unit="m", low=1.0, high=4.0)
@@ -104,6 +111,11 @@ class GreenhouseNavConfig(StrictConfig):
 
     def validate(self) -> None:
         """Check the scene arguments fit together and corridors stay passable at this growth."""
+        if self.scene == "map" and self.scene_distribution != "off":
+            raise ValueError(
+                f"GreenhouseNavConfig: scene_distribution={self.scene_distribution!r} draws greenhouse and corridor "
+                "scenes; it does not apply to scene='map'."
+            )
         if self.scene == "map":
             if not self.map_yaml or not Path(self.map_yaml).is_file():
                 raise ValueError(
@@ -127,6 +139,10 @@ class GreenhouseNavConfig(StrictConfig):
                 f"the {rover.WIDTH} m wide robot needs {rover.WIDTH + 0.2:.2f} m: increase corridor_width "
                 f"or row_width, or lower growth."
             )
+
+    def distribution(self) -> SceneDistribution | None:
+        """The training distribution ``scene_distribution`` names, or None when it is ``"off"``."""
+        return DISTRIBUTIONS.get(self.scene_distribution)
 
     def layout_params(self) -> LayoutParams:
         """The scene part of the config."""

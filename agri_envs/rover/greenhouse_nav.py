@@ -120,7 +120,20 @@ class GreenhouseNavEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
     three scene arguments for one episode. ``reset(options={"start_waypoint": k})`` starts the mission at
     waypoint k instead: the robot stands on waypoint k - 1 facing along the leg that led there (same
     jitter), waypoints before k count as reached, and the time limit covers the rest of the route (a
-    training curriculum; evaluation always starts at 0).
+    training curriculum; evaluation always starts at 0); ``"start_waypoint": "random"`` draws k from
+    1 .. n - 1 with the episode's Generator, once the mission (and its length n) is known.
+
+    With ``scene_distribution="training"`` (default ``"off"``) each episode first draws its scene from the
+    env's training distribution (:data:`agri_envs.rover.distribution.TRAINING`), with the episode's own
+    Generator: a family (greenhouse 60 %, office corridor 40 %), then each of its arguments from its range
+    (greenhouse: ``n_rows`` 2..4, ``row_length`` [4, 8] m, ``corridor_width`` [1.1, 1.5] m, ``growth``
+    [0, 1], ``n_trees`` 0..8, ``n_people`` 0..3, ``people_tease_prob`` [0, 0.6]; corridor: ``office_length``
+    [10, 18] m, ``office_width`` [1.3, 1.8] m, either ``office_route``, ``mission_cycles`` 1..3, ``n_people``
+    0..1, ``people_tease_prob`` [0, 0.6]). The drawn arguments replace the config's for that episode
+    (``env.unwrapped.episode_config``; reset options still apply on top); the distance scale of the
+    observation is the drawn scene's diagonal, as it would be in an env made with those arguments. The
+    arguments it draws cannot also be given to ``gym.make``. Training uses seeds below 100000; held-out
+    suites (100000 and up) run the plain env, and ``greenhouse-generalization`` lies outside every range.
 
     ## Episode End
 
@@ -170,6 +183,7 @@ class GreenhouseNavEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
     | ``post_spacing`` | 3 | m | in [1.0, 20.0] | distance between structural posts along rows and walls |
     | ``n_trees`` | 0 |  | in [0, 50] | trees placed at random plant positions (Harik Fig. 10) |
     | ``layout_seed`` | -1 |  | in [-1, 2147483647] | seed of the scene layout; -1 draws a new layout every episode |
+    | ``scene_distribution`` | 'off' |  | one of 'off', 'training' | scenes drawn per episode (see Starting State) |
     | ``office_length`` | 14 | m | in [6.0, 60.0] | corridor length (scene='corridor') |
     | ``office_width`` | 1.6 | m | in [1.0, 4.0] | corridor width (scene='corridor') |
     | ``office_route`` | 'experiment' |  | one of 'experiment', 'repeatability' | corridor mission: Harik 3.4 or 3.5 |
@@ -227,8 +241,9 @@ class GreenhouseNavEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
       time; the time penalty rose from 0.002 to 0.01 per step; progress counts the heading error toward
       the waypoint as distance to go; new observation
       ``next_waypoint`` (the route is known, so a driver can line up for the next leg). With v1's
-      penalties PPO learned to stand still. Later, without a version change (the default is unchanged):
-      the ``frame_skip`` argument.
+      penalties PPO learned to stand still. Later, without a version change (the defaults are unchanged):
+      the ``frame_skip`` argument; the ``scene_distribution`` argument (a scene drawn per episode from the
+      training distribution).
 
     ## References
 
@@ -270,18 +285,23 @@ class GreenhouseNavEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
         )
         self.sonars = SonarArray(hc_sr04(noise_std=cfg.sonar_noise_std), rover.SONAR_MOUNTS)
         self.odometry = WheelOdometry(cfg.odometry_noise, cfg.odometry_gyro_bias)
-        if cfg.scene == "greenhouse":
-            lp = cfg.layout_params()
-            self.diagonal = math.hypot(lp.width, lp.height)
-            canvas = lp.max_bounds()
-        elif cfg.scene == "corridor":
-            self.diagonal = math.hypot(cfg.office_length, cfg.office_width)
-            canvas = cfg.office_params().bounds()
-        else:
+        #: The training distribution each episode's scene is drawn from (None: the arguments' own scene).
+        self.distribution = cfg.distribution()
+        if self.distribution is not None:
+            fixed = sorted(set(kwargs) & self.distribution.arguments)
+            if fixed:
+                raise ValueError(
+                    f"GreenhouseNav: scene_distribution={cfg.scene_distribution!r} draws {fixed} per episode; "
+                    f"leave them out (it draws {sorted(self.distribution.arguments)})."
+                )
+        if cfg.scene == "map":
             self._map_geometry = map_geometry(cfg.map_yaml)
-            xmin, ymin, xmax, ymax = self._map_geometry.bounds
-            self.diagonal = math.hypot(xmax - xmin, ymax - ymin)
-            canvas = self._map_geometry.bounds
+        #: The arguments of the current episode: the config, with the scene drawn from the distribution if any.
+        self.episode_config = cfg
+        self.diagonal, canvas = self._extent(cfg)
+        if self.distribution is not None:  # one canvas that holds the largest scene of every family
+            boxes = [self._extent(cfg.replace(**f.largest()))[1] for f in self.distribution.families]
+            canvas = (*np.min(boxes, axis=0)[:2], *np.max(boxes, axis=0)[2:])
         self.view = SceneView(render_mode, canvas, cfg.render_width, self.metadata["render_fps"])
         self.render_mode = render_mode
         n = self.lidar.spec.n_beams
@@ -311,19 +331,36 @@ class GreenhouseNavEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
         self._trail: list[tuple[float, float]] = []
 
     # -- episode set-up --------------------------------------------------------------------------------
+    def _extent(self, cfg: GreenhouseNavConfig) -> tuple[float, tuple[float, float, float, float]]:
+        """The scene's diagonal (m; it scales waypoint distances) and the canvas that holds it."""
+        if cfg.scene == "greenhouse":
+            lp = cfg.layout_params()
+            return math.hypot(lp.width, lp.height), lp.max_bounds()
+        if cfg.scene == "corridor":
+            return math.hypot(cfg.office_length, cfg.office_width), cfg.office_params().bounds()
+        xmin, ymin, xmax, ymax = self._map_geometry.bounds
+        return math.hypot(xmax - xmin, ymax - ymin), (xmin, ymin, xmax, ymax)
+
     def reset(
         self, *, seed: int | None = None, options: dict[str, Any] | None = None
     ) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
         """Build a new scene and mission, place robot and people (see Starting State)."""
         overrides = dict(options or {})
         start_waypoint = overrides.pop("start_waypoint", 0)
-        if isinstance(start_waypoint, bool) or not isinstance(start_waypoint, (int, np.integer)):
+        if start_waypoint != "random" and (
+            isinstance(start_waypoint, bool) or not isinstance(start_waypoint, (int, np.integer))
+        ):
             raise ValueError(
-                f"reset option start_waypoint={start_waypoint!r} ({type(start_waypoint).__name__}) must be an integer"
+                f"reset option start_waypoint={start_waypoint!r} ({type(start_waypoint).__name__}) must be an integer "
+                "or 'random'"
             )
         # Checked before anything of the env changes, so a bad option leaves the env as it was.
-        cfg = self.config.with_options(overrides, ("growth", "n_trees", "layout_seed", "start_waypoint"))
+        allowed = ("growth", "n_trees", "layout_seed", "start_waypoint")
+        cfg = self.config.with_options(overrides, allowed)
         super().reset(seed=seed)
+        if self.distribution is not None:  # the scene of this episode, from the episode's own Generator
+            _, drawn = self.distribution.sample(self.np_random)
+            cfg = self.config.replace(**drawn).with_options(overrides, allowed)
         layout_rng = self.np_random if cfg.layout_seed < 0 else np.random.default_rng(cfg.layout_seed)
         if cfg.scene == "greenhouse":
             layout = generate_layout(cfg.layout_params(), layout_rng)
@@ -332,9 +369,13 @@ class GreenhouseNavEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
         else:
             layout = layout_from_map(self._map_geometry, np.asarray(cfg.waypoints))
         targets = np.tile(layout.targets, (cfg.mission_cycles, 1))
+        if start_waypoint == "random":  # a mission drawn with the scene: its length is known only now
+            start_waypoint = int(self.np_random.integers(1, len(targets))) if len(targets) > 1 else 0
         if not 0 <= start_waypoint < len(targets):  # checked before the env's scene is replaced
             raise ValueError(f"reset option start_waypoint must be in [0, {len(targets) - 1}], got {start_waypoint}")
         self.layout = layout
+        self.episode_config = cfg
+        self.diagonal = self._extent(cfg)[0]
         self.world = World2D(layout.geometry, n_movers=cfg.n_people)
         start_pose = self._arrival_pose(targets, int(start_waypoint))
         start = start_pose + self.np_random.uniform([-0.05, -0.05, -0.1], [0.05, 0.05, 0.1])
@@ -437,7 +478,7 @@ class GreenhouseNavEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
 
     def _time_limit(self, start_pose: np.ndarray, targets: np.ndarray) -> tuple[int, str]:
         """The episode's step limit and where it comes from (see Episode End)."""
-        cfg = self.config
+        cfg = self.episode_config
         if self.explicit_max_episode_steps is not None:  # env steps of frame_skip control periods each
             return int(self.explicit_max_episode_steps) * cfg.frame_skip, "explicit max_episode_steps"
         assert self.layout is not None

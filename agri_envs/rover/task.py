@@ -11,6 +11,8 @@ import math
 
 import numpy as np
 
+from agri_envs.sim2d.route import RouteProgress
+
 
 @dataclasses.dataclass(frozen=True)
 class RewardWeights:
@@ -94,11 +96,12 @@ def mission_time_limit(
     return max(1, math.ceil(seconds / control_period))
 
 
-class WaypointTask:
+class WaypointTask(RouteProgress):
     """Visit ``targets`` in order; a target counts as reached within ``radius`` (d_min) of the robot centre.
 
     Progress is measured on the distance to go (:meth:`to_go`): the distance to the current target plus
-    ``turn_distance`` metres per radian of heading error, so turning toward the target is progress too.
+    ``turn_distance`` metres per radian of heading error, so turning toward the target is progress too
+    (:class:`~agri_envs.sim2d.route.RouteProgress`; d is eq. 2's distance, alpha eqs. 3-4's angle).
     """
 
     def __init__(
@@ -110,59 +113,16 @@ class WaypointTask:
         max_steps: int,
         turn_distance: float = 0.0,
     ) -> None:
-        self.targets = np.asarray(targets, dtype=np.float64)
-        self.radius = radius
-        self.turn_distance = turn_distance
+        super().__init__(targets, radius, turn_distance)
         self.safety_margin = safety_margin
         self.weights = weights
         self.max_steps = max_steps
         self.steps = 0
-        self.index = 0
-        self._last_to_go = 0.0
 
     def reset(self, pose: np.ndarray, index: int = 0) -> None:
         """Start the mission with the robot at ``pose``, driving to target ``index`` (earlier ones count as reached)."""
-        self.index = index
         self.steps = 0
-        self._last_to_go = self.to_go(pose)
-
-    @property
-    def done(self) -> bool:
-        """True once every target was reached."""
-        return self.index >= len(self.targets)
-
-    @property
-    def current(self) -> np.ndarray:
-        """The target being driven to (the last one once done)."""
-        return self.targets[min(self.index, len(self.targets) - 1)]
-
-    @property
-    def following(self) -> np.ndarray:
-        """The target after the current one (the last one when the current is the last)."""
-        return self.targets[min(self.index + 1, len(self.targets) - 1)]
-
-    def distance(self, pose: np.ndarray) -> float:
-        """Distance d (eq. 2) from the robot centre to the current target (m)."""
-        t = self.current
-        return math.hypot(t[0] - pose[0], t[1] - pose[1])
-
-    def bearing(self, pose: np.ndarray) -> float:
-        """Angle alpha = theta - beta (eqs. 3-4) of the current target seen from the robot (rad)."""
-        t = self.current
-        theta = math.atan2(t[1] - pose[1], t[0] - pose[0])
-        a = theta - pose[2]
-        return math.atan2(math.sin(a), math.cos(a))
-
-    def to_go(self, pose: np.ndarray) -> float:
-        """Distance to go to the current target: ``d + turn_distance * |alpha|`` (m).
-
-        With ``turn_distance = max_speed / max_turn_rate`` this is the time a robot at its speed limits needs
-        to turn toward the target and drive there, in metres of driving.
-        """
-        return self._to_go(self.distance(pose), self.bearing(pose))
-
-    def _to_go(self, d: float, alpha: float) -> float:
-        return d + self.turn_distance * abs(alpha)
+        super().reset(pose, index)
 
     def evaluate(
         self, pose: np.ndarray, collided: bool, clearance: float, travelled: float = 0.0, step: bool = True
@@ -179,14 +139,7 @@ class WaypointTask:
         w = self.weights
         if step:
             self.steps += 1
-        d, alpha = self.distance(pose), self.bearing(pose)
-        progress = self._last_to_go - self._to_go(d, alpha)
-        reached = False
-        if not self.done and d < self.radius:
-            self.index += 1
-            reached = True
-            d, alpha = self.distance(pose), self.bearing(pose)
-        self._last_to_go = self._to_go(d, alpha)
+        progress, reached, d, alpha = self.advance(pose)
         success = self.done
         shortfall = max(0.0, self.safety_margin - clearance) / self.safety_margin if self.safety_margin > 0 else 0.0
         terms = {

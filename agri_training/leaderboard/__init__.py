@@ -49,6 +49,7 @@ from agri_training.leaderboard.suites import (
     find_suite,
     load_suite,
     load_suites,
+    outside_training,
     parse_suite,
     sha256_file,
 )
@@ -80,6 +81,7 @@ __all__ = [
     "load_suite",
     "load_suites",
     "make_entry",
+    "outside_training",
     "metric_format",
     "metric_label",
     "paired_values",

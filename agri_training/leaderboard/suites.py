@@ -11,11 +11,15 @@ A suite is ``leaderboard/suites/<name>.yaml`` (format: ``docs/leaderboard.md``):
     sweep: {parameter: growth, values: [0.0, 0.5, 1.0]}   # optional: one level per value
     seeds: {start: 100000, episodes: 20}           # per level; held out: start >= 100000
     traces: 1                        # episodes per level the report re-runs with traces for plots
+    generalization: true             # optional: held out by construction, every level outside the env's
+                                     # training distribution (checked when the suite is loaded)
     rank_by:                         # summary keys, most important first
       - {metric: success_rate, higher_is_better: true}
       - {metric: mean_episode_time, higher_is_better: false}
 
-Evaluation seeds start at :data:`HELD_OUT_SEED`; training never uses seeds at or above it.
+Evaluation seeds start at :data:`HELD_OUT_SEED`; training never uses seeds at or above it. A generalization
+suite is held out twice: by its seeds and by its scenes, which no family of the env's training distribution
+(``agri_envs.training_distribution``) can draw; :func:`outside_training` says why, level by level.
 """
 
 from __future__ import annotations
@@ -73,6 +77,7 @@ _SUITE_KEYS = (
     "seeds",
     "traces",
     "rank_by",
+    "generalization",
 )
 
 
@@ -92,6 +97,7 @@ class Suite:
         scenario: Named preset the arguments were copied from, or None.
         sweep: Optional ``(argument, values)``: one level per value.
         traces: Episodes per level re-run with per-step traces for the report's plots, >= 0.
+        generalization: Every level lies outside the env's training distribution (checked here).
         sha256: Hash of the file's bytes (set by :func:`load_suite`).
     """
 
@@ -106,6 +112,7 @@ class Suite:
     scenario: str | None = None
     sweep: tuple[str, tuple[Any, ...]] | None = None
     traces: int = 1
+    generalization: bool = False
     sha256: str = ""
 
     def __post_init__(self) -> None:
@@ -125,6 +132,20 @@ class Suite:
             raise ValueError(f"traces must be >= 0, got {self.traces}")
         if self.sweep is not None and (not self.sweep[1] or self.sweep[0] in self.env_kwargs):
             raise ValueError(f"sweep must give values for an argument not also in env_kwargs, got {self.sweep!r}")
+        if self.generalization:
+            verdict = outside_training(self)
+            if verdict is None:
+                raise ValueError(f"generalization: {self.env_id} declares no training distribution to lie outside")
+            inside = {
+                label: [family for family, reasons in families.items() if not reasons]
+                for label, families in verdict.items()
+                if not all(families.values())
+            }
+            if inside:
+                raise ValueError(
+                    f"generalization: levels {inside} lie inside the training distribution (those families can draw "
+                    "them); a generalization suite needs an argument outside every family's range"
+                )
 
     @property
     def env_version(self) -> str:
@@ -142,6 +163,20 @@ class Suite:
             return [(self.name, dict(self.env_kwargs))]
         key, values = self.sweep
         return [(f"{self.name} {key}={v}", {**self.env_kwargs, key: v}) for v in values]
+
+
+def outside_training(suite: Suite) -> dict[str, dict[str, list[str]]] | None:
+    """For each level of ``suite``: why each family of its env's training distribution cannot draw that scene.
+
+    Returns:
+        ``{level label: {family: [reasons]}}``; an empty list means that family can draw the level's scene
+        (the level lies inside the distribution). None when the env declares no training distribution.
+    """
+    declared = agri_envs.training_distribution(suite.env_id)
+    if declared is None:
+        return None
+    distribution, defaults = declared
+    return {label: distribution.outside(kwargs, defaults) for label, kwargs in suite.levels()}
 
 
 def parse_suite(doc: Mapping[str, Any], sha256: str = "") -> Suite:
@@ -181,6 +216,7 @@ def parse_suite(doc: Mapping[str, Any], sha256: str = "") -> Suite:
         scenario=doc.get("scenario"),
         sweep=sweep,
         traces=int(doc.get("traces", 1)),
+        generalization=bool(doc.get("generalization", False)),
         sha256=sha256,
     )
 

@@ -21,8 +21,10 @@ class RandomStartWaypoint(gym.Wrapper[Any, Any, Any, Any]):
     """Start a share of GreenhouseNav's training episodes at a random waypoint of the mission.
 
     A long waypoint mission shows a learner its later legs (and the turns between them) only once it masters
-    the earlier ones; starting some episodes on the way (``reset(options={"start_waypoint": k})``, the
-    robot standing on waypoint k - 1 as if it had just reached it) shows every leg from the start.
+    the earlier ones; starting some episodes on the way (``reset(options={"start_waypoint": "random"})``:
+    the env draws k from 1 .. n - 1 once it knows the episode's mission, and the robot stands on waypoint
+    k - 1 as if it had just reached it) shows every leg from the start, also when every episode draws
+    another scene and mission (``scene_distribution``).
 
     Args:
         env: A GreenhouseNav env (anything whose reset takes the ``start_waypoint`` option).
@@ -35,18 +37,15 @@ class RandomStartWaypoint(gym.Wrapper[Any, Any, Any, Any]):
         super().__init__(env)
         self.prob = prob
         self._rng = np.random.default_rng(0)
-        self._n_targets = 0
 
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None) -> tuple[Any, dict[str, Any]]:
-        """Reset, at a random waypoint with probability ``prob`` (once the mission's length is known)."""
+        """Reset, at a random waypoint with probability ``prob``."""
         if seed is not None:
             self._rng = np.random.default_rng([seed, 1])
         options = dict(options or {})
-        if "start_waypoint" not in options and self._n_targets > 1 and self._rng.random() < self.prob:
-            options["start_waypoint"] = int(self._rng.integers(1, self._n_targets))
-        obs, info = self.env.reset(seed=seed, options=options or None)
-        self._n_targets = int(info["n_waypoints"])
-        return obs, info
+        if "start_waypoint" not in options and self._rng.random() < self.prob:
+            options["start_waypoint"] = "random"
+        return self.env.reset(seed=seed, options=options or None)
 
 
 class CrashCostRamp(gym.Wrapper[Any, Any, Any, Any]):

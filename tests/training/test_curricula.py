@@ -67,7 +67,7 @@ def test_random_start_waypoint_is_seeded_and_respects_prob():
 
     assert starts(0.0, 0) == [0] * 12
     always = starts(1.0, 0)
-    assert always[0] == 0 and all(1 <= k <= 7 for k in always[1:]) and len(set(always[1:])) > 2
+    assert all(1 <= k <= 7 for k in always) and len(set(always)) > 2
     assert starts(0.5, 4) == starts(0.5, 4)
     half = starts(0.5, 4)
     assert 0 in half[1:] and any(k > 0 for k in half)
@@ -140,3 +140,18 @@ def test_crash_cost_ramp_refunds_a_shrinking_share_of_the_crash():
     assert crash(done)[0] == pytest.approx(plain_reward)  # after the ramp: the env's own reward
     with pytest.raises(ValueError, match="start"):
         CrashCostRamp(gym.make(ENV_ID, **small), start=2.0)
+
+
+def test_random_start_fits_each_drawn_mission():
+    # Every episode draws another scene, and its own number of waypoints: the start always lies inside it.
+    env = gym.make(ENV_ID, scene_distribution="training")
+    lengths, starts = set(), []
+    for seed in range(40):
+        _, info = env.reset(seed=seed, options={"start_waypoint": "random"})
+        assert 1 <= info["waypoint_index"] < info["n_waypoints"]
+        lengths.add(info["n_waypoints"])
+        starts.append(info["waypoint_index"])
+    assert len(lengths) > 3 and len(set(starts)) > 3
+    _, again = env.reset(seed=7, options={"start_waypoint": "random"})
+    _, first = env.reset(seed=7, options={"start_waypoint": "random"})
+    assert again["waypoint_index"] == first["waypoint_index"] and again["x"] == first["x"]

@@ -71,6 +71,28 @@ def test_bad_suites_are_rejected(change, message):
         lb.parse_suite({**SUITE, **change})
 
 
+def test_generalization_suites_lie_outside_the_training_distribution():
+    committed = {s.env_id: s for s in lb.load_suites() if s.generalization}
+    assert set(committed) == {"agri_envs/GreenhouseNav-v2"}
+    for suite in committed.values():
+        for label, families in lb.outside_training(suite).items():
+            assert families and all(families.values()), (label, families)
+    # The default scene lies inside (the greenhouse family draws it): as a generalization suite it is refused,
+    # and so is a scene that one family excludes while another draws it.
+    with pytest.raises(ValueError, match="lie inside the training distribution"):
+        lb.parse_suite({**SUITE, "env_kwargs": {}, "generalization": True})
+    with pytest.raises(ValueError, match=r"\['corridor'\]"):
+        lb.parse_suite({**SUITE, "env_kwargs": {"scene": "corridor", "n_people": 0}, "generalization": True})
+    # one sweep level inside is enough to refuse the suite
+    swept = {**SUITE, "env_kwargs": {"n_rows": 6}, "sweep": {"parameter": "row_length", "values": [6.0]}}
+    assert lb.parse_suite({**swept, "generalization": True}).generalization
+    with pytest.raises(ValueError, match="tiny-rover n_rows=3.: \\[.greenhouse.\\]"):
+        no_rows = {**swept, "env_kwargs": {}, "sweep": {"parameter": "n_rows", "values": [3, 6]}}
+        lb.parse_suite({**no_rows, "generalization": True})
+    with pytest.raises(ValueError, match="declares no training distribution"):
+        lb.parse_suite({**SUITE, "env_id": "agri_envs/GrapeHarvest-v1", "env_kwargs": {}, "generalization": True})
+
+
 def test_suite_name_must_match_file(tmp_path):
     path = write_suite(tmp_path, SUITE)
     path.rename(tmp_path / "other.yaml")
