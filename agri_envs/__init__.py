@@ -70,9 +70,9 @@ def register_envs() -> None:
             entry_point="agri_envs.arm.grape_harvest:GrapeHarvestEnv",
             kwargs=dict(REACH_PRESET),
         )
-    if "agri_envs/GreenhouseCoverage-v0" not in registry:  # the env truncates itself at its mission-sized limit
+    if "agri_envs/GreenhouseCoverage-v1" not in registry:  # the env truncates itself at its mission-sized limit
         register(
-            id="agri_envs/GreenhouseCoverage-v0",
+            id="agri_envs/GreenhouseCoverage-v1",
             entry_point="agri_envs.coverage.greenhouse_coverage:GreenhouseCoverageEnv",
         )
 
@@ -116,6 +116,7 @@ def env_version(env_id: str) -> str:
 #: Gymnasium ids whose env declares a training distribution -> its config class (``module:Class``).
 _DISTRIBUTION_CONFIGS: dict[str, str] = {
     "agri_envs/GreenhouseNav-v2": "agri_envs.rover.config:GreenhouseNavConfig",
+    "agri_envs/GreenhouseCoverage-v1": "agri_envs.coverage.config:GreenhouseCoverageConfig",
 }
 
 

@@ -1,4 +1,4 @@
-"""Arguments of ``agri_envs/GreenhouseCoverage-v0``: one strict, typed, frozen dataclass (``gym.make`` keywords)."""
+"""Arguments of ``agri_envs/GreenhouseCoverage-v1``: one strict, typed, frozen dataclass (``gym.make`` keywords)."""
 
 from __future__ import annotations
 
@@ -7,7 +7,9 @@ import math
 
 from agri_envs._config import StrictConfig, param
 from agri_envs.coverage import robot as fito
+from agri_envs.coverage.distribution import DISTRIBUTIONS
 from agri_envs.coverage.task import CoverageWeights
+from agri_envs.scenes.distribution import SceneDistribution
 from agri_envs.scenes.greenhouse import LayoutParams
 
 LOCALIZATION_MODES = ("odometry", "ground_truth")
@@ -15,7 +17,7 @@ LOCALIZATION_MODES = ("odometry", "ground_truth")
 
 @dataclasses.dataclass(frozen=True)
 class GreenhouseCoverageConfig(StrictConfig):
-    """Arguments of ``agri_envs/GreenhouseCoverage-v0`` (each one a ``gym.make`` keyword)."""
+    """Arguments of ``agri_envs/GreenhouseCoverage-v1`` (each one a ``gym.make`` keyword)."""
 
     # Scene
     n_rows: int = param(4, "rows of plants (the corridors are the n_rows + 1 spaces beside them)", low=1, high=12)
@@ -35,6 +37,11 @@ class GreenhouseCoverageConfig(StrictConfig):
         4.0, "distance between structural posts along rows and walls", unit="m", low=1.0, high=20.0
     )
     layout_seed: int = param(-1, "layout seed; -1: a new greenhouse every episode", low=-1, high=2**31 - 1)
+    scene_distribution: str = param(
+        "off",
+        "scenes drawn per episode (see Starting State)",
+        choices=("off", *DISTRIBUTIONS),
+    )
     # Robot (756 kg: low accelerations)
     max_speed: float = param(0.5, "forward speed limit (reverse: half of it)", unit="m/s", low=0.1, high=1.5)
     max_turn_rate: float = param(0.6, "angular speed limit", unit="rad/s", low=0.1, high=2.0)
@@ -58,6 +65,9 @@ class GreenhouseCoverageConfig(StrictConfig):
     terminate_on_contact: bool = param(True, "end the episode on touching the crop or anything else")
     time_limit: float = param(0.0, "episode time limit; 0 sizes it to the mission", unit="s", low=0.0, high=36000.0)
     reward_coverage: float = param(1.0, "reward per corridor covered (paid per bin)", low=0.0, high=100.0)
+    reward_progress: float = param(
+        0.3, "reward per metre along the covering serpentine (see Rewards)", low=0.0, high=100.0
+    )
     reward_success: float = param(10.0, "bonus when every corridor is covered", low=0.0, high=1000.0)
     reward_contact: float = param(10.0, "penalty on contact", low=0.0, high=1000.0)
     reward_cross_track: float = param(0.0, "penalty per step per metre of cross-track error", low=0.0, high=100.0)
@@ -76,9 +86,18 @@ class GreenhouseCoverageConfig(StrictConfig):
                 f"lower the variation."
             )
 
+    def distribution(self) -> SceneDistribution | None:
+        """The training distribution ``scene_distribution`` names, or None when it is ``"off"``."""
+        return DISTRIBUTIONS.get(self.scene_distribution)
+
     def layout_params(self) -> LayoutParams:
         """The scene part of the config."""
         return LayoutParams.from_config(self)
+
+    def largest_size(self) -> tuple[float, float]:
+        """Inner length and width (m) of the largest greenhouse these arguments generate (corridors at their widest)."""
+        lp = self.layout_params()
+        return lp.width, lp.height + (self.n_rows + 1) * self.corridor_width_jitter
 
     def mission_time(self) -> float:
         """The episode time limit (s): ``time_limit``, or three times the serpentine at full speed plus turns."""
@@ -97,4 +116,5 @@ class GreenhouseCoverageConfig(StrictConfig):
             contact=self.reward_contact,
             cross_track=self.reward_cross_track,
             time=self.reward_time,
+            progress=self.reward_progress,
         )

@@ -1,4 +1,4 @@
-"""GreenhouseCoverage-v0: the tracked Fitorobot drives every corridor of a Mediterranean greenhouse (González 2009)."""
+"""GreenhouseCoverage-v1: the tracked Fitorobot drives every corridor of a Mediterranean greenhouse (González 2009)."""
 
 from __future__ import annotations
 
@@ -14,6 +14,7 @@ from agri_envs.coverage.config import GreenhouseCoverageConfig
 from agri_envs.coverage.task import CoverageTask
 from agri_envs.scenes.greenhouse import generate_layout
 from agri_envs.scenes.layout import Layout
+from agri_envs.sim2d.egomap import EgoMap
 from agri_envs.sim2d.geometry import Kind
 from agri_envs.sim2d.gridmap import rasterize
 from agri_envs.sim2d.odometry import Compass, TrackOdometry
@@ -56,11 +57,17 @@ class GreenhouseCoverageEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
     | ``compass`` | (2,) | ``(1 + sin h) / 2, (1 + cos h) / 2`` of the compass heading h (noise and bias) |
     | ``velocity`` | (2,) | ``(1 + v / max_speed) / 2, (1 + w / max_turn_rate) / 2`` measured by the track encoders |
     | ``pose`` | (4,) | ``x / pose_scale[0], y / pose_scale[1], (1 + sin), (1 + cos) / 2`` of the pose estimate (1) |
-    | ``coverage`` | (n_rows + 1,) | covered fraction of each corridor, in order across the rows |
+    | ``memory`` | (2, 16, 16) | the robot's own map around it (2): cells it drove over; cells its sonars echoed from |
 
     (1) ``localization="odometry"``: the encoders' distance integrated along the compass heading (it
     drifts, and it is rotated by the compass bias); ``"ground_truth"``: the true pose (privileged).
     ``pose_scale`` is an attribute of the env (m), the largest greenhouse size the arguments allow.
+    (2) A grid of 0.5 m cells in the frame of the pose estimate (:mod:`agri_envs.sim2d.egomap`): every
+    control period the cell under the estimated centre is marked visited (channel 0) and the cell of each
+    sonar echo on the sonar's axis is marked (channel 1: the sensory map of González's eq. 2). The
+    observation is the 8 x 8 m window centred on the robot and turned with its estimated heading: row
+    ``a`` lies ``(a - 7.5) * 0.5`` m ahead, column ``b`` as far to the left. It is built from the
+    robot's own readings only, so it drifts with the odometry, as a real robot's would.
 
     ## Sensors
 
@@ -73,17 +80,31 @@ class GreenhouseCoverageEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
 
     ## Rewards
 
-    ``reward = coverage + success + contact + cross_track + time`` with
+    ``reward = coverage + progress + success + contact + cross_track + time`` with
 
     | term | formula |
     |---|---|
     | ``reward_coverage`` | ``reward_coverage * (n_rows + 1) * (coverage gained this step)``: 1 per corridor |
+    | ``reward_progress`` | ``reward_progress * (g_prev - g)``, g = d + (max_speed / max_turn_rate) * abs(alpha) (1) |
     | ``reward_success`` | ``+reward_success`` when every corridor is covered |
     | ``reward_contact`` | ``-reward_contact`` on contact with the crop or anything else |
     | ``reward_cross_track`` | ``-reward_cross_track * cross_track`` (0 by default) |
     | ``reward_time`` | ``-reward_time`` every step |
 
-    Each term is reported in ``info`` under its name.
+    (1) d and alpha are the true distance and bearing of the current subgoal of the covering serpentine
+    (González's Fig. 5): through corridor 0 to a point 0.8 m past its far end, across the headland to the
+    mouth of corridor 1 on the same side, through it, and so on; a subgoal counts as passed within 0.5 m
+    and the next one starts from its own distance to go. Turning toward the subgoal is progress, so the
+    U-turn through the headland into the next corridor pays as it is driven. The robot is not told the
+    subgoals. Each term is reported in ``info`` under its name. Why the weights are what they are:
+
+    * **Corridors pay when they are driven, turns when they are turned.** In v0 only the covered bins
+      paid (1 per corridor, 0.1 per metre): the U-turns in the headlands (15-25 s near walls and row ends)
+      paid nothing until the next corridor's first bin, and PPO drove the first corridor and parked in
+      the headland in every run. With 0.3 per metre of progress a well-driven default mission returns
+      about 40, of which about 3.5 per U-turn.
+    * **Touching the crop ends the mission.** 10 on contact, and what the rest of the mission would
+      have paid is lost with it.
 
     ## Starting State
 
@@ -92,7 +113,17 @@ class GreenhouseCoverageEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
     +-0.02 rad. The odometry starts at the true pose. With ``layout_seed=-1`` the greenhouse (corridor
     widths, row inclines and bends, plants and leaves) is drawn anew from the episode seed; otherwise it
     comes from ``layout_seed``. ``reset(options={"layout_seed": s, "growth": g})`` overrides these for one
-    episode.
+    episode. The memory starts empty.
+
+    With ``scene_distribution="training"`` (default ``"off"``) each episode first draws its greenhouse
+    from the env's training distribution (:data:`agri_envs.coverage.distribution.TRAINING`), with the
+    episode's own Generator: ``n_rows`` 2..4, ``row_length`` [6, 12] m, ``corridor_width`` [1.4, 1.6] m,
+    ``corridor_width_jitter`` [0, 0.1] m, ``row_incline`` [0, 0.012] rad, ``row_bend`` [0, 0.05] m,
+    ``growth`` [0.2, 1] and ``vegetation_echo_prob`` [0, 0.3]. The drawn arguments replace the config's for
+    that episode (``env.unwrapped.episode_config``; reset options still apply on top), and so do the time
+    limit and ``info["n_corridors"]``; ``pose_scale`` is the largest greenhouse the distribution draws. The
+    arguments it draws cannot also be given to ``gym.make``. Training uses seeds below 100000; held-out
+    suites (100000 and up) run the plain env, and ``coverage-generalization`` lies outside every range.
 
     ## Episode End
 
@@ -132,6 +163,7 @@ class GreenhouseCoverageEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
     | ``growth`` | 0.6 |  | in [0.0, 1.0] | season: plant size and leaves reaching into corridors |
     | ``post_spacing`` | 4 | m | in [1.0, 20.0] | distance between structural posts along rows and walls |
     | ``layout_seed`` | -1 |  | in [-1, 2147483647] | layout seed; -1: a new greenhouse every episode |
+    | ``scene_distribution`` | 'off' |  | one of 'off', 'training' | scenes drawn per episode (see Starting State) |
     | ``max_speed`` | 0.5 | m/s | in [0.1, 1.5] | forward speed limit (reverse: half of it) |
     | ``max_turn_rate`` | 0.6 | rad/s | in [0.1, 2.0] | angular speed limit |
     | ``max_accel`` | 0.3 | m/s^2 | in [0.05, 2.0] | linear acceleration limit |
@@ -148,6 +180,7 @@ class GreenhouseCoverageEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
     | ``terminate_on_contact`` | True |  | True or False | end the episode on touching the crop or anything else |
     | ``time_limit`` | 0 | s | in [0.0, 36000.0] | episode time limit; 0 sizes it to the mission |
     | ``reward_coverage`` | 1 |  | in [0.0, 100.0] | reward per corridor covered (paid per bin) |
+    | ``reward_progress`` | 0.3 |  | in [0.0, 100.0] | reward per metre along the covering serpentine (see Rewards) |
     | ``reward_success`` | 10 |  | in [0.0, 1000.0] | bonus when every corridor is covered |
     | ``reward_contact`` | 10 |  | in [0.0, 1000.0] | penalty on contact |
     | ``reward_cross_track`` | 0 |  | in [0.0, 100.0] | penalty per step per metre of cross-track error |
@@ -156,7 +189,7 @@ class GreenhouseCoverageEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
 
     Example::
 
-        env = gym.make("agri_envs/GreenhouseCoverage-v0", n_rows=6, row_bend=0.1, vegetation_echo_prob=0.3)
+        env = gym.make("agri_envs/GreenhouseCoverage-v1", n_rows=6, row_bend=0.1, vegetation_echo_prob=0.3)
 
     ## Baselines
 
@@ -167,6 +200,13 @@ class GreenhouseCoverageEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
     ## Version History
 
     * v0: initial release.
+    * v1: a covering policy can be learned from what the robot has. New observation ``memory`` (the robot's
+      own map of where it drove and where its sonars echoed, around it, from its odometry); the
+      ``coverage`` observation (each corridor's covered fraction, which the robot cannot measure and whose
+      size followed ``n_rows``) is gone. New reward term ``reward_progress`` (0.3 per metre along the
+      covering serpentine, turns included); with v0's reward PPO parked after the first corridor. New
+      argument ``scene_distribution``; ``info["subgoal_index"]``. Dynamics, sensors, the other reward terms,
+      termination and time limits are unchanged.
 
     ## References
 
@@ -208,8 +248,21 @@ class GreenhouseCoverageEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
     def __init__(self, render_mode: str | None = None, **kwargs: Any) -> None:
         self.render_mode = render_mode
         self.config = cfg = GreenhouseCoverageConfig.from_kwargs(kwargs)
+        #: The training distribution each episode's greenhouse is drawn from (None: the arguments' own).
+        self.distribution = cfg.distribution()
+        largest = [cfg]
+        if self.distribution is not None:
+            fixed = sorted(set(kwargs) & self.distribution.arguments)
+            if fixed:
+                raise ValueError(
+                    f"GreenhouseCoverage: scene_distribution={cfg.scene_distribution!r} draws {fixed} per episode; "
+                    f"leave them out (it draws {sorted(self.distribution.arguments)})."
+                )
+            largest = [cfg.replace(**f.largest()) for f in self.distribution.families]
+        bounds = np.array([c.layout_params().max_bounds() for c in largest])
         self.view = SceneView(
-            render_mode, cfg.layout_params().max_bounds(), cfg.render_width, self.metadata["render_fps"]
+            render_mode, (*bounds[:, :2].min(axis=0), *bounds[:, 2:].max(axis=0)), cfg.render_width,
+            self.metadata["render_fps"],
         )
         self.robot_spec = fito.fitorobot_spec(cfg.max_speed, cfg.max_turn_rate, cfg.max_accel, cfg.max_angular_accel)
         self.sonars = SonarArray(
@@ -224,9 +277,13 @@ class GreenhouseCoverageEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
         )
         self.compass = Compass(cfg.compass_noise_std, cfg.compass_bias)
         self.encoders = TrackOdometry(fito.TRACK_GAUGE, cfg.encoder_noise, cfg.encoder_scale_std)
-        lp = cfg.layout_params()
         #: Normalisation of the ``pose`` observation (m): the largest greenhouse the arguments allow.
-        self.pose_scale = (lp.width, lp.height + (cfg.n_rows + 1) * cfg.corridor_width_jitter)
+        scales = [c.largest_size() for c in largest]
+        self.pose_scale = (max(w for w, _ in scales), max(h for _, h in scales))
+        #: The robot's own map (the ``memory`` observation).
+        self.memory = EgoMap()
+        #: The arguments of the current episode: the config, with the greenhouse drawn from the distribution if any.
+        self.episode_config = cfg
         self.n_corridors = cfg.n_rows + 1
         self.max_steps = int(math.ceil(cfg.mission_time() / cfg.control_period))
         box = spaces.Box
@@ -236,7 +293,7 @@ class GreenhouseCoverageEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
                 "compass": box(0.0, 1.0, (2,), np.float32),
                 "velocity": box(0.0, 1.0, (2,), np.float32),
                 "pose": box(0.0, 1.0, (4,), np.float32),
-                "coverage": box(0.0, 1.0, (self.n_corridors,), np.float32),
+                "memory": box(0.0, 1.0, self.memory.shape, np.float32),
             }
         )
         self.action_space = spaces.Box(-1.0, 1.0, (2,), np.float32)
@@ -250,9 +307,16 @@ class GreenhouseCoverageEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
     ) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
         """Build a new greenhouse and place the robot before the first corridor (see Starting State)."""
         # Checked before anything of the env changes, so a bad option leaves the env as it was.
-        cfg = self.config.with_options(options, ("growth", "layout_seed"))
+        allowed = ("growth", "layout_seed")
+        cfg = self.config.with_options(options, allowed)
         super().reset(seed=seed)
         rng = self.np_random
+        if self.distribution is not None:  # the greenhouse of this episode, from the episode's own Generator
+            _, drawn = self.distribution.sample(rng)
+            cfg = self.config.replace(**drawn).with_options(options, allowed)
+        self.episode_config = cfg
+        self.n_corridors = cfg.n_rows + 1
+        self.max_steps = int(math.ceil(cfg.mission_time() / cfg.control_period))
         layout_rng = rng if cfg.layout_seed < 0 else np.random.default_rng(cfg.layout_seed)
         self.layout = generate_layout(cfg.layout_params(), layout_rng)
         geo = self.layout.geometry
@@ -264,7 +328,11 @@ class GreenhouseCoverageEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
         first = self.layout.corridors[0]
         start = np.array([first[0, 0] - 1.0, first[0, 1], 0.0]) + rng.uniform([-0.03, -0.03, -0.02], [0.03, 0.03, 0.02])
         self.robot = self.world.add_robot(self.robot_spec, start)
-        self.task = CoverageTask(self.layout.corridors, cfg.bin_length, cfg.weights())
+        self.task = CoverageTask(
+            self.layout.corridors, cfg.bin_length, cfg.weights(), turn_distance=cfg.max_speed / cfg.max_turn_rate
+        )
+        self.task.reset(start)
+        self.memory.reset(geo.bounds)
         self.encoders.draw_scale(rng)
         self.encoders.reset(start)
         self._steps = 0
@@ -341,6 +409,10 @@ class GreenhouseCoverageEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
             px, py, ph = (float(v) for v in self.robot.pose)
         else:
             px, py, ph = float(enc.estimate[0]), float(enc.estimate[1]), h
+        estimate = np.array([px, py, ph])
+        self.memory.update(
+            estimate, self.sonars.poses_in_world(estimate), self._last_sonar, self.sonars.spec.max_range
+        )
         half = np.float32(0.5)
         return {
             "sonar": (self._last_sonar / self.sonars.spec.max_range).astype(np.float32),
@@ -363,7 +435,7 @@ class GreenhouseCoverageEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
                 0.0,
                 1.0,
             ),
-            "coverage": self.task.corridor_fractions().astype(np.float32),
+            "memory": self.memory.view(estimate),
         }
 
     def _info(self, outcome: dict[str, Any]) -> dict[str, Any]:

@@ -70,17 +70,3 @@ register_policy(
         "--out runs/chain-ppo",
     )
 )
-
-register_policy(
-    PolicySpec(
-        name="ppo-coverage-almeria",
-        env_id="agri_envs/GreenhouseCoverage-v0",
-        entry_point="agri_training.learned.zoo:load_zoo_policy",
-        description="Learned (PPO on sonar, compass and odometry, agri_training/zoo/ppo-coverage-almeria): the "
-        "almeria scenario",
-        learned=True,
-        algo="ppo",
-        train_command="agri train --env agri_envs/GreenhouseCoverage-v0 --scenario almeria --algo ppo --seed 0 "
-        "--out runs/cover-ppo",
-    )
-)

@@ -27,7 +27,7 @@ from agri_envs.scenarios import list_scenarios
 #: Env families of the site: (page name, env id, preset ids that share the page).
 ENV_PAGES = (
     ("greenhouse-nav", "agri_envs/GreenhouseNav-v2", ()),
-    ("greenhouse-coverage", "agri_envs/GreenhouseCoverage-v0", ()),
+    ("greenhouse-coverage", "agri_envs/GreenhouseCoverage-v1", ()),
     ("robot-chain", "robot_chain_v0", ()),
     ("grape-harvest", "agri_envs/GrapeHarvest-v1", ("agri_envs/GrapeHarvestReach-v1",)),
 )

@@ -1,4 +1,4 @@
-"""GreenhouseCoverage-v0: API checkers, determinism, pickling, config strictness, bad input, rendering, task."""
+"""GreenhouseCoverage-v1: API checkers, determinism, pickling, config strictness, bad input, rendering, task."""
 
 import math
 import pickle
@@ -11,9 +11,9 @@ from rollouts import assert_same, rollout
 
 import agri_envs  # noqa: F401
 from agri_envs.coverage.config import GreenhouseCoverageConfig
-from agri_envs.coverage.task import CoverageTask, CoverageWeights
+from agri_envs.coverage.task import CoverageTask, CoverageWeights, serpentine_subgoals
 
-ENV_ID = "agri_envs/GreenhouseCoverage-v0"
+ENV_ID = "agri_envs/GreenhouseCoverage-v1"
 SMALL = {"n_rows": 1, "row_length": 4.0}
 
 
@@ -54,7 +54,7 @@ def test_observations_normalised_and_info_keys():
             assert v.dtype == np.float32 and np.all((v >= 0) & (v <= 1)), k
     for key in ("coverage", "cross_track", "max_cross_track", "crop_contacts", "is_success", "n_corridors"):
         assert key in info
-    assert obs["coverage"].shape == (5,)
+    assert set(obs) == {"sonar", "compass", "velocity", "pose", "memory"} and obs["memory"].shape == (2, 16, 16)
 
 
 def test_bad_actions_and_config():
@@ -140,3 +140,65 @@ def test_a_corridor_with_exactly_the_margin_is_accepted(kwargs):
     env.close()
     with pytest.raises(ValueError, match="narrowest corridor"):
         gym.make(ENV_ID, **{k: v * 1.05 for k, v in kwargs.items()})
+
+
+def test_memory_marks_the_driven_trail_behind_the_robot_and_echoes_beside_it():
+    env = gym.make(ENV_ID, n_rows=2, growth=0.3, terminate_on_contact=False)
+    obs, _ = env.reset(seed=2)
+    assert obs["memory"][0].sum() == 1 and obs["memory"][0, 7:9, 7:9].sum() == 1  # the start cell, under the robot
+    for _ in range(60):  # straight ahead, 2 m into the first corridor
+        obs, *_ = env.step(np.array([1.0, 0.0], np.float32))
+    visited, echo = obs["memory"]
+    # Rows are ahead (a), columns to the left (b); the robot sits between cells 7 and 8 of each.
+    behind = visited[:8, 6:10].sum(axis=1)
+    assert np.all(behind[-4:] >= 1) and visited[10:].sum() == 0 and visited[:, :5].sum() == 0
+    # The first corridor runs between the wall (right, 0.8 m away: column 6) and a row (left): the right
+    # sonars' echoes draw the wall as a line along the trail, and the left ones mark the row's side.
+    assert echo[2:8, 6].all() and echo[:, :6].sum() == 0 and echo[6:10, 9:].sum() > 0
+
+
+def test_memory_is_the_robots_own_estimate():
+    # With odometry the memory is drawn in the pose estimate's frame: a compass bias of 0.5 rad turns the
+    # trail in the grid, while the robot still sees it straight behind itself. The true path is the same.
+    kw = dict(n_rows=2, terminate_on_contact=False, encoder_noise=0.0, compass_noise_std=0.0)
+    grids, paths = [], []
+    for bias in (0.0, 0.5):
+        env = gym.make(ENV_ID, **kw, compass_bias=bias)
+        obs, info = env.reset(seed=1)
+        for _ in range(50):
+            obs, _, _, _, info = env.step(np.array([1.0, 0.0], np.float32))
+        trail = np.argwhere(obs["memory"][0])
+        assert np.all(trail[:, 0] <= 8) and np.all(np.abs(trail[:, 1] - 7.5) <= 1.5)
+        grids.append(env.unwrapped.memory.grid[0].copy())
+        paths.append((info["x"], info["y"]))
+    assert paths[0] == paths[1] and not np.array_equal(grids[0], grids[1])
+
+
+def test_serpentine_subgoals_and_progress_pay_for_the_turn_into_the_next_corridor():
+    lines = tuple(np.array([[0.0, y], [10.0, y]]) for y in (1.0, 3.0, 5.0))
+    goals = serpentine_subgoals(lines, 0.8)
+    np.testing.assert_allclose(goals, [[10.8, 1], [10.8, 3], [-0.8, 3], [-0.8, 5], [10.8, 5]])
+    task = CoverageTask(lines, 0.5, CoverageWeights(progress=1.0), turn_distance=1.0)
+    task.reset(np.array([-1.0, 1.0, 0.0]))
+    total = 0.0
+    for x in np.linspace(-1.0, 10.8, 60):  # along corridor 0 to its far subgoal
+        total += task.evaluate(np.array([x, 1.0, 0.0]), False, False)["reward_progress"]
+    assert task.route.index == 1 and total == pytest.approx(11.8 - 0.5, abs=0.25)
+    # Turning left toward the next corridor's mouth pays pi/2 of turn distance; turning right costs it.
+    left = task.evaluate(np.array([10.8, 1.0, math.pi / 2]), False, False)["reward_progress"]
+    assert left == pytest.approx(math.pi / 2)
+    right = task.evaluate(np.array([10.8, 1.0, -math.pi / 2]), False, False)["reward_progress"]
+    assert right == pytest.approx(-math.pi)
+
+
+def test_env_progress_term_sums_to_the_distance_driven_toward_the_subgoal():
+    env = gym.make(ENV_ID, n_rows=1, row_length=4.0, reward_progress=1.0)
+    _, info = env.reset(seed=0)
+    x0 = info["x"]
+    total = 0.0
+    for _ in range(25):
+        _, _, _, _, info = env.step(np.array([1.0, 0.0], np.float32))
+        total += info["reward_progress"]
+    # Straight toward the subgoal (its bearing stays near 0): progress = metres driven toward it.
+    assert total == pytest.approx(info["x"] - x0, abs=0.05)
+    assert info["subgoal_index"] == 0

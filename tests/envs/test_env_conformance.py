@@ -41,7 +41,7 @@ EXTRA_KWARGS: dict[str, list[dict[str, Any]]] = {
         {"localization": "odometry", "lidar_beams": 30, "growth": 0.6, "n_trees": 3, "n_rows": 2},
     ],
     "agri_envs/GrapeHarvest-v1": [{"control": "ee", "reward_type": "dense"}],
-    "agri_envs/GreenhouseCoverage-v0": [
+    "agri_envs/GreenhouseCoverage-v1": [
         {"row_bend": 0.15, "corridor_width": 1.6, "corridor_width_jitter": 0.1, "vegetation_echo_prob": 0.2}
     ],
 }
@@ -49,7 +49,7 @@ EXTRA_KWARGS: dict[str, list[dict[str, Any]]] = {
 #: ``reset(options=...)`` keys that override config fields, per env id (wrong types must be named).
 RESET_OPTIONS: dict[str, tuple[str, ...]] = {
     "agri_envs/GreenhouseNav-v2": ("growth", "n_trees", "layout_seed", "start_waypoint"),
-    "agri_envs/GreenhouseCoverage-v0": ("growth", "layout_seed"),
+    "agri_envs/GreenhouseCoverage-v1": ("growth", "layout_seed"),
 }
 
 #: Known failures that another branch fixes; strict, so the merge that fixes them flips the mark.

@@ -5,14 +5,16 @@ import numpy as np
 import pytest
 
 import agri_envs
+from agri_envs.coverage.config import GreenhouseCoverageConfig
 from agri_envs.rover.config import GreenhouseNavConfig
 from agri_envs.scenes.distribution import Choice, IntRange, SceneDistribution, SceneFamily, Uniform
 
 NAV = "agri_envs/GreenhouseNav-v2"
-CONFIGS = {NAV: GreenhouseNavConfig}
+COVER = "agri_envs/GreenhouseCoverage-v1"
+CONFIGS = {NAV: GreenhouseNavConfig, COVER: GreenhouseCoverageConfig}
 
 
-@pytest.mark.parametrize("env_id", [NAV])
+@pytest.mark.parametrize("env_id", [NAV, COVER])
 def test_draws_stay_in_range_and_follow_the_seed(env_id):
     distribution, _ = agri_envs.training_distribution(env_id)
     draws = [distribution.sample(np.random.default_rng(seed)) for seed in range(400)]
@@ -38,7 +40,7 @@ def test_draws_stay_in_range_and_follow_the_seed(env_id):
                 assert len(set(values)) == (r.high - r.low + 1 if isinstance(r, IntRange) else len(r.values)), k
 
 
-@pytest.mark.parametrize("env_id", [NAV])
+@pytest.mark.parametrize("env_id", [NAV, COVER])
 def test_every_draw_and_the_tightest_corner_are_valid_scenes(env_id):
     distribution, _ = agri_envs.training_distribution(env_id)
     base = CONFIGS[env_id](scene_distribution="training")
@@ -55,7 +57,7 @@ def test_every_draw_and_the_tightest_corner_are_valid_scenes(env_id):
 
 @pytest.mark.parametrize(
     ("env_id", "kwargs"),
-    [(NAV, {"localization": "ground_truth"})],
+    [(NAV, {"localization": "ground_truth"}), (COVER, {}), (COVER, {"localization": "ground_truth"})],
 )
 def test_env_draws_one_scene_per_episode_from_the_episode_seed(env_id, kwargs):
     env = gym.make(env_id, scene_distribution="training", render_mode="rgb_array", **kwargs)
@@ -74,9 +76,11 @@ def test_env_draws_one_scene_per_episode_from_the_episode_seed(env_id, kwargs):
         obs2, _ = again.reset(seed=seed)
         assert again.unwrapped.episode_config == cfg and all(np.array_equal(obs[k], obs2[k]) for k in obs)
     assert len(set(configs)) == 6 and len(frames) == 1
+    if env_id == COVER:
+        assert env.unwrapped.n_corridors == configs[-1].n_rows + 1
 
 
-@pytest.mark.parametrize(("env_id", "argument"), [(NAV, "n_rows"), (NAV, "office_route")])
+@pytest.mark.parametrize(("env_id", "argument"), [(NAV, "n_rows"), (NAV, "office_route"), (COVER, "growth")])
 def test_an_argument_the_distribution_draws_cannot_be_given_too(env_id, argument):
     default = getattr(CONFIGS[env_id](), argument)
     with pytest.raises(ValueError, match=f"draws \\['{argument}'\\] per episode"):

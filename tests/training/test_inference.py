@@ -211,7 +211,7 @@ def test_zoo_actions_are_the_committed_bits():
 
 
 def test_a_loaded_zoo_policy_acts_like_torch():
-    env = gym.make("agri_envs/GreenhouseCoverage-v0")
+    env = gym.make("agri_envs/GreenhouseCoverage-v1")
     policy = LearnedPolicy(ZOO_DIR / "ppo-coverage-almeria", env)
     flat_space = gym.spaces.flatten_space(env.observation_space)
     net_arch = policy.config["policy_kwargs"]["net_arch"]

@@ -73,7 +73,7 @@ def test_bad_suites_are_rejected(change, message):
 
 def test_generalization_suites_lie_outside_the_training_distribution():
     committed = {s.env_id: s for s in lb.load_suites() if s.generalization}
-    assert set(committed) == {"agri_envs/GreenhouseNav-v2"}
+    assert set(committed) == {"agri_envs/GreenhouseNav-v2", "agri_envs/GreenhouseCoverage-v1"}
     for suite in committed.values():
         for label, families in lb.outside_training(suite).items():
             assert families and all(families.values()), (label, families)
