@@ -18,6 +18,7 @@ from agri_training import leaderboard as lb
 from agri_training.core.yaml_values import load_yaml
 from agri_training.evaluation.evaluate import EvalRequest, evaluate, format_summary
 from agri_training.evaluation.parallel import EpisodeError
+from agri_training.evaluation.validation import VALIDATION_SEED, candidates, validate
 from agri_training.evaluation.video import ClipRequest, record
 from agri_training.report.page import build_report
 from agri_training.sweep import SUMMARY_MD, SweepRequest, parse_grid, run_sweep
@@ -55,6 +56,24 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
     out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text(json.dumps(result, indent=1))
     print(format_summary(result))
+    print(f"wrote {out}")
+    return 0
+
+
+def _cmd_validate(args: argparse.Namespace) -> int:
+    paths = [c for run in args.runs for c in (candidates(Path(run)) if args.checkpoints else [Path(run)])]
+    doc = validate(paths, args.episodes, args.seed, args.workers, not args.quiet, ray=args.ray)
+    out = Path(args.out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    out.write_text(json.dumps(doc, indent=1))
+    best = set(doc["best_per_run"].values())
+    for row in doc["candidates"]:
+        s = row["summary"]
+        mark = " <- chosen" if row["path"] == doc["chosen"] else (" <- best of its run" if row["path"] in best else "")
+        print(
+            f"{row['path']}: success {s['success_rate']:.2f}, collisions {s.get('collision_rate', 0.0):.2f}, "
+            f"mean return {s['mean_return']:.1f}{mark}"
+        )
     print(f"wrote {out}")
     return 0
 
@@ -336,6 +355,26 @@ def build_parser() -> argparse.ArgumentParser:
     ev.add_argument("--quiet", action="store_true", help="no progress bar or progress lines (the summary still prints)")
     add_scale_arguments(ev)
     ev.set_defaults(func=_cmd_evaluate)
+    va = sub.add_parser(
+        "validate",
+        help="choose a learned policy's weights: evaluate runs (and their checkpoints) on validation seeds of "
+        "their training distribution",
+    )
+    va.add_argument("runs", nargs="+", help="`agri train` run directories (or their best/ or checkpoint folders)")
+    va.add_argument(
+        "--checkpoints", action="store_true", help="also every run's best/ and checkpoints/step_N folders"
+    )
+    va.add_argument("--episodes", type=int, default=100, help="episodes per candidate (default 100)")
+    va.add_argument(
+        "--seed",
+        type=int,
+        default=VALIDATION_SEED,
+        help=f"first validation seed (default {VALIDATION_SEED}: above training's, below the held-out 100000)",
+    )
+    va.add_argument("--out", required=True, help="output JSON file (e.g. agri_training/zoo/NAME/validation.json)")
+    va.add_argument("--quiet", action="store_true", help="no progress bar")
+    add_scale_arguments(va)
+    va.set_defaults(func=_cmd_validate)
     rc = sub.add_parser("record", help="record a policy's episode headless as a GIF or MP4 clip")
     _add_clip_arguments(rc, out_required=True)
     rc.set_defaults(func=_cmd_record)

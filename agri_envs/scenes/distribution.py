@@ -145,6 +145,10 @@ class SceneFamily:
         """The family's largest scene: every range at its top (for canvases and observation scales)."""
         return {**self.fixed, **{name: r.largest() for name, r in self.ranges.items()}}
 
+    def same_kind(self, kwargs: Mapping[str, Any], defaults: Mapping[str, Any]) -> bool:
+        """Whether ``kwargs`` has every fixed argument of the family (the same kind of scene, say)."""
+        return all(kwargs.get(name, defaults.get(name)) == value for name, value in self.fixed.items())
+
     def excludes(self, kwargs: Mapping[str, Any], defaults: Mapping[str, Any]) -> list[str]:
         """Why this family never draws a scene with ``kwargs`` (empty: it can).
 
@@ -222,6 +226,17 @@ class SceneDistribution:
             defaults: The env's default arguments, for those that ``kwargs`` leaves out.
         """
         return {f.name: f.excludes(kwargs, defaults) for f in self.families}
+
+    def nearest(self, kwargs: Mapping[str, Any], defaults: Mapping[str, Any]) -> tuple[str, list[str]]:
+        """The family most like ``kwargs`` and why it cannot draw them (``[]``: it can).
+
+        Families of the same kind (their fixed arguments match) come first, then those with fewer reasons.
+        """
+        ranked = sorted(
+            self.families,
+            key=lambda f: (not f.same_kind(kwargs, defaults), len(f.excludes(kwargs, defaults))),
+        )
+        return ranked[0].name, ranked[0].excludes(kwargs, defaults)
 
     def lies_outside(self, kwargs: Mapping[str, Any], defaults: Mapping[str, Any]) -> bool:
         """True when no family of the distribution can draw a scene with these arguments."""

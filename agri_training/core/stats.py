@@ -6,6 +6,8 @@
   a stratified percentile-bootstrap interval, as rliable does (Agarwal et al. 2021, "Deep RL at the Edge of
   the Statistical Precipice"): episodes are resampled with replacement within each stratum (a scenario
   level, say) so every stratum keeps its size.
+- The worst episodes get their own number: the mean of the worst 10 % (:func:`lower_tail_mean`, the
+  conditional value at risk), with a bootstrap interval like any other statistic.
 - Two policies evaluated on the same seeds get a paired comparison: the difference with its interval (a
   paired bootstrap over seeds for continuous metrics, Newcombe's hybrid score interval for paired rates)
   and the probability of improvement ``P(X > Y) + P(X = Y) / 2`` over episode pairs (rliable's definition).
@@ -135,6 +137,27 @@ def iqm(values: Sequence[float] | np.ndarray) -> float:
         return float("nan")
     cut = int(0.25 * x.size)
     return float(x[cut : x.size - cut].mean())
+
+
+def lower_tail_mean(values: Sequence[float] | np.ndarray, fraction: float = 0.1) -> float:
+    """Mean of the worst ``fraction`` of the values (the lower tail; CVaR at level ``fraction``).
+
+    The tail holds ``ceil(fraction * n)`` values (at least one), so over 20 episodes the worst 10 % are the
+    2 lowest. Used for "how bad are a policy's worst episodes" next to the mean.
+
+    Returns:
+        The tail mean, NaN for no finite value.
+
+    Raises:
+        ValueError: For ``fraction`` outside (0, 1].
+    """
+    if not 0.0 < fraction <= 1.0:
+        raise ValueError(f"fraction must be in (0, 1], got {fraction}")
+    x = np.sort(np.asarray(values, dtype=np.float64).ravel())
+    x = x[np.isfinite(x)]
+    if x.size == 0:
+        return float("nan")
+    return float(x[: max(1, math.ceil(fraction * x.size - 1e-9))].mean())
 
 
 def _strata_index(n: int, strata: Sequence[Any] | None) -> list[np.ndarray]:

@@ -43,6 +43,7 @@ from agri_training.evaluation.evaluate import INTERVALS_NOTE
 from agri_training.evaluation.policies import load_policy
 from agri_training.evaluation.video import ClipRequest, record
 from agri_training.learned.zoo import ZOO_DIR
+from agri_training.report.generalization import generalization_section
 
 #: Per-env report sections: env id -> ``"module:function"`` (see the module docstring).
 SECTION_HOOKS: dict[str, str] = {
@@ -789,6 +790,9 @@ def build_report(
                     *table,
                     "",
                 ]
+        if agri_envs.training_distribution(env_id) is not None:
+            shown = [(r.suite, r.entry) for r in rows]
+            parts += ["### How the learned policies generalize", "", *generalization_section(env_id, shown), ""]
         parts += ["### Learning curves", "", *learning_curves(env_id, runs, rows, out_dir), ""]
         hook = SECTION_HOOKS.get(env_id)
         if hook:

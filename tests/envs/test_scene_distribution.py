@@ -113,6 +113,10 @@ def test_outside_needs_every_family_to_exclude():
     assert reasons["a"] == ["n=4 outside 1..3", "w=2.5 outside [1, 2]"] and reasons["b"] == [
         "scene='a' (family 'b' has 'b')"
     ]
+    # The nearest family is of the same kind, even when another has fewer reasons.
+    assert d.nearest({"n": 4, "w": 2.5}, defaults) == ("a", ["n=4 outside 1..3", "w=2.5 outside [1, 2]"])
+    assert d.nearest({"scene": "b", "route": "z"}, defaults) == ("b", ["route='z' outside {'x', 'y'}"])
+    assert d.nearest({}, defaults) == ("a", [])
 
 
 @pytest.mark.parametrize(

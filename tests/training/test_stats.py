@@ -1,6 +1,8 @@
 """Statistics against known values: Wilson/Clopper-Pearson (scipy's binomtest as oracle), IQM, bootstrap,
 paired comparisons."""
 
+import math
+
 import numpy as np
 import pytest
 from scipy.stats import binomtest, trim_mean
@@ -9,6 +11,7 @@ from agri_training.core.stats import (
     clopper_pearson_interval,
     format_interval,
     iqm,
+    lower_tail_mean,
     newcombe_interval,
     newcombe_paired_interval,
     paired_comparison,
@@ -136,3 +139,16 @@ def test_newcombe_independent_interval():
     # 10/10 here against the paper's 9/10: the data support no difference
     lo, hi = newcombe_interval(10, 10, 9, 10)
     assert lo < 0 < hi
+
+
+def test_lower_tail_mean_is_the_mean_of_the_worst_episodes():
+    rng = np.random.default_rng(3)
+    x = rng.normal(size=200)
+    # oracle: sort by hand, keep the lowest ceil(0.1 n)
+    assert lower_tail_mean(x, 0.1) == pytest.approx(float(np.mean(sorted(x.tolist())[:20])))
+    assert lower_tail_mean([1.0, 0.0, 1.0, 1.0], 0.1) == 0.0  # one episode of four is the tail
+    assert lower_tail_mean([3.0, 1.0, np.nan, 2.0], 0.5) == 1.5
+    assert lower_tail_mean(x, 1.0) == pytest.approx(x.mean())
+    assert math.isnan(lower_tail_mean([np.nan]))
+    with pytest.raises(ValueError, match="fraction"):
+        lower_tail_mean(x, 0.0)

@@ -15,6 +15,9 @@ ENV_ID = "agri_envs/GreenhouseNav-v2"
 TINY_HP = {
     "n_envs": 2,
     "env_kwargs": {"n_rows": 1, "row_length": 3.0, "n_people": 0, "max_episode_steps": 40},
+    # the tiny fixed scene: no training distribution (the YAML draws scenes), which would override it
+    "train_env_kwargs": {"scene_distribution": "off"},
+    "eval_env_kwargs": {"scene_distribution": "off"},
     "algo_kwargs": {"n_steps": 32, "batch_size": 32},
     "policy_kwargs": {"net_arch": {"pi": [16], "vf": [16]}},
     "eval_freq": 64,
@@ -113,7 +116,8 @@ def test_a_failing_run_is_reported_with_its_seed_and_the_others_finish(tmp_path,
     out = tmp_path / "sweep"
     hp = ["n_envs=2", "env_kwargs={n_rows: 1, row_length: 3.0, n_people: 0, max_episode_steps: 40}",
           "algo_kwargs={n_steps: 32}", "policy_kwargs={net_arch: {pi: [8], vf: [8]}}", "eval_freq=64",
-          "eval_episodes=1", "checkpoint_freq=0"]  # fmt: skip
+          "eval_episodes=1", "checkpoint_freq=0", "train_env_kwargs={scene_distribution: 'off'}",
+          "eval_env_kwargs={scene_distribution: 'off'}"]  # fmt: skip
     # PPO refuses batch_size 1 when it builds the model, i.e. inside the run, after planning succeeded.
     grid = ["--seeds", "7", "--grid", "algo_kwargs.batch_size=1,32", "--workers", "1", "--quiet"]
     code = main(["train", "--env", ENV_ID, "--algo", "ppo", "--timesteps", "64", "--out", str(out), *grid, "--hp", *hp])

@@ -16,6 +16,9 @@ TINY_ENV = {"n_rows": 1, "row_length": 3.0, "n_people": 0, "max_episode_steps": 
 TINY_HP = {
     "n_envs": 1,
     "env_kwargs": TINY_ENV,
+    # the tiny fixed scene: no training distribution (the YAML draws scenes), which would override it
+    "train_env_kwargs": {"scene_distribution": "off"},
+    "eval_env_kwargs": {"scene_distribution": "off"},
     "algo_kwargs": {"n_steps": 32, "batch_size": 32, "n_epochs": 1},
     "policy_kwargs": {"net_arch": {"pi": [8], "vf": [8]}},
     "eval_freq": 10_000,

@@ -22,6 +22,9 @@ TINY_ENV = {"n_rows": 1, "row_length": 3.0, "n_people": 0, "max_episode_steps": 
 TINY_HP = {
     "n_envs": 2,
     "env_kwargs": TINY_ENV,
+    # the tiny fixed scene: no training distribution (the YAML draws scenes), which would override it
+    "train_env_kwargs": {"scene_distribution": "off"},
+    "eval_env_kwargs": {"scene_distribution": "off"},
     "algo_kwargs": {"n_steps": 32, "batch_size": 32, "n_epochs": 1},
     "policy_kwargs": {"net_arch": {"pi": [16], "vf": [16]}},
     "eval_freq": 64,
@@ -120,7 +123,7 @@ def test_pickled_code_in_a_checkpoint_never_runs(tiny_run, tmp_path):
 
 def test_hyperparameters_resolve_and_stay_strict(tmp_path):
     hp = load_hyperparams(ENV_ID, "ppo")
-    assert hp["wrappers"][0] == "FlattenObservation" and hp["algo_kwargs"]["n_steps"] == 2048
+    assert hp["wrappers"][0] == "FlattenObservation" and hp["algo_kwargs"]["n_steps"] == 1024
     assert load_hyperparams(ENV_ID, "ppo", overrides={"n_envs": 2})["n_envs"] == 2
     assert load_hyperparams("agri_envs/GrapeHarvest-v1", "sac")["policy"] == "MultiInputPolicy"
     with pytest.raises(ValueError, match="unknown hyperparameter keys"):
@@ -164,12 +167,12 @@ def test_a_registered_trained_policy_loads_by_name(tiny_run, monkeypatch, capsys
 def test_train_env_kwargs_reach_the_training_envs_only(tmp_path):
     from agri_training.train import _env_factory
 
-    hp = {**TINY_HP, "train_env_kwargs": {"n_people": 2, "people_tease_prob": 0.9}}
+    hp = {**TINY_HP, "train_env_kwargs": {"scene_distribution": "off", "n_people": 2, "people_tease_prob": 0.9}}
     config = resolve_config(TrainRequest(ENV_ID, "ppo", tmp_path / "run", overrides=hp))
     training = _env_factory(config, 0)().unwrapped.config
     assert (training.n_people, training.people_tease_prob) == (2, 0.9)
     assert config["env_kwargs"]["n_people"] == 0  # what evaluation and loading use
-    bad = {**TINY_HP, "train_env_kwargs": {"localization": "none"}}  # another observation space
+    bad = {**TINY_HP, "train_env_kwargs": {"scene_distribution": "off", "localization": "none"}}  # other spaces
     with pytest.raises(ValueError, match="spaces"):
         train(TrainRequest(ENV_ID, "ppo", tmp_path / "bad", timesteps=64, overrides=bad, progress=False), "test")
     assert not (tmp_path / "bad" / "config.yaml").exists()
@@ -201,3 +204,32 @@ def test_timesteps_are_rounded_up_to_whole_rollouts_and_said_so(tmp_path, capsys
     assert meta["timesteps_requested"] == 100 and meta["timesteps_planned"] == 128 == meta["timesteps_done"]
     assert meta["timesteps_rounding"] == "whole rollouts of n_steps 32 x 2 env slot(s) = 64 steps"
     assert "training 128 steps, not 100" in capsys.readouterr().err
+
+
+def test_eval_env_kwargs_reach_the_periodic_evaluation_and_validation(tiny_run, tmp_path):
+    from agri_training.evaluation.validation import VALIDATION_SEED, candidates, validate
+    from agri_training.train import eval_env_kwargs
+
+    hp = {**TINY_HP, "eval_env_kwargs": {"scene_distribution": "off", "growth": 0.5}}
+    out = tmp_path / "grown"
+    train(TrainRequest(ENV_ID, "ppo", out, seed=2, timesteps=128, overrides=hp, progress=False), "test")
+    config = yaml.safe_load((out / "config.yaml").read_text())
+    assert eval_env_kwargs(config)["growth"] == 0.5 and "growth" not in config["env_kwargs"]
+    found = candidates(out)
+    assert found[-1] == out and found[-2] == out / "best" and all(p.name.startswith("step_") for p in found[:-2])
+    doc = validate(found, episodes=2, progress=False, command="test")
+    assert doc["env_kwargs"]["growth"] == 0.5 and doc["seeds"] == {"start": VALIDATION_SEED, "episodes": 2}
+    assert [row["path"] for row in doc["candidates"]] == [str(p) for p in found]
+    assert all(row["summary"]["episodes"] == 2 and row["seed"] == 2 for row in doc["candidates"])
+    # The chosen candidate ranks first by success, then fewer collisions, then return.
+    def score(row):
+        s = row["summary"]
+        return (s["success_rate"], -s["collision_rate"], s["mean_return"])
+
+    best = max(doc["candidates"], key=score)
+    assert doc["chosen"] == best["path"] and doc["best_per_run"] == {str(out): best["path"]}
+    assert list(doc["episodes"]) == [best["path"]] and len(doc["episodes"][best["path"]]) == 2
+    with pytest.raises(ValueError, match="validation seeds"):
+        validate([out], episodes=2, seed=VALIDATION_SEED - 1, progress=False)
+    with pytest.raises(ValueError, match="validates on"):  # another validation env: not comparable
+        validate([out, tiny_run], episodes=2, progress=False)
