@@ -295,9 +295,11 @@ def check_same_spaces(config: Mapping[str, Any]) -> None:
     reference.close()
 
 
-def eval_env_kwargs(config: Mapping[str, Any]) -> dict[str, Any]:
-    """The arguments of the periodic evaluation's env: ``env_kwargs`` with ``eval_env_kwargs`` over them."""
-    return {**config["env_kwargs"], **(config.get("eval_env_kwargs") or {})}
+def make_eval_env(config: Mapping[str, Any]) -> Any:
+    """The periodic evaluation's env: ``env_kwargs`` and ``eval_env_kwargs`` over them (multi-agent: the first)."""
+    if agri_envs.is_parallel_id(config["env_id"]):
+        return agri_envs.make(config["env_id"], **config["env_kwargs"])
+    return gym.make(config["env_id"], **{**config["env_kwargs"], **(config.get("eval_env_kwargs") or {})})
 
 
 def make_repeating(env_id: str, env_kwargs: Mapping[str, Any], repeat: int) -> gym.Env[Any, Any]:
@@ -408,11 +410,7 @@ def _make_callback(
             self.live: _LivePolicy | None = None
 
         def _on_training_start(self) -> None:
-            self.eval_env = (
-                agri_envs.make(config["env_id"], **config["env_kwargs"])
-                if agri_envs.is_parallel_id(config["env_id"])
-                else gym.make(config["env_id"], **eval_env_kwargs(config))
-            )
+            self.eval_env = make_eval_env(config)
             self.live = _LivePolicy(self.model, self.eval_env, config)
             if progress:
                 from tqdm import tqdm

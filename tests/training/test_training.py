@@ -208,13 +208,14 @@ def test_timesteps_are_rounded_up_to_whole_rollouts_and_said_so(tmp_path, capsys
 
 def test_eval_env_kwargs_reach_the_periodic_evaluation_and_validation(tiny_run, tmp_path):
     from agri_training.evaluation.validation import VALIDATION_SEED, candidates, validate
-    from agri_training.train import eval_env_kwargs
+    from agri_training.train import make_eval_env
 
     hp = {**TINY_HP, "eval_env_kwargs": {"scene_distribution": "off", "growth": 0.5}}
-    out = tmp_path / "grown"
+    out, other = tmp_path / "grown", tmp_path / "grown-too"
     train(TrainRequest(ENV_ID, "ppo", out, seed=2, timesteps=128, overrides=hp, progress=False), "test")
+    train(TrainRequest(ENV_ID, "ppo", other, seed=5, timesteps=64, overrides=hp, progress=False), "test")
     config = yaml.safe_load((out / "config.yaml").read_text())
-    assert eval_env_kwargs(config)["growth"] == 0.5 and "growth" not in config["env_kwargs"]
+    assert make_eval_env(config).unwrapped.config.growth == 0.5 and "growth" not in config["env_kwargs"]
     found = candidates(out)
     assert found[-1] == out and found[-2] == out / "best" and all(p.name.startswith("step_") for p in found[:-2])
     doc = validate(found, episodes=2, progress=False, command="test")
@@ -229,6 +230,13 @@ def test_eval_env_kwargs_reach_the_periodic_evaluation_and_validation(tiny_run, 
     best = max(doc["candidates"], key=score)
     assert doc["chosen"] == best["path"] and doc["best_per_run"] == {str(out): best["path"]}
     assert list(doc["episodes"]) == [best["path"]] and len(doc["episodes"][best["path"]]) == 2
+    # Two runs: each keeps its best, and the choice is the better of the two bests.
+    both = validate([*found, other], episodes=2, progress=False, command="test")
+    by_path = {c["path"]: c for c in both["candidates"]}
+    bests = {run: by_path[path] for run, path in both["best_per_run"].items()}
+    assert set(bests) == {str(out), str(other)} and bests[str(out)]["path"] == best["path"]
+    assert both["chosen"] == max(bests.values(), key=score)["path"]
+    assert score(bests[str(out)]) != score(bests[str(other)])  # the choice is not a tie
     with pytest.raises(ValueError, match="validation seeds"):
         validate([out], episodes=2, seed=VALIDATION_SEED - 1, progress=False)
     with pytest.raises(ValueError, match="validates on"):  # another validation env: not comparable
