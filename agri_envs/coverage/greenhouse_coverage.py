@@ -117,7 +117,7 @@ class GreenhouseCoverageEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
 
     With ``scene_distribution="training"`` (default ``"off"``) each episode first draws its greenhouse
     from the env's training distribution (:data:`agri_envs.coverage.distribution.TRAINING`), with the
-    episode's own Generator: ``n_rows`` 2..4, ``row_length`` [6, 12] m, ``corridor_width`` [1.4, 1.6] m,
+    episode's own Generator: ``n_rows`` 1..4, ``row_length`` [4, 12] m, ``corridor_width`` [1.4, 1.6] m,
     ``corridor_width_jitter`` [0, 0.1] m, ``row_incline`` [0, 0.012] rad, ``row_bend`` [0, 0.05] m,
     ``growth`` [0.2, 1] and ``vegetation_echo_prob`` [0, 0.3]. The drawn arguments replace the config's for
     that episode (``env.unwrapped.episode_config``; reset options still apply on top), and so do the time

@@ -54,16 +54,20 @@ class CrashCostRamp(gym.Wrapper[Any, Any, Any, Any]):
     A learner whose first random drives end in a crash that costs more than idling to the time limit learns
     to stand still before it learns to steer. This wrapper gives back part of each crash's penalty: the
     share charged grows linearly from ``start`` to 1 over this env's first ``ramp_steps`` steps, after which
-    the env's reward is unchanged. It reads the penalty from ``info["reward_collision"]`` (GreenhouseNav).
+    the env's reward is unchanged. It reads the penalty from ``info[term]``: ``reward_collision``
+    (GreenhouseNav) or ``reward_contact`` (GreenhouseCoverage).
 
     Args:
         env: The training env.
         start: Share of the crash penalty charged at first, in [0, 1].
         ramp_steps: Steps of this env copy over which the share reaches 1, >= 1 (with ``action_repeat`` a
             step is one action, held for that many control periods).
+        term: The ``info`` key of the env's crash penalty (a reward term, <= 0).
     """
 
-    def __init__(self, env: gym.Env[Any, Any], start: float = 0.1, ramp_steps: int = 100_000) -> None:
+    def __init__(
+        self, env: gym.Env[Any, Any], start: float = 0.1, ramp_steps: int = 100_000, term: str = "reward_collision"
+    ) -> None:
         if not 0.0 <= start <= 1.0:
             raise ValueError(f"CrashCostRamp: start must be in [0, 1], got {start}")
         if ramp_steps < 1:
@@ -71,6 +75,7 @@ class CrashCostRamp(gym.Wrapper[Any, Any, Any, Any]):
         super().__init__(env)
         self.start = start
         self.ramp_steps = ramp_steps
+        self.term = term
         self.steps = 0
 
     @property
@@ -82,7 +87,7 @@ class CrashCostRamp(gym.Wrapper[Any, Any, Any, Any]):
         """Step the env; refund ``1 - share`` of a crash's penalty."""
         obs, reward, terminated, truncated, info = self.env.step(action)
         self.steps += 1
-        penalty = -float(info.get("reward_collision", 0.0))
+        penalty = -float(info.get(self.term, 0.0))
         return obs, float(reward) + (1.0 - self.share) * penalty, terminated, truncated, info
 
 

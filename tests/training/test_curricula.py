@@ -142,6 +142,23 @@ def test_crash_cost_ramp_refunds_a_shrinking_share_of_the_crash():
         CrashCostRamp(gym.make(ENV_ID, **small), start=2.0)
 
 
+def test_crash_cost_ramp_refunds_the_coverage_contact_term():
+    from agri_training.learned.curricula import CrashCostRamp
+
+    def contact(env):
+        env.reset(seed=0)
+        while True:
+            _, reward, term, trunc, info = env.step(np.array([1.0, -0.6], np.float32))  # into the wall
+            if term or trunc:
+                return reward, info
+
+    small = {"n_rows": 1, "row_length": 4.0}
+    plain, info = contact(gym.make("agri_envs/GreenhouseCoverage-v1", **small))
+    assert info["reward_contact"] < 0
+    ramp = CrashCostRamp(gym.make("agri_envs/GreenhouseCoverage-v1", **small), 0.5, 10**9, term="reward_contact")
+    assert contact(ramp)[0] == pytest.approx(plain + 0.5 * -info["reward_contact"])
+
+
 def test_random_start_fits_each_drawn_mission():
     # Every episode draws another scene, and its own number of waypoints: the start always lies inside it.
     env = gym.make(ENV_ID, scene_distribution="training")
