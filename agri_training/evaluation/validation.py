@@ -97,6 +97,13 @@ def validate(
     for p, c in zip(paths, configs, strict=True):
         if c["env_id"] != env_id or validation_env_kwargs(c) != kwargs:
             raise ValueError(f"{p} validates on {c['env_id']} {validation_env_kwargs(c)}, not {env_id} {kwargs}")
+        used = {
+            "its training envs": (int(c["seed"]), int(c["seed"]) + int(c["n_envs"])),
+            "its periodic evaluation": (int(c["eval_seed"]), int(c["eval_seed"]) + int(c["eval_episodes"])),
+        }
+        for what, (lo, hi) in used.items():
+            if lo < seed + episodes and seed < hi:
+                raise ValueError(f"{p}: {what} used seeds {lo}..{hi - 1}, which overlap the validation seeds")
     extra = dict(configs[0].get("eval_env_kwargs") or {})  # the run's own env_kwargs come with it
     requests = [
         EvalRequest(env_id, str(p), episodes, seed, env_kwargs=extra, record_traces=0, label=str(p)) for p in paths

@@ -239,5 +239,10 @@ def test_eval_env_kwargs_reach_the_periodic_evaluation_and_validation(tiny_run, 
     assert score(bests[str(out)]) != score(bests[str(other)])  # the choice is not a tie
     with pytest.raises(ValueError, match="validation seeds"):
         validate([out], episodes=2, seed=VALIDATION_SEED - 1, progress=False)
+    with pytest.raises(ValueError, match="its periodic evaluation used seeds 20001..20001"):
+        overlap = tmp_path / "overlap"
+        hp_overlap = {**hp, "eval_seed": VALIDATION_SEED + 1}
+        train(TrainRequest(ENV_ID, "ppo", overlap, seed=2, timesteps=64, overrides=hp_overlap, progress=False), "t")
+        validate([overlap], episodes=2, progress=False)
     with pytest.raises(ValueError, match="validates on"):  # another validation env: not comparable
         validate([out, tiny_run], episodes=2, progress=False)
