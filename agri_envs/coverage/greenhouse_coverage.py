@@ -92,8 +92,9 @@ class GreenhouseCoverageEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
     | ``reward_time`` | ``-reward_time`` every step |
 
     (1) d and alpha are the true distance and bearing of the current subgoal of the covering serpentine
-    (González's Fig. 5): through corridor 0 to a point 0.8 m past its far end, across the headland to the
-    mouth of corridor 1 on the same side, through it, and so on; a subgoal counts as passed within 0.5 m
+    (González's Fig. 5): through corridor 0 to the middle of the headland past its far end (``headland / 2``
+    past the row ends, room for the 1.5 m robot's turn on either side), across the headland to the
+    mouth of corridor 1 on the same side, through it, and so on; a subgoal counts as passed within 0.3 m
     and the next one starts from its own distance to go. Turning toward the subgoal is progress, so the
     U-turn through the headland into the next corridor pays as it is driven. The robot is not told the
     subgoals. Each term is reported in ``info`` under its name. Why the weights are what they are:
@@ -329,7 +330,12 @@ class GreenhouseCoverageEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
         start = np.array([first[0, 0] - 1.0, first[0, 1], 0.0]) + rng.uniform([-0.03, -0.03, -0.02], [0.03, 0.03, 0.02])
         self.robot = self.world.add_robot(self.robot_spec, start)
         self.task = CoverageTask(
-            self.layout.corridors, cfg.bin_length, cfg.weights(), turn_distance=cfg.max_speed / cfg.max_turn_rate
+            self.layout.corridors,
+            cfg.bin_length,
+            cfg.weights(),
+            turn_distance=cfg.max_speed / cfg.max_turn_rate,
+            subgoal_offset=0.5 * cfg.headland,
+            subgoal_radius=0.3,
         )
         self.task.reset(start)
         self.memory.reset(geo.bounds)

@@ -6,8 +6,9 @@ mission succeeds when every bin of every corridor is covered. One :meth:`Coverag
 step produces the dict that termination, reward and ``info`` all read.
 
 The reward also pays progress along the serpentine that covers the corridors in order (the route González's
-planner draws, Fig. 5): through each corridor to a subgoal ``subgoal_offset`` metres past its far end, then
-to the next corridor's mouth on the same side. Progress toward the current subgoal counts turning toward it
+planner draws, Fig. 5): through each corridor to a subgoal ``subgoal_offset`` metres past its far end (the
+env puts it mid-headland, with room for the 1.5 m robot's turn on either side), then to the next corridor's
+mouth on the same side. Progress toward the current subgoal counts turning toward it
 (:class:`~agri_envs.sim2d.route.RouteProgress`), so the U-turn through the headland into the next corridor
 pays as it is driven, not only once the next corridor's first bin is covered. The robot is not told the
 subgoals: they shape the reward only.
@@ -77,8 +78,8 @@ class CoverageTask:
         bin_length: float,
         weights: CoverageWeights,
         turn_distance: float = 0.0,
-        subgoal_offset: float = 0.8,
-        subgoal_radius: float = 0.5,
+        subgoal_offset: float = 1.3,
+        subgoal_radius: float = 0.3,
     ) -> None:
         if not corridors:
             raise ValueError("CoverageTask needs at least one corridor")

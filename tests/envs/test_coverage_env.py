@@ -178,12 +178,12 @@ def test_serpentine_subgoals_and_progress_pay_for_the_turn_into_the_next_corrido
     lines = tuple(np.array([[0.0, y], [10.0, y]]) for y in (1.0, 3.0, 5.0))
     goals = serpentine_subgoals(lines, 0.8)
     np.testing.assert_allclose(goals, [[10.8, 1], [10.8, 3], [-0.8, 3], [-0.8, 5], [10.8, 5]])
-    task = CoverageTask(lines, 0.5, CoverageWeights(progress=1.0), turn_distance=1.0)
+    task = CoverageTask(lines, 0.5, CoverageWeights(progress=1.0), turn_distance=1.0, subgoal_offset=0.8)
     task.reset(np.array([-1.0, 1.0, 0.0]))
     total = 0.0
     for x in np.linspace(-1.0, 10.8, 60):  # along corridor 0 to its far subgoal
         total += task.evaluate(np.array([x, 1.0, 0.0]), False, False)["reward_progress"]
-    assert task.route.index == 1 and total == pytest.approx(11.8 - 0.5, abs=0.25)
+    assert task.route.index == 1 and total == pytest.approx(11.8 - 0.3, abs=0.25)
     # Turning left toward the next corridor's mouth pays pi/2 of turn distance; turning right costs it.
     left = task.evaluate(np.array([10.8, 1.0, math.pi / 2]), False, False)["reward_progress"]
     assert left == pytest.approx(math.pi / 2)
@@ -202,3 +202,24 @@ def test_env_progress_term_sums_to_the_distance_driven_toward_the_subgoal():
     # Straight toward the subgoal (its bearing stays near 0): progress = metres driven toward it.
     assert total == pytest.approx(info["x"] - x0, abs=0.05)
     assert info["subgoal_index"] == 0
+
+
+def test_the_robot_turns_clear_of_the_row_ends_where_the_subgoal_is_passed():
+    # Drive corridor 0 on its centre line until the far subgoal counts as passed, then turn toward the next
+    # corridor on a tight arc (0.4 m: in place the rear corner would hit the side wall, 0.8 m away): the
+    # 1.5 m robot must not touch the row end. The shaping points where a turn can be driven.
+    env = gym.make(ENV_ID, n_rows=2, localization="ground_truth", vegetation_echo_prob=0.0, row_bend=0.0,
+                   row_incline=0.0, corridor_width_jitter=0.0)  # fmt: skip
+    _, info = env.reset(seed=4)
+    line_y = env.unwrapped.corridor_lines()[0][0, 1]
+    for _ in range(600):
+        steer = np.clip(2.0 * (line_y - info["y"]) - 2.0 * info["yaw"], -1, 1)
+        _, _, term, _, info = env.step(np.array([0.6, steer], np.float32))
+        assert not term
+        if info["subgoal_index"] == 1:
+            break
+    assert info["subgoal_index"] == 1
+    for _ in range(30):  # a quarter turn to the left at 0.6 rad/s (and a little more)
+        _, _, term, _, info = env.step(np.array([0.5, 1.0], np.float32))
+        assert not term and info["crop_contacts"] == 0 and info["other_contacts"] == 0
+    assert info["yaw"] > 1.4
