@@ -253,12 +253,7 @@ class GreenhouseCoverageEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
         self.distribution = cfg.distribution()
         largest = [cfg]
         if self.distribution is not None:
-            fixed = sorted(set(kwargs) & self.distribution.arguments)
-            if fixed:
-                raise ValueError(
-                    f"GreenhouseCoverage: scene_distribution={cfg.scene_distribution!r} draws {fixed} per episode; "
-                    f"leave them out (it draws {sorted(self.distribution.arguments)})."
-                )
+            self.distribution.refuse_given(kwargs, f"GreenhouseCoverage: scene_distribution={cfg.scene_distribution!r}")
             largest = [cfg.replace(**f.largest()) for f in self.distribution.families]
         bounds = np.array([c.layout_params().max_bounds() for c in largest])
         self.view = SceneView(

@@ -288,12 +288,7 @@ class GreenhouseNavEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
         #: The training distribution each episode's scene is drawn from (None: the arguments' own scene).
         self.distribution = cfg.distribution()
         if self.distribution is not None:
-            fixed = sorted(set(kwargs) & self.distribution.arguments)
-            if fixed:
-                raise ValueError(
-                    f"GreenhouseNav: scene_distribution={cfg.scene_distribution!r} draws {fixed} per episode; "
-                    f"leave them out (it draws {sorted(self.distribution.arguments)})."
-                )
+            self.distribution.refuse_given(kwargs, f"GreenhouseNav: scene_distribution={cfg.scene_distribution!r}")
         if cfg.scene == "map":
             self._map_geometry = map_geometry(cfg.map_yaml)
         #: The arguments of the current episode: the config, with the scene drawn from the distribution if any.

@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from collections.abc import Mapping
+from collections.abc import Iterable, Mapping
 from typing import Any
 
 import numpy as np
@@ -193,6 +193,22 @@ class SceneDistribution:
     def arguments(self) -> frozenset[str]:
         """Every argument some family sets (an env refuses them as ``gym.make`` arguments beside it)."""
         return frozenset(a for f in self.families for a in f.arguments)
+
+    def refuse_given(self, given: Iterable[str], owner: str) -> None:
+        """Refuse env arguments that this distribution draws per episode (they would be silently replaced).
+
+        Args:
+            given: The arguments given to ``gym.make``.
+            owner: Who asks, for the message (``"GreenhouseNav: scene_distribution='training'"``).
+
+        Raises:
+            ValueError: Naming the arguments to leave out and all that the distribution draws.
+        """
+        drawn = sorted(set(given) & self.arguments)
+        if drawn:
+            raise ValueError(
+                f"{owner} draws {drawn} per episode; leave them out (it draws {sorted(self.arguments)})."
+            )
 
     def family(self, name: str) -> SceneFamily:
         """The family called ``name``.
