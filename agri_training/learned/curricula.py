@@ -91,10 +91,77 @@ class CrashCostRamp(gym.Wrapper[Any, Any, Any, Any]):
         return obs, float(reward) + (1.0 - self.share) * penalty, terminated, truncated, info
 
 
+class ExpertStart(gym.Wrapper[Any, Any, Any, Any]):
+    """Start a share of training episodes where a scripted baseline left off, part way through the mission.
+
+    On such a reset the baseline drives the env (in the env's own control periods) until ``info[progress]``
+    reaches a ``k`` drawn from 1 .. ``info[total]`` - 1, and then for up to ``extra_steps`` more periods; the
+    learner's episode starts there, in a state it reached by real driving (its memory, odometry and
+    coverage included). For GreenhouseCoverage with ``progress="corridors_covered"`` the learner starts at
+    the end of a corridor or in the turn into the next: the skill a learner meets last when every episode
+    starts at the first corridor, and the one it parks in front of. The baseline's periods are not part of
+    the learner's episode (its return and length count from the handover). A backward curriculum from
+    demonstrations (Salimans and Chen 2018), with the paper's own controller as the demonstrator.
+
+    Args:
+        env: The training env.
+        policy: A registered baseline of the env (``agri list``), built on the unwrapped env.
+        prob: Share of the episodes that start where the baseline left off, in [0, 1].
+        progress: ``info`` key counting the mission's completed parts.
+        total: ``info`` key holding their number.
+        extra_steps: The baseline drives up to this many control periods past the completed part, >= 0.
+    """
+
+    def __init__(
+        self,
+        env: gym.Env[Any, Any],
+        policy: str,
+        prob: float = 0.5,
+        progress: str = "corridors_covered",
+        total: str = "n_corridors",
+        extra_steps: int = 120,
+    ) -> None:
+        from agri_baselines import make_policy
+
+        if not 0.0 <= prob <= 1.0:
+            raise ValueError(f"ExpertStart: prob must be in [0, 1], got {prob}")
+        if extra_steps < 0:
+            raise ValueError(f"ExpertStart: extra_steps must be >= 0, got {extra_steps}")
+        super().__init__(env)
+        self.expert = make_policy(policy, env.unwrapped)
+        self.prob = prob
+        self.progress = progress
+        self.total = total
+        self.extra_steps = extra_steps
+        self._rng = np.random.default_rng(0)
+
+    def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None) -> tuple[Any, dict[str, Any]]:
+        """Reset; with probability ``prob``, let the baseline drive first (a fresh reset if its drive ends)."""
+        if seed is not None:
+            self._rng = np.random.default_rng([seed, 2])
+        obs, info = self.env.reset(seed=seed, options=options)
+        if self._rng.random() >= self.prob or int(info[self.total]) < 2:
+            return obs, info
+        goal = int(self._rng.integers(1, int(info[self.total])))
+        extra = int(self._rng.integers(0, self.extra_steps + 1))
+        base = self.env.unwrapped
+        start = True
+        while extra >= 0:
+            action, _ = self.expert.predict(obs, episode_start=np.array([start]), deterministic=True)
+            start = False
+            obs, _, terminated, truncated, info = base.step(action)
+            if terminated or truncated:  # the baseline's drive ended the episode: start afresh instead
+                return self.env.reset(options=options)
+            if int(info[self.progress]) >= goal:
+                extra -= 1
+        return obs, info
+
+
 #: Training wrappers a config may declare (by name; nothing is imported from a string).
 TRAIN_WRAPPERS: dict[str, type[gym.Wrapper[Any, Any, Any, Any]]] = {
     "RandomStartWaypoint": RandomStartWaypoint,
     "CrashCostRamp": CrashCostRamp,
+    "ExpertStart": ExpertStart,
 }
 
 
