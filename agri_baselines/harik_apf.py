@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -218,7 +219,9 @@ class HarikApfPolicy:
 
     Reads the ``waypoint`` (d, alpha from the env's localization), ``scan`` and ``sonar`` observation keys,
     so the env must be made with ``full_scan=True`` and a localization other than ``"none"``. One
-    controller is kept per env of a vectorised batch; ``episode_start`` resets it.
+    controller is kept per env of a vectorised batch; ``episode_start`` resets it. ``diagonal`` scales the
+    observation's distances back to metres: the env's ``diagonal``, or a function that reads it, for an env
+    whose scene (and with it the scale) is drawn per episode (``scene_distribution``).
     """
 
     #: Observation keys the policy reads, and the env arguments that provide them.
@@ -228,7 +231,7 @@ class HarikApfPolicy:
     def __init__(
         self,
         robot: RobotGeometry,
-        diagonal: float,
+        diagonal: float | Callable[[], float],
         max_speed: float,
         max_reverse_speed: float,
         max_turn_rate: float,
@@ -252,6 +255,10 @@ class HarikApfPolicy:
         a0 = u / self.max_speed if u >= 0 else u / max(self.max_reverse_speed, 1e-9)
         return np.clip(np.array([a0, r / self.max_turn_rate], dtype=np.float32), -1.0, 1.0)
 
+    def scale(self) -> float:
+        """The observation's distance scale now (m): the env's diagonal (of the current episode's scene)."""
+        return float(self.diagonal()) if callable(self.diagonal) else float(self.diagonal)
+
     def start_episode(self, i: int) -> None:
         """Clear the per-episode memory of env ``i``."""
         self._controller(i).reset()
@@ -259,7 +266,7 @@ class HarikApfPolicy:
     def waypoint_error(self, i: int, obs: dict[str, np.ndarray], scan: np.ndarray) -> tuple[float, float]:
         """Distance d (m) and angle alpha (rad) of the current waypoint for env ``i`` (eqs. 2-4)."""
         wp = obs["waypoint"]
-        return float(wp[0]) * self.diagonal, math.atan2(float(wp[1]), float(wp[2]))
+        return float(wp[0]) * self.scale(), math.atan2(float(wp[1]), float(wp[2]))
 
     def predict(
         self,
@@ -334,7 +341,7 @@ def make_harik_apf_gt(env: Any) -> HarikApfPolicy:
         raise ValueError("harik-apf-gt needs gym.make(..., full_scan=True, localization='ground_truth')")
     return HarikApfPolicy(
         robot_geometry(env),
-        e.diagonal,
+        lambda: e.diagonal,
         e.robot_spec.max_speed,
         e.robot_spec.max_reverse_speed,
         e.robot_spec.max_turn_rate,
@@ -376,7 +383,7 @@ class HarikApfSlamPolicy(HarikApfPolicy):
     def waypoint_error(self, i: int, obs: dict[str, np.ndarray], scan: np.ndarray) -> tuple[float, float]:
         """SLAM update on this scan, then d and alpha (eqs. 2-4) of the target in the map frame."""
         x, y, yaw = self._slam(i).update(scan)
-        tx, ty = obs["target"] * self.diagonal
+        tx, ty = obs["target"] * self.scale()
         theta = math.atan2(ty - y, tx - x)
         return math.hypot(tx - x, ty - y), math.atan2(math.sin(theta - yaw), math.cos(theta - yaw))
 
@@ -408,7 +415,7 @@ def make_harik_apf_slam(env: Any, localization_margin: float = 0.1, slam_config:
     d_min = max(0.05, cfg.waypoint_radius - localization_margin)
     return HarikApfSlamPolicy(
         robot_geometry(env),
-        e.diagonal,
+        lambda: e.diagonal,
         spec.max_speed,
         spec.max_reverse_speed,
         spec.max_turn_rate,

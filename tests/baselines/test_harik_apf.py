@@ -174,6 +174,18 @@ def test_repulsion_is_what_keeps_the_robot_in_narrow_grown_rows():
     assert not any(i["is_success"] for i in results[0.0])
 
 
+def test_it_reads_each_drawn_scenes_distance_scale():
+    # With scene_distribution the distance scale (the scene's diagonal) changes per episode. Read once,
+    # at construction, it made the controller believe every waypoint within d_min: it stopped short of
+    # the first one (0 waypoints) in these corridor missions, larger than the default greenhouse.
+    env = gym.make(ENV_ID, full_scan=True, localization="ground_truth", scene_distribution="training")
+    policy = make_policy("harik-apf-gt", env)
+    base_diagonal = env.unwrapped.diagonal
+    records = [run_episode(env, policy, seed, None)["record"] for seed in (20000, 20001)]
+    assert env.unwrapped.diagonal > 1.1 * base_diagonal
+    assert all(r["is_success"] and not r["collision"] for r in records), records
+
+
 def test_policy_spec_is_privileged_and_requires_full_scan():
     spec = policy_spec("harik-apf-gt")
     assert spec.privileged and spec.env_kwargs == {"localization": "ground_truth", "full_scan": True}
