@@ -17,6 +17,7 @@ evaluated. The keys:
 | ``wrappers`` | observation wrappers by name, innermost first (see ``learned.WRAPPERS``) |
 | ``action_repeat`` | env steps per action (1: every step); evaluation holds actions the same way |
 | ``train_wrappers`` | training-only curricula by name, inside ``wrappers`` (see ``curricula.TRAIN_WRAPPERS``) |
+| ``pretrain`` | PPO only: behaviour cloning of a baseline before the first rollout (see ``learned.pretrain``) |
 | ``normalize`` | ``false`` or ``VecNormalize`` arguments (``norm_obs``, ``norm_reward``, ``clip_obs``, ...) |
 | ``algo_kwargs`` | the algorithm's arguments (``learning_rate`` may be ``lin_3e-4``: linear decay) |
 | ``policy_kwargs`` | ``net_arch``, ``activation_fn`` (a name), ... |
@@ -78,6 +79,7 @@ from agri_training.learned.policy import (
     resolve_algo_kwargs,
     resolve_policy_kwargs,
 )
+from agri_training.learned.pretrain import PretrainSpec, pretrain_from_baseline
 
 HYPERPARAMS_DIR = Path(__file__).parent / "hyperparams"
 #: Seeds from here on are reserved for held-out evaluation suites; training never uses them.
@@ -93,6 +95,7 @@ HYPERPARAM_KEYS = (
     "wrappers",
     "train_wrappers",
     "action_repeat",
+    "pretrain",
     "normalize",
     "algo_kwargs",
     "policy_kwargs",
@@ -218,6 +221,10 @@ def resolve_config(request: TrainRequest) -> dict[str, Any]:
         raise ValueError(f"vec_env must be 'dummy' or 'subproc', got {vec_env!r}")
     algo_kwargs = dict(hp.get("algo_kwargs", {}) or {})
     her = dict(hp.get("her", {}) or {}) if request.her else None
+    if hp.get("pretrain"):
+        PretrainSpec.from_config(hp["pretrain"])  # refused here, before anything is written
+        if request.algo != "ppo" or agri_envs.is_parallel_id(request.env_id):
+            raise ValueError("pretrain clones a baseline into a single-agent PPO policy: --algo ppo on a Gymnasium env")
     if agri_envs.is_parallel_id(request.env_id):  # one parameter-shared policy for every agent (see parameter_sharing)
         if request.algo != "ppo" or request.her:
             raise ValueError(f"{request.env_id} trains a parameter-shared PPO: --algo ppo, without --her")
@@ -242,6 +249,7 @@ def resolve_config(request: TrainRequest) -> dict[str, Any]:
         "wrappers": list(hp.get("wrappers", []) or []),
         "train_wrappers": list(hp.get("train_wrappers", []) or []),
         "action_repeat": int(hp.get("action_repeat", 1)),
+        "pretrain": dict(hp["pretrain"]) if hp.get("pretrain") else None,
         "normalize": dict(hp["normalize"]) if hp.get("normalize") else None,
         "algo_kwargs": algo_kwargs,
         "policy_kwargs": dict(hp.get("policy_kwargs", {}) or {}),
@@ -606,8 +614,13 @@ def train(
     t0 = time.perf_counter()
     started = time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())
     stopped_early = False
+    pretrained = None
     restore = _stop_on_sigterm()
     try:
+        if config["pretrain"]:  # inside the wall time; its weights are checkpoint step_0, a validation candidate
+            pretrained = pretrain_from_baseline(model, model.get_vec_normalize_env(), config)
+            pretrained["wall_time_s"] = round(time.perf_counter() - t0, 1)
+            save_weights(model, run_dir / "checkpoints" / "step_0")
         model.learn(total_timesteps=planned, callback=callback, tb_log_name="run")
     except KeyboardInterrupt:  # Ctrl-C or SIGTERM: keep what was learned, write a complete run directory
         stopped_early = True
@@ -626,6 +639,7 @@ def train(
             "timesteps_rounding": f"whole rollouts of {why} = {unit} steps",
             "timesteps_done": int(model.num_timesteps),
             "stopped_early": stopped_early,
+            "pretrain": pretrained,
             "git_commit": git_commit(),
             "packages": package_versions(),
             "cpu_count": os.cpu_count(),

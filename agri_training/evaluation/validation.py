@@ -101,6 +101,9 @@ def validate(
             "its training envs": (int(c["seed"]), int(c["seed"]) + int(c["n_envs"])),
             "its periodic evaluation": (int(c["eval_seed"]), int(c["eval_seed"]) + int(c["eval_episodes"])),
         }
+        if c.get("pretrain"):
+            first = int(c["pretrain"].get("seed", 50_000))
+            used["its demonstrations"] = (first, first + int(c["pretrain"].get("episodes", 100)))
         for what, (lo, hi) in used.items():
             if lo < seed + episodes and seed < hi:
                 raise ValueError(f"{p}: {what} used seeds {lo}..{hi - 1}, which overlap the validation seeds")

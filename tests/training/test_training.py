@@ -246,3 +246,31 @@ def test_eval_env_kwargs_reach_the_periodic_evaluation_and_validation(tiny_run, 
         validate([overlap], episodes=2, progress=False)
     with pytest.raises(ValueError, match="validates on"):  # another validation env: not comparable
         validate([out, tiny_run], episodes=2, progress=False)
+
+
+def test_pretrain_clones_a_baseline_before_ppo(tmp_path):
+    import math
+
+    from agri_training.learned.pretrain import PretrainSpec, demonstrate
+
+    hp = {**TINY_HP, "pretrain": {"policy": "harik-apf-gt", "episodes": 2, "epochs": 40, "seed": 50000}}
+    out = tmp_path / "cloned"
+    train(TrainRequest(ENV_ID, "ppo", out, seed=4, timesteps=64, overrides=hp, progress=False), "test")
+    meta = json.loads((out / "meta.json").read_text())["pretrain"]
+    config = yaml.safe_load((out / "config.yaml").read_text())
+    demos = demonstrate(PretrainSpec.from_config(config["pretrain"]), config)
+    # Every action_repeat-th control period of the two demonstrations is a learner decision.
+    assert meta["decisions"] == len(demos.actions) == 2 * math.ceil(40 / config["action_repeat"])
+    assert meta["action_mse_first_last"][1] < 0.5 * meta["action_mse_first_last"][0]
+    # The cloned weights are checkpoint step_0, with the demonstrations' observation statistics; the
+    # action noise keeps its configured value.
+    stats = json.loads((out / "checkpoints" / "step_0" / "normalize.json").read_text())
+    seen = demos.observations.reshape(len(demos.actions), -1).astype(np.float64)
+    np.testing.assert_allclose(stats["mean"][""], seen.mean(axis=0))
+    state = torch.load(out / "checkpoints" / "step_0" / "policy.pt", weights_only=True)
+    assert np.allclose(state["log_std"].numpy(), config["policy_kwargs"]["log_std_init"])
+    with pytest.raises(ValueError, match="pretrain: unknown keys"):
+        bad = {**hp, "pretrain": {"policy": "a", "n": 1}}
+        resolve_config(TrainRequest(ENV_ID, "ppo", tmp_path / "x", overrides=bad))
+    with pytest.raises(ValueError, match="single-agent PPO"):
+        resolve_config(TrainRequest(ENV_ID, "sac", tmp_path / "y", overrides=hp))
