@@ -217,19 +217,32 @@ def split_info(info: Mapping[str, Any], num_envs: int, rows: Iterable[int] | Non
         num_envs: Sub-envs.
         rows: Only these sub-envs get their entries (the others an empty dict); None: all.
     """
-    out: list[dict[str, Any]] = [{} for _ in range(num_envs)]
     wanted = np.ones(num_envs, bool) if rows is None else np.isin(np.arange(num_envs), list(rows))
+    everywhere: list[tuple[str, Any]] = []  # entries every wanted sub-env has: one dict per sub-env at once
+    somewhere: list[tuple[str, Any, np.ndarray]] = []
     for key, value in info.items():
         if key.startswith("_"):
             continue
         mask = info.get("_" + key)
-        present = wanted if mask is None else wanted & np.asarray(mask, bool)
+        if mask is None:
+            present = wanted
+        else:
+            present = np.asarray(mask, bool) if rows is None else wanted & np.asarray(mask, bool)
         if isinstance(value, Mapping):
             values: Any = split_info(value, num_envs, np.flatnonzero(present))
         elif isinstance(value, np.ndarray) and value.ndim == 1 and value.dtype != object:
             values = value.tolist()  # Python scalars, as a single env reports them
         else:
             values = value
-        for i in np.flatnonzero(present):
+        if rows is None and present.all():
+            everywhere.append((key, values))
+        else:
+            somewhere.append((key, values, np.flatnonzero(present)))
+    keys = [key for key, _ in everywhere]
+    out = [dict(zip(keys, entries, strict=True)) for entries in zip(*(v for _, v in everywhere), strict=True)]
+    if not everywhere:
+        out = [{} for _ in range(num_envs)]
+    for key, values, where in somewhere:
+        for i in where:
             out[i][key] = values[i]
     return out

@@ -5,6 +5,7 @@ must hand SB3 the same observations, rewards, dones, infos and terminal observat
 observation wrappers, curricula, ``Monitor`` statistics and ``VecNormalize`` on top.
 """
 
+import dataclasses
 import functools
 
 import gymnasium as gym
@@ -32,7 +33,7 @@ from agri_training.learned.vector import (
     make_sync_vector_env,
     split_info,
 )
-from agri_training.train import TrainRequest, make_vec_env, resolve_config, with_update_threads
+from agri_training.train import TrainRequest, make_vec_env, resolve_config, train, with_update_threads
 
 ENV_ID = "agri_envs/GreenhouseNav-v2"
 #: Short episodes (truncations), people who stand in the way (collisions), and the recipe's wrappers.
@@ -285,3 +286,29 @@ def test_monitor_and_vec_monitor_count_the_same_episodes():
             _, _, dones, infos = venv.step(action)
             out += [(i, infos[i]["episode"]["l"], infos[i]["is_success"]) for i in np.flatnonzero(dones)]
     assert episodes[0] == episodes[1] and len(episodes[0]) >= 4
+
+
+def test_a_run_on_the_vector_path_is_the_run_on_the_dummy_path(tmp_path):
+    """Same seed, same envs: the trained weights and the saved normalisation statistics agree bit for bit."""
+    hp = {
+        **RECIPE,
+        "n_envs": 3,
+        "algo_kwargs": {"n_steps": 32, "batch_size": 48, "n_epochs": 2},
+        "policy_kwargs": {"net_arch": {"pi": [16], "vf": [16]}},
+        "update_threads": 1,
+        "eval_freq": 10**6,
+        "eval_episodes": 1,
+        "checkpoint_freq": 0,
+    }
+    runs = {}
+    for kind in ("dummy", "vector"):
+        out = tmp_path / kind
+        request = TrainRequest(ENV_ID, "ppo", out, seed=2, timesteps=192, overrides={**hp, "vec_env": kind})
+        train(dataclasses.replace(request, progress=False))
+        runs[kind] = out
+    old = torch.load(runs["dummy"] / "policy.pt", weights_only=True)
+    new = torch.load(runs["vector"] / "policy.pt", weights_only=True)
+    assert old.keys() == new.keys()
+    for key in old:
+        assert torch.equal(old[key], new[key]), key
+    assert (runs["dummy"] / "normalize.json").read_text() == (runs["vector"] / "normalize.json").read_text()
