@@ -207,6 +207,10 @@ class GreenhouseNavEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
 
         env = gym.make("agri_envs/GreenhouseNav-v2", n_rows=4, growth=0.6, n_people=3, full_scan=True)
 
+    Batched: ``gym.make_vec("agri_envs/GreenhouseNav-v2", num_envs=64, **kwargs)`` steps 64 of these worlds in one
+    compiled loop (:class:`~agri_envs.rover.vector.GreenhouseNavVectorEnv`), each sub-env's episodes bit for bit
+    this env's for the same seed and actions, with Gymnasium's autoreset modes and per-sub-env reset options.
+
     ## Baselines
 
     ``harik-apf-gt``: the paper's APF controller (eqs. 12-14) on the ground-truth pose (privileged).
@@ -228,7 +232,7 @@ class GreenhouseNavEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
       the waypoint as distance to go; new observation
       ``next_waypoint`` (the route is known, so a driver can line up for the next leg). With v1's
       penalties PPO learned to stand still. Later, without a version change (the default is unchanged):
-      the ``frame_skip`` argument.
+      the ``frame_skip`` argument; the batched form (``gym.make_vec``) and resets that reuse the pymunk world.
 
     ## References
 

@@ -33,26 +33,13 @@ import numba
 import numpy as np
 import pymunk
 
+from agri_envs.sim2d.batched import arc
 from agri_envs.sim2d.diff_drive import DiffDriveSpec, limit_velocity, unicycle_arc
 from agri_envs.sim2d.geometry import Geometry
 from agri_envs.sim2d.raycast import disc_clearance, footprint_clearance
 
 # Pymunk collision categories: robots do not sense or hit themselves through these filters.
 _ROBOT_GROUP_BASE = 1000
-
-
-@numba.njit(cache=True)
-def _arc(x: float, y: float, th: float, v: float, w: float, dt: float) -> tuple[float, float, float]:
-    """:func:`~agri_envs.sim2d.diff_drive.unicycle_arc` on scalars."""
-    if abs(w) < 1e-9:
-        return x + v * dt * math.cos(th), y + v * dt * math.sin(th), th
-    th1 = th + w * dt
-    k = v / w
-    return (
-        x + k * (math.sin(th1) - math.sin(th)),
-        y - k * (math.cos(th1) - math.cos(th)),
-        math.atan2(math.sin(th1), math.cos(th1)),
-    )
 
 
 @numba.njit(cache=True)
@@ -85,13 +72,13 @@ def _drive_discs(
         clear = disc_clearance(x, y, r, circles, capsules, skip)
         hit = False
         if clear > reach + 1e-6:
-            x, y, th = _arc(x, y, th, v, w, dt)
+            x, y, th = arc(x, y, th, v, w, dt)
         else:
             n_sub = max(1, math.ceil(reach / max_substep))
             h = dt / n_sub
             inside = clear <= 0.0
             for _ in range(n_sub):
-                cx, cy, cth = _arc(x, y, th, v, w, h)
+                cx, cy, cth = arc(x, y, th, v, w, h)
                 new_clear = disc_clearance(cx, cy, r, circles, capsules, skip)
                 if new_clear <= 0.0:
                     if not inside or new_clear <= clear:
