@@ -336,7 +336,9 @@ class GreenhouseNavEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
         self.layout = layout
         start_pose = self._arrival_pose(targets, int(start_waypoint))
         start = start_pose + self.np_random.uniform([-0.05, -0.05, -0.1], [0.05, 0.05, 0.1])
-        if self.world is None:  # the first episode (or the first after close()) builds the world ...
+        if self.world is None or len(self.world.movers) != cfg.n_people:  # the first episode builds the world ...
+            if self.world is not None:
+                self.world.close()
             self.world = World2D(layout.geometry, n_movers=cfg.n_people)
             self.robot = self.world.add_robot(self.robot_spec, start)
         else:  # ... later ones move what is in it

@@ -118,14 +118,13 @@ class WaypointTask:
         self.max_steps = max_steps
         self.steps = 0
         self.index = 0
-        #: The distance to go at the last evaluation (m); progress is measured from it.
-        self.last_to_go = 0.0
+        self._last_to_go = 0.0
 
     def reset(self, pose: np.ndarray, index: int = 0) -> None:
         """Start the mission with the robot at ``pose``, driving to target ``index`` (earlier ones count as reached)."""
         self.index = index
         self.steps = 0
-        self.last_to_go = self.to_go(pose)
+        self._last_to_go = self.to_go(pose)
 
     @property
     def done(self) -> bool:
@@ -181,13 +180,13 @@ class WaypointTask:
         if step:
             self.steps += 1
         d, alpha = self.distance(pose), self.bearing(pose)
-        progress = self.last_to_go - self._to_go(d, alpha)
+        progress = self._last_to_go - self._to_go(d, alpha)
         reached = False
         if not self.done and d < self.radius:
             self.index += 1
             reached = True
             d, alpha = self.distance(pose), self.bearing(pose)
-        self.last_to_go = self._to_go(d, alpha)
+        self._last_to_go = self._to_go(d, alpha)
         success = self.done
         shortfall = max(0.0, self.safety_margin - clearance) / self.safety_margin if self.safety_margin > 0 else 0.0
         terms = {

@@ -90,7 +90,6 @@ class _Constants(NamedTuple):
     safety_margin: float
     turn_distance: float
     weights: np.ndarray  # progress, waypoint, success, collision, clearance, time
-    diagonal: float
     full_scan: bool
     lidar_mount: np.ndarray
     beam_ux: np.ndarray
@@ -121,11 +120,13 @@ class _State(NamedTuple):
     gyro_bias: np.ndarray
     last_to_go: np.ndarray
     max_substep: np.ndarray
+    diagonal: np.ndarray  # the scene's diagonal (m): the scale of waypoint distances
     steps: np.ndarray
     max_steps: np.ndarray
     task_index: np.ndarray  # the waypoint being driven to
     n_targets: np.ndarray
     n_static: np.ndarray
+    n_people: np.ndarray
     n_circles: np.ndarray
     n_capsules: np.ndarray
     circles: np.ndarray  # (n, C, 3): static circles, then the people
@@ -207,7 +208,7 @@ def _step_worlds(rngs: Any, actions: np.ndarray, active: np.ndarray, c: _Constan
         est = s.estimate[i]
         circles = s.circles[i, : s.n_circles[i]]
         capsules = s.capsules[i, : s.n_capsules[i]]
-        people = s.circles[i, s.n_static[i] : s.n_circles[i]]
+        people = s.circles[i, s.n_static[i] : s.n_static[i] + s.n_people[i]]
         targets = s.targets[i]
         n_targets = s.n_targets[i]
         u, r = actions[i, 0], actions[i, 1]  # DiffDriveSpec.command
@@ -358,11 +359,11 @@ def _step_worlds(rngs: Any, actions: np.ndarray, active: np.ndarray, c: _Constan
             dx = targets[current, 0] - s.start[i, 0]
             dy = targets[current, 1] - s.start[i, 1]
             cs, sn = math.cos(s.start[i, 2]), math.sin(s.start[i, 2])
-            o.target[i, 0] = np.float32(min(max((cs * dx + sn * dy) / c.diagonal, -1.0), 1.0))
-            o.target[i, 1] = np.float32(min(max((-sn * dx + cs * dy) / c.diagonal, -1.0), 1.0))
+            o.target[i, 0] = np.float32(min(max((cs * dx + sn * dy) / s.diagonal[i], -1.0), 1.0))
+            o.target[i, 1] = np.float32(min(max((-sn * dx + cs * dy) / s.diagonal[i], -1.0), 1.0))
         else:
-            _polar(targets[current, 0], targets[current, 1], est, c.diagonal, o.waypoint[i])
-            _polar(targets[following, 0], targets[following, 1], est, c.diagonal, o.next_waypoint[i])
+            _polar(targets[current, 0], targets[current, 1], est, s.diagonal[i], o.waypoint[i])
+            _polar(targets[following, 0], targets[following, 1], est, s.diagonal[i], o.next_waypoint[i])
         if c.full_scan:
             for k in range(scan.shape[0]):
                 o.scan[i, k] = np.float32(scan[k] / c.lidar_max)
@@ -486,7 +487,7 @@ class GreenhouseNavVectorEnv(VectorEnv[dict[str, np.ndarray], np.ndarray, np.nda
         self.observation_space = batch_space(self.single_observation_space, self.num_envs)
         self.action_space = batch_space(self.single_action_space, self.num_envs)
         self._constants = self._shared_constants(first)
-        self._state = self._empty_state(1, 1, 1, 1, 1)
+        self._state = self._empty_state()
         self._out = self._empty_output()
         self._rngs: Any = None  # the sub-envs' generators, as a numba typed list (after the first reset)
         self._rng_objects: list[Any] = [None] * self.num_envs
@@ -530,7 +531,6 @@ class GreenhouseNavVectorEnv(VectorEnv[dict[str, np.ndarray], np.ndarray, np.nda
                     weights.time,
                 ]
             ),
-            diagonal=float(env.diagonal),
             full_scan=bool(cfg.full_scan),
             lidar_mount=np.array(lidar.mount, dtype=np.float64),
             beam_ux=np.cos(lidar.beam_angles),
@@ -549,8 +549,9 @@ class GreenhouseNavVectorEnv(VectorEnv[dict[str, np.ndarray], np.ndarray, np.nda
             sonar_noise=float(sonar.noise_std),
         )
 
-    def _empty_state(self, n_circles: int, n_capsules: int, n_targets: int, n_nodes: int, degree: int) -> _State:
-        n, p = self.num_envs, self.config.n_people
+    def _empty_state(self) -> _State:
+        """Arrays for one world of each kind of thing; :meth:`_load` grows them to what the episodes need."""
+        n, p, n_circles, n_capsules, n_targets, n_nodes, degree = self.num_envs, 0, 0, 0, 0, 0, 0
         f = np.zeros
         return _State(
             pose=f((n, 3)),
@@ -562,11 +563,13 @@ class GreenhouseNavVectorEnv(VectorEnv[dict[str, np.ndarray], np.ndarray, np.nda
             gyro_bias=f(n),
             last_to_go=f(n),
             max_substep=f(n),
+            diagonal=f(n),
             steps=f(n, np.int64),
             max_steps=f(n, np.int64),
             task_index=f(n, np.int64),
             n_targets=f(n, np.int64),
             n_static=f(n, np.int64),
+            n_people=f(n, np.int64),
             n_circles=f(n, np.int64),
             n_capsules=f(n, np.int64),
             circles=f((n, n_circles, 3)),
@@ -620,26 +623,31 @@ class GreenhouseNavVectorEnv(VectorEnv[dict[str, np.ndarray], np.ndarray, np.nda
         world, crowd, task = env.world, env.crowd, env.task
         graph = crowd.graph
         n_circles, n_capsules, n_targets = len(world.circles), len(world.capsules), len(task.targets)
-        degree = max((len(a) for a in graph.adjacency), default=1)
+        n_nodes, p = len(graph.nodes), crowd.n
+        degree = max(1, max((len(a) for a in graph.adjacency), default=1))
         s = self._state
-        needed = (n_circles, n_capsules, n_targets, len(graph.nodes), max(1, degree))
-        have = (s.circles.shape[1], s.capsules.shape[1], s.targets.shape[1], s.nodes.shape[1], s.adjacency.shape[2])
-        if any(a > b for a, b in zip(needed, have, strict=True)):
-            s = self._state = _State(
-                **{
-                    **s._asdict(),
-                    "circles": _grown(s.circles, (self.num_envs, n_circles, 3)),
-                    "capsules": _grown(s.capsules, (self.num_envs, n_capsules, 5)),
-                    "targets": _grown(s.targets, (self.num_envs, n_targets, 2)),
-                    "nodes": _grown(s.nodes, (self.num_envs, len(graph.nodes), 2)),
-                    "adjacency": _grown(s.adjacency, (self.num_envs, len(graph.nodes), max(1, degree))),
-                    "degree": _grown(s.degree, (self.num_envs, len(graph.nodes))),
-                }
-            )
+        sizes = {  # the padded arrays and the shape this episode needs of them
+            "circles": (n_circles, 3),
+            "capsules": (n_capsules, 5),
+            "targets": (n_targets, 2),
+            "nodes": (n_nodes, 2),
+            "adjacency": (n_nodes, degree),
+            "degree": (n_nodes,),
+            **{name: (p,) for name in ("prev_node", "next_node", "speed", "mode", "timer", "reacted")},
+        }
+        grow = {
+            name: _grown(getattr(s, name), (self.num_envs, *shape))
+            for name, shape in sizes.items()
+            if any(want > have for want, have in zip(shape, getattr(s, name).shape[1:], strict=True))
+        }
+        if grow:  # a larger scene, route graph, mission or crowd than any before
+            s = self._state = s._replace(**grow)
         s.circles[i, :n_circles] = world.circles
         s.capsules[i, :n_capsules] = world.capsules
         s.n_circles[i], s.n_capsules[i] = n_circles, n_capsules
         s.n_static[i] = len(world.geometry.circles) if world.geometry is not None else 0
+        s.n_people[i] = p
+        s.diagonal[i] = env.diagonal
         s.max_substep[i] = world.max_substep
         s.pose[i] = env.robot.pose
         s.vel[i] = (env.robot.v, env.robot.w)
@@ -653,8 +661,7 @@ class GreenhouseNavVectorEnv(VectorEnv[dict[str, np.ndarray], np.ndarray, np.nda
         s.targets[i, :n_targets] = task.targets
         s.n_targets[i] = n_targets
         s.task_index[i] = task.index
-        s.last_to_go[i] = task.last_to_go
-        p = crowd.n
+        s.last_to_go[i] = task._last_to_go
         s.prev_node[i, :p] = crowd.prev_node
         s.next_node[i, :p] = crowd.next_node
         s.speed[i, :p] = crowd.speed

@@ -169,19 +169,27 @@ class RowShapes:
 
     def row_y(self, r: int, x: np.ndarray | float) -> np.ndarray:
         """Y of row ``r``'s centre line at ``x`` (m)."""
+        return self.rows_y(x)[r]
+
+    def rows_y(self, x: np.ndarray | float) -> np.ndarray:
+        """``(n_rows, *x.shape)``: y of every row's centre line at ``x`` (m)."""
         xm = 0.5 * (self.x0 + self.x1)
         half = 0.5 * (self.x1 - self.x0)
         xa = np.asarray(x, dtype=np.float64)
-        return self.centre[r] + self.slope[r] * (xa - xm) + self.bend[r] * (1.0 - np.abs(xa - xm) / half)
+        along = xa - xm
+        kink = 1.0 - np.abs(along) / half
+        shape = (-1,) + (1,) * xa.ndim
+        return self.centre.reshape(shape) + self.slope.reshape(shape) * along + self.bend.reshape(shape) * kink
 
     def corridor_lines(self) -> tuple[np.ndarray, ...]:
         """Centre line of every corridor: midway between the plants of its two rows (or a row and a wall)."""
         xs = np.array([self.x0, 0.5 * (self.x0 + self.x1), self.x1])
+        ys = self.rows_y(xs)
         n = len(self.centre)
         lines = []
         for k in range(n + 1):
-            lo = self.row_y(k - 1, xs) + self.half_extent if k > 0 else np.zeros(3)
-            hi = self.row_y(k, xs) - self.half_extent if k < n else np.full(3, self.height)
+            lo = ys[k - 1] + self.half_extent if k > 0 else np.zeros(3)
+            hi = ys[k] - self.half_extent if k < n else np.full(3, self.height)
             lines.append(np.column_stack([xs, 0.5 * (lo + hi)]))
         return tuple(lines)
 
@@ -324,7 +332,7 @@ def generate_layout(p: LayoutParams, rng: np.random.Generator) -> Layout:
     # A post stands where a plant would be too close to it.
     planted = np.abs(post_xs[None, :] - xs[:, None]).min(axis=1) >= plant_r + p.post_radius + 0.02
     xs = xs[planted]
-    ys = np.concatenate([shapes.row_y(row, xs) for row in range(p.n_rows)])
+    ys = shapes.rows_y(xs).ravel()
     plants = np.empty((len(ys), 3))
     kinds = np.empty(len(ys), dtype=np.int64)
     leaves = np.empty((2 * len(ys), 5))
@@ -341,10 +349,9 @@ def generate_layout(p: LayoutParams, rng: np.random.Generator) -> Layout:
         kinds,
         leaves,
     )
+    post_ys = shapes.rows_y(post_xs)
     for row in range(p.n_rows):
-        b.circles(
-            np.column_stack([post_xs, shapes.row_y(row, post_xs), np.full(len(post_xs), p.post_radius)]), Kind.POST
-        )
+        b.circles(np.column_stack([post_xs, post_ys[row], np.full(len(post_xs), p.post_radius)]), Kind.POST)
         b.circles(plants[row * len(xs) : (row + 1) * len(xs)], kinds[row * len(xs) : (row + 1) * len(xs)])
     b.capsules(leaves[:n_leaves], Kind.LEAF)
     geometry = b.build((-WALL_THICKNESS, -WALL_THICKNESS, w + WALL_THICKNESS, h + WALL_THICKNESS))

@@ -66,6 +66,13 @@ class Geometry:
         )
 
 
+def _kinds(kinds: np.ndarray | Kind, n: int) -> list[int]:
+    """``n`` kinds as ints: one per row, or the same one repeated."""
+    if isinstance(kinds, np.ndarray):
+        return kinds.astype(np.int64).tolist()
+    return [int(kinds)] * n
+
+
 class GeometryBuilder:
     """Collects primitives one by one and packs them into a :class:`Geometry`."""
 
@@ -97,7 +104,7 @@ class GeometryBuilder:
         if np.any(rows[:, 2] <= 0):
             raise ValueError(f"circle radius must be positive, got {rows[:, 2].min()}")
         self._circles.extend(map(tuple, rows.tolist()))
-        self._circle_kinds.extend(np.broadcast_to(np.asarray(kinds, dtype=np.int64), len(rows)).tolist())
+        self._circle_kinds.extend(_kinds(kinds, len(rows)))
 
     def capsules(self, rows: np.ndarray, kinds: np.ndarray | Kind) -> None:
         """Add many capsules at once: ``rows`` ``(n, 5)`` ``x0, y0, x1, y1, r`` (m), with one kind or one per row."""
@@ -105,7 +112,7 @@ class GeometryBuilder:
         if np.any(rows[:, 4] < 0):
             raise ValueError(f"capsule radius must be >= 0, got {rows[:, 4].min()}")
         self._capsules.extend(map(tuple, rows.tolist()))
-        self._capsule_kinds.extend(np.broadcast_to(np.asarray(kinds, dtype=np.int64), len(rows)).tolist())
+        self._capsule_kinds.extend(_kinds(kinds, len(rows)))
 
     def polygon(self, vertices: np.ndarray, kind: Kind) -> None:
         """Add a convex polygon (vertices ``(k, 2)``); its edges become zero-radius capsules for sensing."""
