@@ -664,6 +664,7 @@ def train(
     config = {**config, "timesteps_planned": planned}
     callback = _make_callback(config, run_dir, request.progress, on_eval)
     load_before = os.getloadavg()
+    commit = git_commit()  # the code that trains, even if the tree changes while it does
     t0 = time.perf_counter()
     started = time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())
     stopped_early = False
@@ -687,7 +688,7 @@ def train(
             "timesteps_rounding": f"whole rollouts of {why} = {unit} steps",
             "timesteps_done": int(model.num_timesteps),
             "stopped_early": stopped_early,
-            "git_commit": git_commit(),
+            "git_commit": commit,
             "packages": package_versions(),
             "cpu_count": os.cpu_count(),
             "load_average_start": [round(x, 2) for x in load_before],
