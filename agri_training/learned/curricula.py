@@ -54,12 +54,38 @@ class RandomStartWaypoint(gym.Wrapper[Any, Any, Any, Any]):
         return obs, info
 
 
-def crash_share(start: float, ramp_steps: int, steps: int) -> float:
-    """The share of a crash's penalty charged after ``steps`` steps: from ``start`` linearly to 1 at ``ramp_steps``."""
-    return start + (1.0 - start) * min(1.0, steps / ramp_steps)
+class CrashShare:
+    """The crash penalty's share that :class:`CrashCostRamp` and its vector form charge: ``start`` rising to 1.
+
+    Attributes:
+        start: Share charged at first, in [0, 1].
+        ramp_steps: Steps over which the share reaches 1, >= 1.
+        steps: Steps taken so far.
+    """
+
+    start: float
+    ramp_steps: int
+    steps: int
+
+    def start_ramp(self, start: float, ramp_steps: int) -> None:
+        """Set the ramp and count from 0.
+
+        Raises:
+            ValueError: For a ``start`` outside [0, 1] or ``ramp_steps`` below 1.
+        """
+        if not 0.0 <= start <= 1.0:
+            raise ValueError(f"CrashCostRamp: start must be in [0, 1], got {start}")
+        if ramp_steps < 1:
+            raise ValueError(f"CrashCostRamp: ramp_steps must be >= 1, got {ramp_steps}")
+        self.start, self.ramp_steps, self.steps = start, ramp_steps, 0
+
+    @property
+    def share(self) -> float:
+        """The share of the crash penalty charged now."""
+        return self.start + (1.0 - self.start) * min(1.0, self.steps / self.ramp_steps)
 
 
-class CrashCostRamp(gym.Wrapper[Any, Any, Any, Any]):
+class CrashCostRamp(CrashShare, gym.Wrapper[Any, Any, Any, Any]):
     """Phase a crash's penalty in over the first part of training: cheap crashes first, the env's cost later.
 
     A learner whose first random drives end in a crash that costs more than idling to the time limit learns
@@ -75,24 +101,8 @@ class CrashCostRamp(gym.Wrapper[Any, Any, Any, Any]):
     """
 
     def __init__(self, env: gym.Env[Any, Any], start: float = 0.1, ramp_steps: int = 100_000) -> None:
-        self.check(start, ramp_steps)
         super().__init__(env)
-        self.start = start
-        self.ramp_steps = ramp_steps
-        self.steps = 0
-
-    @staticmethod
-    def check(start: float, ramp_steps: int) -> None:
-        """Raise ``ValueError`` for a ``start`` outside [0, 1] or ``ramp_steps`` below 1."""
-        if not 0.0 <= start <= 1.0:
-            raise ValueError(f"CrashCostRamp: start must be in [0, 1], got {start}")
-        if ramp_steps < 1:
-            raise ValueError(f"CrashCostRamp: ramp_steps must be >= 1, got {ramp_steps}")
-
-    @property
-    def share(self) -> float:
-        """The share of the crash penalty charged now."""
-        return crash_share(self.start, self.ramp_steps, self.steps)
+        self.start_ramp(start, ramp_steps)
 
     def step(self, action: Any) -> tuple[Any, float, bool, bool, dict[str, Any]]:
         """Step the env; refund ``1 - share`` of a crash's penalty."""
@@ -160,7 +170,7 @@ class VectorRandomStartWaypoint(VectorWrapper[Any, Any, Any, Any, Any]):
         return observations, infos
 
 
-class VectorCrashCostRamp(VectorWrapper[Any, Any, Any, Any, Any]):
+class VectorCrashCostRamp(CrashShare, VectorWrapper[Any, Any, Any, Any, Any]):
     """:class:`CrashCostRamp` for every sub-env of a vector env at once.
 
     The sub-envs step together, so they share one step count and one share: after ``k`` vector steps each
@@ -173,16 +183,8 @@ class VectorCrashCostRamp(VectorWrapper[Any, Any, Any, Any, Any]):
     """
 
     def __init__(self, env: VectorEnv[Any, Any, Any], start: float = 0.1, ramp_steps: int = 100_000) -> None:
-        CrashCostRamp.check(start, ramp_steps)
         super().__init__(env)
-        self.start = start
-        self.ramp_steps = ramp_steps
-        self.steps = 0
-
-    @property
-    def share(self) -> float:
-        """The share of the crash penalty charged now."""
-        return crash_share(self.start, self.ramp_steps, self.steps)
+        self.start_ramp(start, ramp_steps)
 
     def step(self, actions: Any) -> tuple[Any, np.ndarray, Any, Any, dict[str, Any]]:
         """Step the sub-envs; refund ``1 - share`` of each crash's penalty."""
