@@ -4,9 +4,10 @@ Trains the YAML block of ``agri_envs/GreenhouseNav-v2`` (``agri_training/hyperpa
 ``--timesteps`` decisions twice, in this process, one path after the other:
 
 * **old path**: the recipe as it trained ``ppo-greenhouse-nav`` (4 single envs in SB3's ``DummyVecEnv``,
-  each in ``Monitor`` and the wrappers, ``n_steps`` 2048; torch on one thread), :data:`OLD_PATH`;
+  each in ``Monitor`` and the wrappers, ``n_steps`` 2048; torch on one thread; SB3's default Adam),
+  :data:`OLD_PATH`;
 * **new path**: the recipe as committed (``vec_env: vector``: the env's batched form through the SB3
-  adapter, 64 envs x ``n_steps`` 128, the same 8192 decisions per rollout; ``update_threads``).
+  adapter, 64 envs x ``n_steps`` 128, the same 8192 decisions per rollout; ``update_threads: 2``; fused Adam).
 
 Decisions per second count ``PPO.learn``'s wall time without the periodic evaluations (one episode at
 the start and one at the end, timed apart and left out), as ``benchmarks/profile_ppo_nav.py`` does. The
@@ -30,6 +31,7 @@ from pathlib import Path
 from typing import Any
 
 import agri_training.train as train_module
+from agri_training.__main__ import settle_idle_threads
 from agri_training.train import TrainRequest, train
 
 ENV_ID = "agri_envs/GreenhouseNav-v2"
@@ -40,6 +42,7 @@ OLD_PATH: dict[str, Any] = {
     "algo_kwargs": {"n_steps": 2048},
     "train_wrappers": [{"RandomStartWaypoint": {"prob": 0.5}}, {"CrashCostRamp": {"start": 0.1, "ramp_steps": 100000}}],
     "update_threads": 1,
+    "policy_kwargs": {"optimizer_kwargs": {"eps": 1e-5, "fused": False}},  # SB3's Adam, one tensor at a time
 }
 #: Keep the periodic evaluation to one episode at the start and one at the end, and write no checkpoints.
 QUIET = {"eval_freq": 10**9, "eval_episodes": 1, "checkpoint_freq": 0}
@@ -90,6 +93,7 @@ def main() -> None:
         "--new-path", choices=("batched", "sync"), default="batched", help="sync: the new path on single envs"
     )
     args = parser.parse_args()
+    settle_idle_threads()  # as the agri command does, before torch is imported
     print(f"load average {os.getloadavg()[0]:.2f} on {os.cpu_count()} cores at the start")
     old, done = decisions_per_second(OLD_PATH, args.timesteps)
     print(f"old path: {done} decisions, {old:,.0f} decisions/s", flush=True)

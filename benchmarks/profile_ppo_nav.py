@@ -45,6 +45,7 @@ from bench_training import OLD_PATH
 
 import agri_training.train as train_module
 from agri_envs.rover.greenhouse_nav import GreenhouseNavEnv
+from agri_training.__main__ import settle_idle_threads
 from agri_training.learned.policy import ActionRepeat
 from agri_training.learned.vec_env import VectorVecEnv
 from agri_training.train import TrainRequest, train
@@ -148,6 +149,7 @@ def main() -> None:
     parser.add_argument("--repeat-path", choices=("frame_skip", "wrapper"), default="frame_skip")
     parser.add_argument("--action-repeat", type=int, default=None, help="override the YAML's action_repeat (4)")
     args = parser.parse_args()
+    settle_idle_threads()  # as the agri command does, before torch is imported
 
     from stable_baselines3 import PPO
     from stable_baselines3.common.buffers import RolloutBuffer
