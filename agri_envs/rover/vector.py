@@ -426,6 +426,8 @@ class GreenhouseNavVectorEnv(VectorEnv[dict[str, np.ndarray], np.ndarray, np.nda
       sub-envs with ``reset(options={"reset_mask": mask})`` before stepping them again.
     * ``max_episode_steps=N`` limits every episode to N steps as ``gym.make(..., max_episode_steps=N)`` does.
     * ``render_mode="rgb_array"``: ``render()`` returns one frame per sub-env, drawn as the single env draws.
+    * ``envs``: the sub-envs. Their scene, layout and mission are the episode's; their robot, people and
+      counters are the vector env's copy from the episode's start (the steps run on the vector env's arrays).
 
     Example::
 
@@ -722,8 +724,8 @@ class GreenhouseNavVectorEnv(VectorEnv[dict[str, np.ndarray], np.ndarray, np.nda
         self, actions: np.ndarray
     ) -> tuple[dict[str, np.ndarray], np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
         """Step every sub-env (see the class docstring for what happens to finished ones)."""
-        if not self._started:
-            raise RuntimeError("call reset() before step()")
+        if self.closed or not self._started:
+            raise RuntimeError("call reset() before step()" if not self.closed else "the vector env is closed")
         a = self._checked_actions(actions)
         o = self._out
         if self.autoreset_mode == AutoresetMode.DISABLED and self._autoreset.any():

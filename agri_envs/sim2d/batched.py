@@ -24,7 +24,7 @@ import sys
 import numba
 import numpy as np
 
-from agri_envs.sim2d.raycast import cast_scan, footprint_clearance, sonar_ranges
+from agri_envs.sim2d.raycast import cast_scan, disc_clearance, footprint_clearance, sonar_ranges
 
 # -- Python's scalar semantics ----------------------------------------------------------------------------
 
@@ -42,18 +42,8 @@ def _split(x: float) -> tuple[float, float]:
 
 
 @numba.njit(cache=True)
-def _hypot_t27(x: float, y: float) -> float:
-    """CPython 3.10 and 3.11 ``math.hypot(x, y)`` (``Modules/mathmodule.c``, ``vector_norm``)."""
-    ax = abs(x)
-    ay = abs(y)
-    big = max(0.0, ax)
-    big = max(big, ay)
-    if math.isinf(ax) or math.isinf(ay):
-        return math.inf
-    if math.isnan(ax) or math.isnan(ay):
-        return math.nan
-    if big == 0.0:
-        return big
+def _norm_t27(ax: float, ay: float, big: float) -> float:
+    """CPython 3.10 and 3.11 ``vector_norm`` of ``(ax, ay)`` (``Modules/mathmodule.c``), ``big`` the larger."""
     _, max_e = math.frexp(big)
     csum = 1.0
     frac1 = 0.0
@@ -107,20 +97,11 @@ def _product(x: float, y: float) -> tuple[float, float]:
 
 
 @numba.njit(cache=True)
-def _hypot_fma(x: float, y: float) -> float:
-    """CPython 3.12+ ``math.hypot(x, y)``: the same sum of squares, squared with ``fma`` error terms."""
-    ax = abs(x)
-    ay = abs(y)
-    big = max(max(0.0, ax), ay)
-    if math.isinf(ax) or math.isinf(ay):
-        return math.inf
-    if math.isnan(ax) or math.isnan(ay):
-        return math.nan
-    if big == 0.0:
-        return big
+def _norm_fma(ax: float, ay: float, big: float) -> float:
+    """CPython 3.12+ ``vector_norm``: the same sum of squares, squared with ``fma`` error terms."""
     _, max_e = math.frexp(big)
     if max_e < -1023:  # subnormals: scale up by DBL_MIN first
-        return _DBL_MIN * _hypot_fma(ax / _DBL_MIN, ay / _DBL_MIN)
+        return _DBL_MIN * _norm_fma(ax / _DBL_MIN, ay / _DBL_MIN, big / _DBL_MIN)
     scale = math.ldexp(1.0, -max_e)
     csum = 1.0
     frac1 = 0.0
@@ -142,8 +123,22 @@ def _hypot_fma(x: float, y: float) -> float:
     return h / scale
 
 
-#: CPython's ``math.hypot(x, y)`` for the running interpreter (the algorithm changed in 3.12).
-py_hypot = _hypot_fma if sys.version_info >= (3, 12) else _hypot_t27
+_norm = _norm_fma if sys.version_info >= (3, 12) else _norm_t27  # CPython changed the algorithm in 3.12
+
+
+@numba.njit(cache=True)
+def py_hypot(x: float, y: float) -> float:
+    """CPython's ``math.hypot(x, y)`` for the running interpreter (not the C library's ``hypot``)."""
+    ax = abs(x)
+    ay = abs(y)
+    if math.isinf(ax) or math.isinf(ay):
+        return math.inf
+    if math.isnan(ax) or math.isnan(ay):
+        return math.nan
+    big = max(ax, ay)
+    if big == 0.0:
+        return 0.0
+    return _norm(ax, ay, big)
 
 
 # -- motion -----------------------------------------------------------------------------------------------
@@ -161,6 +156,85 @@ def arc(x: float, y: float, th: float, v: float, w: float, dt: float) -> tuple[f
         y - k * (math.cos(th1) - math.cos(th)),
         math.atan2(math.sin(th1), math.cos(th1)),
     )
+
+
+@numba.njit(cache=True, inline="always")
+def limited_velocity(
+    v: float, w: float, v_cmd: float, w_cmd: float, limits: np.ndarray, dt: float
+) -> tuple[float, float]:
+    """:func:`~agri_envs.sim2d.diff_drive.limit_velocity` on scalars.
+
+    ``limits``: ``max_speed, max_reverse_speed, max_turn_rate, max_accel, max_angular_accel``.
+    """
+    v_cmd = min(limits[0], max(-limits[1], v_cmd))
+    w_cmd = min(limits[2], max(-limits[2], w_cmd))
+    dv = limits[3] * dt
+    dw = limits[4] * dt
+    return v + min(dv, max(-dv, v_cmd - v)), w + min(dw, max(-dw, w_cmd - w))
+
+
+@numba.njit(cache=True, inline="always")
+def _clearance(
+    x: float,
+    y: float,
+    th: float,
+    radius: float,
+    half_length: float,
+    half_width: float,
+    circles: np.ndarray,
+    capsules: np.ndarray,
+    skip: int,
+) -> float:
+    """Clearance of a disc (``radius > 0``) or of a rectangular footprint at ``(x, y, th)``."""
+    if radius > 0.0:
+        return disc_clearance(x, y, radius, circles, capsules, skip)
+    return footprint_clearance(x, y, th, half_length, half_width, circles, capsules, skip)
+
+
+@numba.njit(cache=True)
+def sweep(
+    x: float,
+    y: float,
+    th: float,
+    v: float,
+    w: float,
+    dt: float,
+    reach: float,
+    max_substep: float,
+    radius: float,
+    half_length: float,
+    half_width: float,
+    circles: np.ndarray,
+    capsules: np.ndarray,
+    skip: int,
+) -> tuple[float, float, float, bool]:
+    """:meth:`~agri_envs.sim2d.world.World2D.drive`'s motion at the new velocities ``(v, w)``, with exact contact.
+
+    One arc when nothing lies within ``reach``; otherwise substeps no longer than ``max_substep`` that stop
+    at the last pose that touches nothing (or that moved out of an overlap it started in). A disc robot
+    (``radius > 0``) or a rectangle (``half_length``, ``half_width``); ``skip`` is its own row of ``circles``.
+
+    Returns:
+        The new pose ``x, y, th`` and whether the robot touched something (it stopped before).
+    """
+    clear = _clearance(x, y, th, radius, half_length, half_width, circles, capsules, skip)
+    if clear > reach + 1e-6:
+        x, y, th = arc(x, y, th, v, w, dt)
+        return x, y, th, False
+    n_sub = max(1, math.ceil(reach / max_substep))
+    h = dt / n_sub
+    inside = clear <= 0.0
+    for _ in range(n_sub):
+        cx, cy, cth = arc(x, y, th, v, w, h)
+        new_clear = _clearance(cx, cy, cth, radius, half_length, half_width, circles, capsules, skip)
+        if new_clear <= 0.0:
+            if not inside or new_clear <= clear:
+                return x, y, th, True
+            clear = new_clear
+        else:
+            inside = False
+        x, y, th = cx, cy, cth
+    return x, y, th, False
 
 
 @numba.njit(cache=True)
@@ -199,40 +273,14 @@ def drive_box(
     Returns:
         True on contact (the robot stays at the last pose that did not touch anything).
     """
-    vmax, vrev, wmax, acc, wacc = limits[0], limits[1], limits[2], limits[3], limits[4]
-    # limit_velocity
-    v_cmd = min(vmax, max(-vrev, v_cmd))
-    w_cmd = min(wmax, max(-wmax, w_cmd))
-    dv = acc * dt
-    dw = wacc * dt
-    v = vel[0] + min(dv, max(-dv, v_cmd - vel[0]))
-    w = vel[1] + min(dw, max(-dw, w_cmd - vel[1]))
+    v, w = limited_velocity(vel[0], vel[1], v_cmd, w_cmd, limits, dt)
+    # A rectangle that turns in place sweeps its corners: they reach as far as the circumradius turns.
     reach = abs(v) * dt + abs(w) * dt * circumradius
-    x, y, th = pose[0], pose[1], pose[2]
-    clear = footprint_clearance(x, y, th, half_length, half_width, circles, capsules, -1)
-    contact = False
-    if clear > reach + 1e-6:
-        x, y, th = arc(x, y, th, v, w, dt)
-    else:
-        n_sub = max(1, math.ceil(reach / max_substep))
-        h = dt / n_sub
-        inside = clear <= 0.0
-        for _ in range(n_sub):
-            cx, cy, cth = arc(x, y, th, v, w, h)
-            new_clear = footprint_clearance(cx, cy, cth, half_length, half_width, circles, capsules, -1)
-            if new_clear <= 0.0:
-                if not inside or new_clear <= clear:
-                    contact = True
-                    break
-                clear = new_clear
-            else:
-                inside = False
-            x, y, th = cx, cy, cth
+    x, y, th, contact = sweep(
+        pose[0], pose[1], pose[2], v, w, dt, reach, max_substep, 0.0, half_length, half_width, circles, capsules, -1
+    )
     pose[0], pose[1], pose[2] = x, y, th
-    if contact:
-        vel[0], vel[1] = 0.0, 0.0
-    else:
-        vel[0], vel[1] = v, w
+    vel[0], vel[1] = (0.0, 0.0) if contact else (v, w)
     return contact
 
 

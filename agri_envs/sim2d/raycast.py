@@ -26,14 +26,7 @@ def _wrap(a: float) -> float:
 @numba.njit(cache=True, inline="always")
 def _ray_circle(lx: float, ly: float, r: float, ux: float, uy: float) -> float:
     """Distance along the unit ray ``(ux, uy)`` from the origin to a circle at ``(lx, ly)``; inf if missed."""
-    b = lx * ux + ly * uy
-    disc = b * b - (lx * lx + ly * ly - r * r)
-    if disc < 0.0:
-        return math.inf
-    t = b - math.sqrt(disc)
-    if t <= 0.0:
-        return math.inf
-    return t
+    return _ray_disc(lx, ly, lx * lx + ly * ly - r * r, ux, uy)
 
 
 @numba.njit(cache=True, inline="always")
@@ -41,14 +34,7 @@ def _ray_segment(ax: float, ay: float, bx: float, by: float, ux: float, uy: floa
     """Distance along the unit ray from the origin to segment ``a-b``; inf if missed or parallel."""
     ex = bx - ax
     ey = by - ay
-    denom = ux * ey - uy * ex
-    if abs(denom) < 1e-15:
-        return math.inf
-    t = (ax * ey - ay * ex) / denom
-    s = (ax * uy - ay * ux) / denom
-    if t <= 0.0 or s < 0.0 or s > 1.0:
-        return math.inf
-    return t
+    return _ray_line(ax, ay, ex, ey, ax * ey - ay * ex, ux, uy)
 
 
 @numba.njit(cache=True, inline="always")

@@ -33,7 +33,7 @@ import numba
 import numpy as np
 import pymunk
 
-from agri_envs.sim2d.batched import arc
+from agri_envs.sim2d.batched import limited_velocity, sweep
 from agri_envs.sim2d.diff_drive import DiffDriveSpec, limit_velocity, unicycle_arc
 from agri_envs.sim2d.geometry import Geometry
 from agri_envs.sim2d.raycast import disc_clearance, footprint_clearance
@@ -58,45 +58,29 @@ def _drive_discs(
 ) -> None:
     """:meth:`World2D.drive` for many disc robots in turn (each sees the others where they already are)."""
     for k in range(poses.shape[0]):
-        vmax, vrev, wmax, acc, wacc = limits[k, 0], limits[k, 1], limits[k, 2], limits[k, 3], limits[k, 4]
-        v_cmd = min(vmax, max(-vrev, cmd[k, 0]))
-        w_cmd = min(wmax, max(-wmax, cmd[k, 1]))
-        dv = acc * dt
-        dw = wacc * dt
-        v = vel[k, 0] + min(dv, max(-dv, v_cmd - vel[k, 0]))
-        w = vel[k, 1] + min(dw, max(-dw, w_cmd - vel[k, 1]))
-        x, y, th = poses[k, 0], poses[k, 1], poses[k, 2]
-        r = radius[k]
-        skip = rows[k]
-        reach = abs(v) * dt
-        clear = disc_clearance(x, y, r, circles, capsules, skip)
-        hit = False
-        if clear > reach + 1e-6:
-            x, y, th = arc(x, y, th, v, w, dt)
-        else:
-            n_sub = max(1, math.ceil(reach / max_substep))
-            h = dt / n_sub
-            inside = clear <= 0.0
-            for _ in range(n_sub):
-                cx, cy, cth = arc(x, y, th, v, w, h)
-                new_clear = disc_clearance(cx, cy, r, circles, capsules, skip)
-                if new_clear <= 0.0:
-                    if not inside or new_clear <= clear:
-                        hit = True
-                        break
-                    clear = new_clear
-                else:
-                    inside = False
-                x, y, th = cx, cy, cth
+        v, w = limited_velocity(vel[k, 0], vel[k, 1], cmd[k, 0], cmd[k, 1], limits[k], dt)
+        x, y, th, hit = sweep(
+            poses[k, 0],
+            poses[k, 1],
+            poses[k, 2],
+            v,
+            w,
+            dt,
+            abs(v) * dt,
+            max_substep,
+            radius[k],
+            0.0,
+            0.0,
+            circles,
+            capsules,
+            rows[k],
+        )
         poses[k, 0], poses[k, 1], poses[k, 2] = x, y, th
-        if hit:
-            vel[k, 0], vel[k, 1] = 0.0, 0.0
-        else:
-            vel[k, 0], vel[k, 1] = v, w
+        vel[k, 0], vel[k, 1] = (0.0, 0.0) if hit else (v, w)
         contact[k] = hit
-        if skip >= 0:
-            circles[skip, 0] = x
-            circles[skip, 1] = y
+        if rows[k] >= 0:
+            circles[rows[k], 0] = x
+            circles[rows[k], 1] = y
 
 
 @dataclasses.dataclass

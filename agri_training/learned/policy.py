@@ -23,7 +23,7 @@ import dataclasses
 import importlib
 import json
 import pickle
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -166,17 +166,17 @@ def algorithm_class(name: str) -> Any:
 
 
 def wrap_by_name(
-    env: gym.Env[Any, Any],
+    env: Any,
     wrappers: Sequence[str | Mapping[str, Any]],
-    allowed: Mapping[str, type[gym.Wrapper[Any, Any, Any, Any]]],
+    allowed: Mapping[str, Callable[..., Any]],
     kind: str = "wrapper",
-) -> gym.Env[Any, Any]:
+) -> Any:
     """Wrap ``env`` in wrappers declared by name, innermost first; only names in ``allowed`` are built.
 
     Args:
-        env: The env to wrap.
+        env: The env (or vector env) to wrap.
         wrappers: Names from ``allowed``, or one-key mappings ``{name: {kwarg: value}}``.
-        allowed: The allow-list, name -> class (nothing is imported from a string).
+        allowed: The allow-list, name -> wrapper class or factory (nothing is imported from a string).
         kind: What the list holds, for error messages.
 
     Raises:
@@ -203,7 +203,8 @@ def apply_wrappers(env: gym.Env[Any, Any], wrappers: Sequence[str | Mapping[str,
     Raises:
         ValueError: For a wrapper that is not in :data:`WRAPPERS`, or a malformed entry.
     """
-    return wrap_by_name(env, wrappers, WRAPPERS)
+    wrapped: gym.Env[Any, Any] = wrap_by_name(env, wrappers, WRAPPERS)
+    return wrapped
 
 
 def observation_chain(

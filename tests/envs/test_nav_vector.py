@@ -260,6 +260,8 @@ def test_rgb_frames_are_the_single_envs_frames():
     assert gym.make_vec(ENV_ID, num_envs=1).render() is None
     envs.close()
     envs.close()  # idempotent
+    with pytest.raises(RuntimeError, match="closed"):
+        envs.step(np.zeros((2, 2)))
 
 
 def test_bad_arguments_and_actions_are_refused_by_name():
