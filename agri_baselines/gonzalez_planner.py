@@ -79,6 +79,9 @@ class CoveragePlan:
 
     Attributes:
         path: ``(N, 2)`` path points (m), from the start through every corridor.
+        part: ``(N,)`` what each path point belongs to: :data:`APPROACH` (from the start to the first
+            corridor), :data:`CORRIDOR` (along a corridor) or :data:`TURN` (across a headland from one corridor
+            to the next).
         skeleton: Boolean grid of the pruned Voronoi diagram (the part the search uses), on the work grid.
         resolution: Cell size of the work grid (m).
         corridors: Per corridor, its two end points ``(2, 2)`` (m) in the order the path drives it.
@@ -86,10 +89,15 @@ class CoveragePlan:
     """
 
     path: np.ndarray
+    part: np.ndarray
     skeleton: np.ndarray
     resolution: float
     corridors: list[np.ndarray]
     row_direction: float
+
+
+#: Values of :attr:`CoveragePlan.part`.
+APPROACH, CORRIDOR, TURN = 0, 1, 2
 
 
 _NEIGHBOURS = ((-1, -1), (-1, 0), (-1, 1), (0, -1), (0, 1), (1, -1), (1, 0), (1, 1))
@@ -212,6 +220,47 @@ def _line_fit(a: np.ndarray, c: np.ndarray) -> tuple[float, float]:
     return slope, mc - slope * ma
 
 
+def _square_turn(
+    start: np.ndarray, link: np.ndarray, row: tuple[float, float], clear: np.ndarray, res: float
+) -> np.ndarray:
+    """A headland turn as Fig. 5 draws it: straight out of the corridor, across, straight into the next.
+
+    ``link`` is the diagram's route from the end of one corridor (``start``) to the beginning of the next
+    (its last point). Where the diagram rounds the headland off (a sensory map, whose free space is a band
+    around the first run's trajectory), a robot that follows it leaves the turn at the corridor's mouth
+    still turning. The square turn runs along the rows to the route's farthest reach into the headland,
+    across, and back along the rows, and replaces the route when every point of it lies in ``clear`` (the
+    cells at least ``min_clearance`` from an obstacle); otherwise the route is kept.
+
+    Args:
+        start: End of the corridor just driven (m).
+        link: ``(n, 2)`` route to the next corridor (m), excluding ``start``.
+        row: Unit vector along the rows.
+        clear: Cells where the robot's centre may be.
+        res: Cell size (m).
+    """
+    u = np.asarray(row, dtype=np.float64)
+    end = link[-1]
+    along = link @ u
+    a0, a1 = float(start @ u), float(end @ u)
+    outward = 1.0 if along.max() - max(a0, a1) > min(a0, a1) - along.min() else -1.0
+    reach = float(along.max()) if outward > 0 else float(along.min())
+    if outward * (reach - a0) <= res or outward * (reach - a1) <= res:
+        return link  # not a U-turn into a headland
+    corners = [start + (reach - a0) * u, end + (reach - a1) * u, end]
+    out, last = [], start
+    for c in corners:
+        n = max(1, int(math.ceil(float(np.hypot(*(c - last))) / res)))
+        out.append(last + np.linspace(0.0, 1.0, n + 1)[1:, None] * (c - last))
+        last = c
+    square = np.vstack(out)
+    ij = np.floor(square[:, ::-1] / res).astype(np.int64)
+    inside = (ij >= 0).all(axis=1) & (ij[:, 0] < clear.shape[0]) & (ij[:, 1] < clear.shape[1])
+    if not inside.all() or not clear[ij[:, 0], ij[:, 1]].all():
+        return link
+    return square
+
+
 def _visible(free: np.ndarray, a: np.ndarray, b: np.ndarray) -> bool:
     """Whether the straight segment between cells ``a`` and ``b`` crosses free cells only."""
     n = int(max(abs(b[0] - a[0]), abs(b[1] - a[1]))) * 2 + 2
@@ -221,15 +270,17 @@ def _visible(free: np.ndarray, a: np.ndarray, b: np.ndarray) -> bool:
     return bool(np.all(free[ii, jj]))
 
 
-def _resample(points: np.ndarray, spacing: float) -> np.ndarray:
-    """Points every ``spacing`` metres along a polyline (keeps both ends)."""
+def _resample(points: np.ndarray, spacing: float, labels: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Points every ``spacing`` metres along a polyline (keeps both ends), each with the label of its nearest vertex."""
     seg = np.hypot(*np.diff(points, axis=0).T)
     s = np.concatenate([[0.0], np.cumsum(seg)])
     if s[-1] <= 0:
-        return points[:1].copy()
+        return points[:1].copy(), labels[:1].copy()
     n = max(2, int(math.ceil(s[-1] / spacing)) + 1)
     t = np.linspace(0.0, s[-1], n)
-    return np.column_stack([np.interp(t, s, points[:, 0]), np.interp(t, s, points[:, 1])])
+    k = np.clip(np.searchsorted(s, t), 1, len(s) - 1)
+    nearest = np.where(t - s[k - 1] <= s[k] - t, k - 1, k)
+    return np.column_stack([np.interp(t, s, points[:, 0]), np.interp(t, s, points[:, 1])]), labels[nearest]
 
 
 def _smooth(points: np.ndarray, half_width: int) -> np.ndarray:
@@ -303,7 +354,8 @@ def plan_coverage(
     k = int(math.ceil(r))
     oy, ox = np.mgrid[-k : k + 1, -k : k + 1]
     disk = ox * ox + oy * oy < r * r
-    skel = skeletonize(ndi.binary_erosion(free, structure=disk, border_value=0))
+    clear = ndi.binary_erosion(free, structure=disk, border_value=0)  # where the robot's centre may go
+    skel = skeletonize(clear)
     if not skel.any():
         raise ValueError(f"no free corridor is wider than 2 * min_clearance = {2 * p.min_clearance:.2f} m")
     graph, cells = _cell_graph(skel)
@@ -420,7 +472,10 @@ def plan_coverage(
             out.append(int(pred[out[-1]]))
         return out[::-1]
 
-    nodes: list[int] = [entry]
+    def centres(nodes: list[int]) -> np.ndarray:
+        return (cells[nodes][:, ::-1] + 0.5) * res
+
+    legs: list[np.ndarray] = [centres([entry])]
     in_corridor: list[bool] = [False]
     driven: list[np.ndarray] = []
     current = entry
@@ -441,17 +496,27 @@ def plan_coverage(
             link, run = route(current, chain[k])[1:], chain[k + 1 :]
         else:
             link, run = route(current, first)[1:], chain[1:]
-        nodes += link + run
-        in_corridor += [False] * len(link) + [True] * len(run)
-        driven.append((cells[[first, last]][:, ::-1] + 0.5) * res)
+        link_xy = centres(link) if link else np.zeros((0, 2))
+        if current != entry and len(link) > 1:
+            link_xy = _square_turn(centres([current])[0], link_xy, (ux, uy), clear, res)
+        legs += [link_xy, centres(run)]
+        in_corridor += [False] * len(link_xy) + [True] * len(run)
+        driven.append(centres([first, last]))
         current = last
-    xy = (cells[nodes][:, ::-1] + 0.5) * res
+    xy = np.vstack(legs)
     if f > 1:  # back to the given grid's precision along the corridors
         sel = np.asarray(in_corridor)
         xy[sel] = _centre_across(xy[sel], (-uy, ux), fine_occ, fine_res, reach=1.5, max_shift=res)
-    xy = _smooth(xy, int(round(p.smoothing / res)))
-    path = np.vstack([[sx, sy], _resample(xy, p.sample_spacing)])
-    return CoveragePlan(path=path, skeleton=main, resolution=res, corridors=driven, row_direction=row_dir)
+    # The start joins the diagram where the robot stands, often a few centimetres to the side of it: the
+    # smoothing spreads that step over its width instead of asking the robot to step sideways.
+    xy = _smooth(np.vstack([[sx, sy], xy]), int(round(p.smoothing / res)))
+    corridor = np.concatenate([[False], in_corridor])
+    first = int(np.argmax(corridor))
+    part = np.where(corridor, CORRIDOR, np.where(np.arange(len(corridor)) < first, APPROACH, TURN))
+    path, part = _resample(xy, p.sample_spacing, part)
+    return CoveragePlan(
+        path=path, part=part, skeleton=main, resolution=res, corridors=driven, row_direction=row_dir
+    )
 
 
 def coverage_path(occupancy: np.ndarray, resolution: float, start: tuple[float, float] | np.ndarray) -> np.ndarray:

@@ -153,6 +153,7 @@ def run_blocks(
             env_kwargs=dict(b.env_kwargs),
             record_traces=b.traces,
             label=b.label,
+            campaign_runs=b.suite.campaign_runs,
         )
         for b in blocks
     ]
@@ -233,10 +234,15 @@ def load_entries(entries_dir: Path | str = ENTRIES_DIR) -> list[dict[str, Any]]:
 
 
 def all_baseline_pairs(suites: Iterable[Suite]) -> list[tuple[Suite, dict[str, Any]]]:
-    """Every registered policy (baselines and shipped learned ones) on every suite of its env it can run."""
+    """Every registered policy (baselines and shipped learned ones) on every suite of its env it can run.
+
+    A suite that names its ``policies`` gets those only.
+    """
     pairs = []
     for suite in suites:
         for spec in list_policies(suite.env_id):
+            if suite.policies is not None and spec.name not in suite.policies:
+                continue
             # a policy that needs other env arguments than the suite pins cannot run it (luo-apf drives joints,
             # the reach suite end-effector steps; the learned reach policy is sized for one cluster)
             if any(k in suite.env_kwargs and suite.env_kwargs[k] != v for k, v in spec.env_kwargs.items()):

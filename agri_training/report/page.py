@@ -291,6 +291,8 @@ def comparison_table(group: Sequence[Row]) -> tuple[list[str], list[str]]:
                 )
                 continue
             fmt = "{:+" + lb.metric_format(rk.metric)[2:]
+            f = lb.metric_scale(rk.metric)
+            diff, lo, hi = c.difference * f, c.ci[0] * f, c.ci[1] * f
             verdict = c.verdict
             if i == 0:
                 primary = verdict
@@ -307,11 +309,11 @@ def comparison_table(group: Sequence[Row]) -> tuple[list[str], list[str]]:
             }
             over = f" over the {completed} episodes both completed" if completed is not None else ""
             cells.append(
-                f"{fmt.format(c.difference)} [{fmt.format(c.ci[0])}, {fmt.format(c.ci[1])}], "
+                f"{fmt.format(diff)} [{fmt.format(lo)}, {fmt.format(hi)}], "
                 f"P(X better) {c.prob_improvement:.2f}; {word[verdict]}{over}"
             )
             text = (
-                f"{_metric_name(rk.metric)} ({fmt.format(c.difference)} [{fmt.format(c.ci[0])}, {fmt.format(c.ci[1])}]"
+                f"{_metric_name(rk.metric)} ({fmt.format(diff)} [{fmt.format(lo)}, {fmt.format(hi)}]"
                 f"{'; ' + over.strip() if over else ''})"
             )
             {"better": wins, "worse": losses, "matches": same}.get(verdict, []).append(text)
