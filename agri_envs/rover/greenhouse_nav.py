@@ -158,7 +158,7 @@ class GreenhouseNavEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
     |---|---|---|---|---|
     | ``scene`` | 'greenhouse' |  | one of 'greenhouse', 'corridor', 'map' | kind of scene |
     | ``map_yaml`` | '' |  | YAML path, e.g. EXAMPLE_MAP | ROS map_server map to load (scene='map') |
-    | ``waypoints`` | () | m | >= 2 (x, y) | loop of waypoints in the map frame (scene='map') |
+    | ``waypoints`` | () | m | >= 2 (x, y) | loop of waypoints in the map frame (scene='map'; () takes the map YAML's) |
     | ``n_rows`` | 3 |  | in [1, 12] | rows of plants |
     | ``row_length`` | 6 | m | in [2.0, 40.0] | length of each row |
     | ``corridor_width`` | 1.2 | m | in [0.8, 3.0] | free width between rows (and between outer rows and walls) |
@@ -330,7 +330,7 @@ class GreenhouseNavEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
         elif cfg.scene == "corridor":
             layout = generate_office_corridor(cfg.office_params(), layout_rng)
         else:
-            layout = layout_from_map(self._map_geometry, np.asarray(cfg.waypoints))
+            layout = layout_from_map(self._map_geometry, cfg.map_mission())
         targets = np.tile(layout.targets, (cfg.mission_cycles, 1))
         if not 0 <= start_waypoint < len(targets):  # checked before the env's scene is replaced
             raise ValueError(f"reset option start_waypoint must be in [0, {len(targets) - 1}], got {start_waypoint}")
