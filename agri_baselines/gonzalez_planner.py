@@ -47,6 +47,9 @@ class CoveragePlannerParams:
         sample_spacing: Spacing of the returned path points (m); the paper samples the path "depending on
             the desired speed".
         smoothing: Half-width of the moving average applied to the skeleton's staircase (m); 0 keeps it.
+        turn_clearance: A headland turn's corner with less room than this around it (m) is rounded: the
+            Fitorobot, 1.5 m long and 0.7 m wide, sweeps 0.83 m around its centre when it turns on the spot.
+        turn_radius: Radius of a rounded corner of a headland turn (m): there the robot turns as it drives.
         max_cells: Grids with more cells than this are max-pooled by the smallest integer factor that
             brings them under it (a work cell is blocked when any of its cells is, so the path stays on free
             cells of the given grid; the corridor runs are then re-centred on the given grid). This keeps a
@@ -59,6 +62,8 @@ class CoveragePlannerParams:
     junction_radius: float = 0.15
     sample_spacing: float = 0.1
     smoothing: float = 0.3
+    turn_clearance: float = 0.9
+    turn_radius: float = 0.8
     max_cells: int = 250_000
 
     def __post_init__(self) -> None:
@@ -67,8 +72,8 @@ class CoveragePlannerParams:
                 raise ValueError(f"CoveragePlannerParams: {name} must be > 0, got {getattr(self, name)}")
         if not 0 < self.direction_tolerance < math.pi / 2:
             raise ValueError("CoveragePlannerParams: direction_tolerance must be in (0, pi/2) rad")
-        if self.smoothing < 0:
-            raise ValueError("CoveragePlannerParams: smoothing must be >= 0 m")
+        if self.smoothing < 0 or self.turn_radius < 0 or self.turn_clearance < 0:
+            raise ValueError("CoveragePlannerParams: smoothing, turn_clearance and turn_radius must be >= 0 m")
         if self.max_cells < 100:
             raise ValueError(f"CoveragePlannerParams: max_cells must be >= 100, got {self.max_cells}")
 
@@ -221,7 +226,13 @@ def _line_fit(a: np.ndarray, c: np.ndarray) -> tuple[float, float]:
 
 
 def _square_turn(
-    start: np.ndarray, link: np.ndarray, row: tuple[float, float], clear: np.ndarray, res: float
+    start: np.ndarray,
+    link: np.ndarray,
+    row: tuple[float, float],
+    clear: np.ndarray,
+    res: float,
+    room: np.ndarray,
+    params: CoveragePlannerParams,
 ) -> np.ndarray:
     """A headland turn as Fig. 5 draws it: straight out of the corridor, across, straight into the next.
 
@@ -229,8 +240,11 @@ def _square_turn(
     (its last point). Where the diagram rounds the headland off (a sensory map, whose free space is a band
     around the first run's trajectory), a robot that follows it leaves the turn at the corridor's mouth
     still turning. The square turn runs along the rows to the route's farthest reach into the headland,
-    across, and back along the rows, and replaces the route when every point of it lies in ``clear`` (the
-    cells at least ``min_clearance`` from an obstacle); otherwise the route is kept.
+    across, and back along the rows. Its corners are sharp (the robot turns on the spot there, then drives
+    straight into the corridor) where the map leaves ``params.turn_clearance`` around them, and rounded to
+    ``params.turn_radius`` (or less where a leg is shorter) where it does not, so that a long robot turns
+    while it drives rather than on the spot beside a wall. It replaces the route when every point of it
+    lies in ``clear`` (the cells at least ``min_clearance`` from an obstacle); otherwise the route is kept.
 
     Args:
         start: End of the corridor just driven (m).
@@ -238,6 +252,8 @@ def _square_turn(
         row: Unit vector along the rows.
         clear: Cells where the robot's centre may be.
         res: Cell size (m).
+        room: Distance from every cell to the nearest blocked one (m).
+        params: Planner parameters.
     """
     u = np.asarray(row, dtype=np.float64)
     end = link[-1]
@@ -247,18 +263,41 @@ def _square_turn(
     reach = float(along.max()) if outward > 0 else float(along.min())
     if outward * (reach - a0) <= res or outward * (reach - a1) <= res:
         return link  # not a U-turn into a headland
-    corners = [start + (reach - a0) * u, end + (reach - a1) * u, end]
-    out, last = [], start
-    for c in corners:
-        n = max(1, int(math.ceil(float(np.hypot(*(c - last))) / res)))
-        out.append(last + np.linspace(0.0, 1.0, n + 1)[1:, None] * (c - last))
-        last = c
-    square = np.vstack(out)
+    c1, c2 = start + (reach - a0) * u, end + (reach - a1) * u
+    legs = [float(np.hypot(*(c1 - start))), float(np.hypot(*(c2 - c1))), float(np.hypot(*(end - c2)))]
+    d1, d2, d3 = ((b - a) / max(n, 1e-9) for a, b, n in ((start, c1, legs[0]), (c1, c2, legs[1]), (c2, end, legs[2])))
+
+    def radius(corner: np.ndarray, before: float, after: float) -> float:
+        i, j = (int(v) for v in np.clip(np.floor(corner[::-1] / res), 0, np.array(room.shape) - 1))
+        return 0.0 if room[i, j] >= params.turn_clearance else min(params.turn_radius, before, after)
+
+    r1, r2 = radius(c1, legs[0], 0.5 * legs[1]), radius(c2, 0.5 * legs[1], legs[2])
+    pieces = [_segment(start, c1 - r1 * d1, res)]
+    if r1 > 0:
+        pieces.append(_arc(c1 - r1 * d1, d1, d2, r1, res))
+    pieces.append(_segment(c1 + r1 * d2, c2 - r2 * d2, res))
+    if r2 > 0:
+        pieces.append(_arc(c2 - r2 * d2, d2, d3, r2, res))
+    pieces.append(_segment(c2 + r2 * d3, end, res))
+    square = np.vstack(pieces)
     ij = np.floor(square[:, ::-1] / res).astype(np.int64)
     inside = (ij >= 0).all(axis=1) & (ij[:, 0] < clear.shape[0]) & (ij[:, 1] < clear.shape[1])
     if not inside.all() or not clear[ij[:, 0], ij[:, 1]].all():
         return link
     return square
+
+
+def _segment(a: np.ndarray, b: np.ndarray, res: float) -> np.ndarray:
+    """Points every ``res`` metres or less from ``a`` (excluded) to ``b`` (included)."""
+    n = max(1, int(math.ceil(float(np.hypot(*(b - a))) / res)))
+    return a + np.linspace(0.0, 1.0, n + 1)[1:, None] * (b - a)
+
+
+def _arc(a: np.ndarray, d_in: np.ndarray, d_out: np.ndarray, r: float, res: float) -> np.ndarray:
+    """A quarter circle of radius ``r`` from ``a`` (heading ``d_in``) to heading ``d_out`` (at right angles)."""
+    centre = a + r * d_out
+    t = np.linspace(0.0, math.pi / 2, max(2, int(math.ceil(r * math.pi / 2 / res))) + 1)[1:]
+    return centre - r * np.cos(t)[:, None] * d_out + r * np.sin(t)[:, None] * d_in
 
 
 def _visible(free: np.ndarray, a: np.ndarray, b: np.ndarray) -> bool:
@@ -355,6 +394,7 @@ def plan_coverage(
     oy, ox = np.mgrid[-k : k + 1, -k : k + 1]
     disk = ox * ox + oy * oy < r * r
     clear = ndi.binary_erosion(free, structure=disk, border_value=0)  # where the robot's centre may go
+    room = ndi.distance_transform_edt(np.pad(free, 1)).astype(np.float32)[1:-1, 1:-1] * res  # to the nearest block
     skel = skeletonize(clear)
     if not skel.any():
         raise ValueError(f"no free corridor is wider than 2 * min_clearance = {2 * p.min_clearance:.2f} m")
@@ -498,7 +538,7 @@ def plan_coverage(
             link, run = route(current, first)[1:], chain[1:]
         link_xy = centres(link) if link else np.zeros((0, 2))
         if current != entry and len(link) > 1:
-            link_xy = _square_turn(centres([current])[0], link_xy, (ux, uy), clear, res)
+            link_xy = _square_turn(centres([current])[0], link_xy, (ux, uy), clear, res, room, p)
         legs += [link_xy, centres(run)]
         in_corridor += [False] * len(link_xy) + [True] * len(run)
         driven.append(centres([first, last]))

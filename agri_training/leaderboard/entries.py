@@ -203,15 +203,28 @@ def evaluate_entries(
     progress: bool = True,
     command: str = "",
     ray: str | None = None,
+    traces: list[list[Any]] | None = None,
 ) -> list[dict[str, Any]]:
-    """Evaluate each (suite, policy reference) pair and return the entries, all blocks in one pool."""
+    """Evaluate each (suite, policy reference) pair and return the entries, all blocks in one pool.
+
+    Args:
+        pairs: The (suite, policy reference) pairs.
+        workers: Worker processes (see :func:`run_blocks`).
+        progress: Show the progress bar.
+        command: The command recorded in the entries.
+        ray: Run the episodes as Ray tasks.
+        traces: When given, every episode records its per-step trace, and this list receives, per pair, the
+            traces of each level (entries never hold traces; a report that evaluates afresh plots them).
+    """
     blocks: list[Block] = []
     spans = []
     for suite, ref in pairs:
-        bl = blocks_of(suite, policy_argument(ref))
+        bl = blocks_of(suite, policy_argument(ref), suite.episodes if traces is not None else 0)
         spans.append((len(blocks), len(blocks) + len(bl)))
         blocks += bl
     results = run_blocks(blocks, workers, progress, ray)
+    if traces is not None:
+        traces += [[doc["traces"] for doc in results[a:b]] for a, b in spans]
     return [make_entry(suite, ref, results[a:b], command) for (suite, ref), (a, b) in zip(pairs, spans, strict=True)]
 
 

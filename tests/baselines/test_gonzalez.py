@@ -203,17 +203,26 @@ def test_plan_parts_label_the_approach_every_corridor_and_the_turns():
         assert part[k] == CORRIDOR and np.hypot(*(plan.path[k] - mid)) < 0.15
 
 
-def test_headland_turns_are_square_where_the_diagram_rounds_them():
-    """Two corridors joined by a round headland (a sensory map's band around the first run): Fig. 5's turn."""
+@pytest.mark.parametrize("room, sharp", [(2.6, True), (2.0, False)])
+def test_headland_turns_are_square_where_the_diagram_rounds_them(room, sharp):
+    """Two corridors joined by a round headland (a sensory map's band around the first run): Fig. 5's turn.
+
+    With room to turn on the spot at its corners the turn is square; where a corner is tight it is rounded.
+    """
     res = 0.05
-    yy, xx = (np.mgrid[0 : int(4.2 / res), 0 : int(11 / res)] + 0.5) * res
-    corridors = (xx >= 3) & (xx < 10) & (((yy > 0.6) & (yy < 1.6)) | ((yy > 2.6) & (yy < 3.6)))
-    headland = (xx < 3.05) & (np.hypot(xx - 3, yy - 2.1) < 2.0)
-    plan = plan_coverage(~(corridors | headland), res, (9.5, 1.1))
+    yy, xx = (np.mgrid[0 : int(6.2 / res), 0 : int(11 / res)] + 0.5) * res
+    corridors = (xx >= 3) & (xx < 10) & (((yy > 1.6) & (yy < 2.6)) | ((yy > 3.6) & (yy < 4.6)))
+    headland = (xx < 3.05) & (np.hypot(xx - 3, yy - 3.1) < room)
+    occ = ~(corridors | headland)
+    plan = plan_coverage(occ, res, (9.5, 2.1))
+    assert _free_along(occ, plan.path)
     turn = plan.path[plan.part == TURN]
-    across = turn[(turn[:, 1] > 1.5) & (turn[:, 1] < 2.7)]  # between the two corridors' lines
-    assert len(across) > 5 and np.ptp(across[:, 0]) < 0.02  # straight across, at right angles to the rows
-    assert abs(across[0, 0] - turn[:, 0].min()) < 0.02  # at the diagram's farthest reach into the headland
+    across = turn[(turn[:, 1] > 2.5) & (turn[:, 1] < 3.7)]  # between the two corridors' lines
+    assert len(across) > 5
+    if sharp:  # straight across, at right angles to the rows, at the diagram's farthest reach
+        assert np.ptp(across[:, 0]) < 0.02 and abs(across[0, 0] - turn[:, 0].min()) < 0.02
+    else:  # rounded corners: the robot turns as it drives
+        assert np.ptp(across[:, 0]) > 0.05
 
 
 def test_deliberative_tracks_its_plan_in_corridors_and_turns():
