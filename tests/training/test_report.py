@@ -77,15 +77,45 @@ def test_report_from_entries_and_fresh_runs(tmp_path, capsys):
     assert "_d_alpha.png" in md and "_trajectory.png" in md
     from PIL import Image
 
-    assert "![greenhousenav-v2_clip.gif](greenhousenav-v2_clip.gif)" in md
-    assert Image.open(out / "greenhousenav-v2_clip.gif").n_frames >= 10
+    # a clip of every baseline's success (none fails this suite), MP4 with its poster, loaded only when played
+    for policy in ("harik-apf-gt", "harik-apf", "harik-apf-hector-plain"):
+        clip = f"clip_tiny-rover_{policy}_success"
+        assert f'<video controls preload="none" poster="{clip}.png" src="{clip}.mp4"></video>' in md
+        assert (out / f"{clip}.mp4").stat().st_size > 5_000 and Image.open(out / f"{clip}.png").width == 320
+    # the learned policy fails this tiny scene (it never saw one): its failure, and no success to show
+    assert "clip_tiny-rover_ppo-greenhouse-nav_failure.mp4" in md and "ppo-greenhouse-nav_success" not in md
     for line in md.splitlines():
         if line.startswith("!["):
             assert (out / line.split("(")[1].rstrip(")")).stat().st_size > 10_000
     assert scan_report_tables(md, lb.load_entries(entries) + lb.load_entries(out / "results")) == []
     html = (out / "report.html").read_text()
     assert "<table>" in html and "<img" in html and "<h2 id='who-wins-where'>" in html
+    assert '<video controls preload="none"' in html and 'loading="lazy"' in html
     assert json.loads((out / "summary.json").read_text())[0]["suite"] == "tiny-rover"
+
+
+def test_quick_look_runs_each_episode_once_and_says_it_is_a_smoke_test(tmp_path, monkeypatch):
+    from agri_training.report import page
+
+    suites, out = tmp_path / "suites", tmp_path / "out"
+    suites.mkdir()
+    (suites / "tiny-rover.yaml").write_text(yaml.safe_dump(SUITE))
+    replays = []
+    real = page._Replay.run
+
+    def counted(self, record, film):
+        replays.append((self.policy, record["seed"], film))
+        return real(self, record, film)
+
+    monkeypatch.setattr(page._Replay, "run", counted)
+    args = ["report", "--episodes", "1", "--out", str(out), "--suites", str(suites), "--workers", "1", "--quiet"]
+    args += ["--entries", str(tmp_path / "none"), "--runs", str(tmp_path / "none")]
+    assert main(args) == 0
+    md = (out / "report.md").read_text()
+    assert "Smoke test, not results" in md
+    # the traces came from the evaluation itself: the only re-run is the lead policy's clip
+    assert replays == [("harik-apf", 100000, True)]
+    assert "_trajectory.png" in md
 
 
 def _entry(name, successes, times, kind="baseline"):
