@@ -247,9 +247,9 @@ class GonzalezHybridPolicy(GonzalezPseudoReactivePolicy):
     some centimetres beside the corridors this run's odometry sees. Along the corridors of the plan the
     robot therefore corrects its odometry sideways by what its lateral sonars measure (this project's
     addition; the paper tracks on the odometry alone and names a Kalman filter as future work): the offset
-    from the corridor's middle that the two middle sonars read (eq. 1-filtered, both seeing a row) against
-    the offset from the plan's corridor line that the corrected odometry predicts, blended in with gain
-    ``lateral_gain`` per step. Without it the later runs drove 0.10-0.23 m off the true corridor centres.
+    from the corridor's middle that each lateral pair of sonars reads (eq. 1-filtered, both seeing a row)
+    against the offset from the plan's corridor line that the corrected odometry predicts, blended in with
+    gain ``lateral_gain`` per step.
 
     Args:
         env: A GreenhouseCoverage env made with ``localization="odometry"``; a fixed ``layout_seed`` makes
@@ -416,5 +416,9 @@ def make_gonzalez_pseudo_reactive(env: Any) -> GonzalezPseudoReactivePolicy:
 
 
 def make_gonzalez_hybrid(env: Any) -> GonzalezHybridPolicy:
-    """``gonzalez-hybrid``. Env: ``localization="odometry"`` (and a fixed ``layout_seed`` for later runs)."""
+    """``gonzalez-hybrid``. Env: ``localization="odometry"``; its later runs need a campaign in one world.
+
+    ``agri evaluate --campaign-runs R`` (or a suite's ``campaign``) drives R runs in one greenhouse with one
+    policy; evaluated episode by episode, every run is a first run.
+    """
     return GonzalezHybridPolicy(env)
