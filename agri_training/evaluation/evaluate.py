@@ -362,6 +362,14 @@ def format_summary(result: Mapping[str, Any]) -> str:
             lines.append(f"  {name:<24} {format_interval(value, s.get(key + '_ci'), fmt):<30} {iqm_text}")
     if s.get("min_clearance") is not None:
         lines.append(f"  {'min_clearance (worst)':<24} {s['min_clearance']:.3f}")
+    for part, name in (("first_run_", "first runs"), ("later_runs_", "later runs")):
+        if f"{part}episodes" not in s:
+            continue
+        lines.append(f"  campaigns, {name} ({s[part + 'episodes']} episodes):")
+        for key in ("success_rate", "mean_episode_time", "mean_max_cross_track", "mean_cross_track_corridors_max"):
+            if s.get(part + key) is not None:
+                fmt = "{:.2f}" if key.endswith("rate") else _FORMATS.get(key[len("mean_") :], "{:.3g}")
+                lines.append(f"    {key:<30} {format_interval(s[part + key], s.get(part + key + '_ci'), fmt)}")
     lines.append("  " + INTERVALS_NOTE)
     return "\n".join(lines)
 
