@@ -468,6 +468,19 @@ def plan_coverage(
         if resid[k] < tol:
             groups[k].append(int(b))
             group_of[b] = k
+    # A corridor whose diagram is cut into pieces all shorter than min_corridor_length (grown plants with
+    # gaps in both rows: a junction at every gap) is a corridor still when its pieces together are that long.
+    loose = sorted((int(b) for b in short if group_of[b] < 0), key=lambda b: float(across_mean[b]))
+    pending: list[list[int]] = []
+    for b in loose:
+        if pending and abs(across_mean[b] - across_mean[pending[-1][-1]]) < tol:
+            pending[-1].append(b)
+        else:
+            pending.append([b])
+    for g in pending:
+        if float(length[g].sum()) >= p.min_corridor_length:
+            group_of[g] = len(groups)
+            groups.append(g)
     # Index of each skeleton cell in the graph, for the two extreme cells of every corridor.
     index = np.full(main.shape, -1, dtype=np.int64)
     index[cells[:, 0], cells[:, 1]] = np.arange(len(cells))

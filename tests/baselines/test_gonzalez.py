@@ -189,6 +189,18 @@ def test_regulated_lookahead_keeps_a_u_turn_within_a_tenth_of_what_a_fixed_one_c
         PurePursuit(path, lookahead=1.0, min_lookahead=1.5)
 
 
+def test_a_corridor_cut_into_short_pieces_is_still_planned():
+    """Fully grown plants in 1.5 m corridors: junctions at every gap in the rows cut one corridor's diagram
+    into pieces shorter than min_corridor_length; together they are a corridor (it was skipped)."""
+    env = gym.make("agri_envs/GreenhouseCoverage-v0", growth=1.0, vegetation_echo_prob=0.3, corridor_width=1.5)
+    env.reset(seed=8000)
+    occ, res, origin = env.unwrapped.true_map()
+    plan = plan_coverage(occ, res, env.unwrapped.robot.pose[:2] - np.asarray(origin))
+    assert len(plan.corridors) == len(env.unwrapped.corridor_lines()) == 5
+    assert _free_along(occ, plan.path)
+    env.close()
+
+
 def test_plan_parts_label_the_approach_every_corridor_and_the_turns():
     occ, layout, origin, start = _greenhouse(0)
     plan = plan_coverage(occ, RES, start)
