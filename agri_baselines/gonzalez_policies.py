@@ -112,9 +112,11 @@ class _Follower:
 
     def part_at(self, s: float) -> int:
         """The part of the plan (approach, corridor or turn) at arc length ``s``."""
-        return int(self.part[min(len(self.part) - 1, int(np.searchsorted(self._s, s, side="right")) - 1)])
+        k = int(np.searchsorted(self._s, s, side="right")) - 1
+        return int(self.part[min(len(self.part) - 1, max(0, k))])
 
     def command(self, pose: np.ndarray, spec: Any) -> tuple[float, float]:
+        """Pure Pursuit's ``(v, w)`` for ``pose``; records its cross-track error on the part of the plan it is on."""
         v, w = self.tracker.command(pose, spec.max_speed, spec.max_turn_rate, spec.max_accel)
         part = self.part_at(self.tracker.progress)
         if not self.tracker.done and part in self.errors:
