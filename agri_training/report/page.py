@@ -191,6 +191,8 @@ def level_results(
                 for outcome, name in ((True, "success"), (False, "failure")):
                     traced = [(k, s) for k, ss in enumerate(seeds) for s in ss]
                     where = [(k, s) for k, s in traced if _record_of(levels[k], s).get("is_success") == outcome]
+                    # in a campaign, show a later run (what the runs before it taught the policy) where traced
+                    where.sort(key=lambda ks: not _record_of(levels[ks[0]], ks[1]).get("campaign_run"))
                     if not where:
                         episodes = [(k, e) for k, lv in enumerate(levels) for e in lv["episodes"]]
                         where = [(k, e["seed"]) for k, e in episodes if e["is_success"] == outcome][:1]
@@ -298,6 +300,8 @@ class _Replay:
             return False
 
         ep = run_episode(env, policy, seed, keys, on_step if film else None)
+        if film and ep["record"]["steps"] % every:  # and the episode's last state (the poster)
+            frames.append(shrink_frame(np.asarray(env.render(), dtype=np.uint8), CLIP_SCALE))
         return ep, frames
 
     def close(self) -> None:
