@@ -65,11 +65,12 @@ def metric_format(metric: str) -> str:
 
     Rates and ratios to 2 decimals; cross-track errors in cm to 1 (mm); other distances in m to 3 (mm).
     """
-    if metric.endswith(("_rate", "_ratio")) or "path_length" in metric:
+    key = _base_key(metric)
+    if metric.endswith(("_rate", "_ratio")) or key.endswith("_ratio") or "path_length" in key:
         return "{:.2f}"
-    if "cross_track" in metric:
+    if "cross_track" in key:
         return "{:.1f}"
-    if any(k in metric for k in ("coverage", "clearance", "error", "ate", "distance", "gap")):
+    if key.startswith("ate_") or any(k in key for k in ("coverage", "clearance", "error", "distance", "gap")):
         return "{:.3f}"
     return "{:.1f}"
 

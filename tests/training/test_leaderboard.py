@@ -247,6 +247,8 @@ def test_cross_track_reads_in_centimetres_and_campaign_parts_are_named():
     assert lb.format_metric("mean_max_cross_track", 0.0577, [0.0549, 0.0605]) == "5.8 [5.5, 6.0]"
     assert lb.format_metric("later_runs_mean_cross_track_turns_max", 0.1234) == "12.3"
     assert lb.format_metric("mean_episode_time", 137.84) == "137.8"
+    assert lb.format_metric("later_runs_mean_episode_time", 141.667) == "141.7"  # "later" holds no "ate"
+    assert lb.metric_format("ate_rmse") == lb.metric_format("mean_ate_rmse") == "{:.3f}"
     assert lb.metric_label("later_runs_mean_cross_track_corridors_max") == (
         "later runs: max cross-track to plan, corridors [cm]"
     )
