@@ -171,23 +171,32 @@ def test_secondary_metrics_are_compared_over_episodes_both_completed():
     assert "match over the 15 episodes both completed" in table[2]
 
 
-def _success_contradicts(table_line, success):
-    """Why a paired-table row's verdicts contradict the success rates (or None)."""
+def _success_contradicts(table_line, success, parts=None):
+    """Why a paired-table row's verdicts contradict the success rates (or None).
+
+    ``parts``: per policy, each episode's campaign part (first run or later run) in a campaign suite, whose
+    columns of one part compare the episodes of that part.
+    """
     cells = [c.strip() for c in table_line.strip().strip("|").split("|")]
     x, y = (n.strip("` ") for n in cells[0].split(" vs "))
     sx, sy = success[x], success[y]
     lo, hi = newcombe_paired_interval(sx, sy)
+    completed = [a and b for a, b in zip(sx, sy, strict=True)]
+    counts = {sum(completed)}
+    if parts:
+        counts |= {sum(c for c, p in zip(completed, parts[x], strict=True) if p == part) for part in set(parts[x])}
     for cell in cells[2:]:  # the secondary metrics
         for word, contradicted in (("**X better**", hi < 0), ("**X worse**", lo > 0)):
             if word not in cell:
                 continue
             if contradicted:
                 return f"{cells[0]}: {word} though the success rates say otherwise ({sum(sx)} vs {sum(sy)})"
-            both = sum(a and b for a, b in zip(sx, sy, strict=True))
-            if f"over the {both} episodes both completed" not in cell and "episodes both completed" in cell:
-                return f"{cells[0]}: compared over other episodes than the {both} both completed"
-            if "episodes both completed" in cell and both < lb.MIN_COMPLETED_PAIRS:
-                return f"{cells[0]}: compared over {both} episodes"
+            if "episodes both completed" in cell:
+                both = int(cell.split("over the ")[1].split(" episodes both completed")[0])
+                if both not in counts:
+                    return f"{cells[0]}: compared over other episodes than the {sorted(counts)} both completed"
+                if both < lb.MIN_COMPLETED_PAIRS:
+                    return f"{cells[0]}: compared over {both} episodes"
     return None
 
 
@@ -199,12 +208,13 @@ def scan_report_tables(md, entries):
         if line.startswith("#### "):
             suite = line[5:].split(" (v")[0]
         elif line.startswith("| `") and " vs `" in line.split("|")[1]:
-            success = {
-                e["policy"]["name"]: lb.episode_values(e, "success_rate")[0]
-                for e in entries
-                if e["suite"]["name"] == suite
+            mine = [e for e in entries if e["suite"]["name"] == suite]
+            success = {e["policy"]["name"]: lb.episode_values(e, "success_rate")[0] for e in mine}
+            parts = {
+                e["policy"]["name"]: [bool(r.get("campaign_run")) for lv in e["levels"] for r in lv["episodes"]]
+                for e in mine
             }
-            problem = _success_contradicts(line, success)
+            problem = _success_contradicts(line, success, parts)
             if problem:
                 problems.append(f"{suite}: {problem}")
     return problems
