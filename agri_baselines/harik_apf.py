@@ -418,11 +418,12 @@ def make_harik_apf_slam(env: Any, localization_margin: float = 0.1, slam_config:
 
 
 def make_harik_apf_hector_plain(env: Any) -> HarikApfSlamPolicy:
-    """``harik-apf-hector-plain``: ``harik-apf`` on plain Hector SLAM, without our two safeguards.
+    """``harik-apf-hector-plain``: ``harik-apf`` on plain Hector SLAM, without our three safeguards.
 
-    No free-space guard against moving people and no cost check of Gauss-Newton steps, as in ROS
-    ``hector_mapping`` (see :mod:`baselines.hector_slam`).
+    No free-space guard against moving people, no cost check of Gauss-Newton steps and no constant-velocity
+    prediction of the match's start, as in ROS ``hector_mapping`` (see :mod:`baselines.hector_slam`).
     """
     from agri_baselines.hector_slam import HectorSlamConfig
 
-    return make_harik_apf_slam(env, slam_config=HectorSlamConfig(free_space_guard=None, max_step_halvings=0))
+    plain = HectorSlamConfig(free_space_guard=None, max_step_halvings=0, constant_velocity=False)
+    return make_harik_apf_slam(env, slam_config=plain)

@@ -49,6 +49,7 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
         scenario=args.scenario,
         env_kwargs=parse_env_kwargs(args.env_kwargs or []),
         record_traces=args.traces,
+        campaign_runs=args.campaign_runs,
     )
     result = evaluate(request, progress=not args.quiet, workers=args.workers, ray=args.ray)
     out = Path(args.out)
@@ -234,6 +235,8 @@ def _cmd_leaderboard(args: argparse.Namespace) -> int:
                 ref = lb.policy_reference(args.policy)
                 env_id = policy_spec(args.policy).env_id
                 chosen = [s for s in chosen if s.env_id == env_id] if names == ["all"] else chosen
+            if names == ["all"]:  # a suite that names its policies runs only those
+                chosen = [s for s in chosen if s.policies is None or ref["name"] in s.policies]
             pairs = [(s, ref) for s in chosen]
         command = "agri leaderboard " + " ".join(sys.argv[2:] if len(sys.argv) > 2 else [])
         entries, seconds = lb.timed(lb.evaluate_entries, pairs, args.workers, not args.quiet, command, args.ray)
@@ -331,7 +334,16 @@ def build_parser() -> argparse.ArgumentParser:
         help="seed of the first episode; episode i runs seed S+i (default 0; held-out suites use 100000 and up)",
     )
     ev.add_argument("--env-kwargs", nargs="*", metavar="KEY=VALUE", help="extra env arguments")
-    ev.add_argument("--traces", type=int, default=1, help="episodes that record per-step traces")
+    ev.add_argument("--traces", type=int, default=1, help="episodes (campaigns) that record per-step traces")
+    ev.add_argument(
+        "--campaign-runs",
+        type=int,
+        default=1,
+        metavar="R",
+        help="drive the episodes in campaigns of R consecutive seeds, each in one world (layout_seed = its first "
+        "seed) by one policy that keeps what it learned between runs (e.g. gonzalez-hybrid's sensory map); "
+        "R must divide --episodes (default 1: a fresh policy per episode)",
+    )
     ev.add_argument("--out", required=True, help="output JSON file")
     ev.add_argument("--quiet", action="store_true", help="no progress bar or progress lines (the summary still prints)")
     add_scale_arguments(ev)

@@ -158,7 +158,7 @@ class GreenhouseNavEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
     |---|---|---|---|---|
     | ``scene`` | 'greenhouse' |  | one of 'greenhouse', 'corridor', 'map' | kind of scene |
     | ``map_yaml`` | '' |  | YAML path, e.g. EXAMPLE_MAP | ROS map_server map to load (scene='map') |
-    | ``waypoints`` | () | m | >= 2 (x, y) | loop of waypoints in the map frame (scene='map') |
+    | ``waypoints`` | () | m | >= 2 (x, y) | loop of waypoints in the map frame (scene='map'; () takes the map YAML's) |
     | ``n_rows`` | 3 |  | in [1, 12] | rows of plants |
     | ``row_length`` | 6 | m | in [2.0, 40.0] | length of each row |
     | ``corridor_width`` | 1.2 | m | in [0.8, 3.0] | free width between rows (and between outer rows and walls) |
@@ -430,7 +430,7 @@ class GreenhouseNavEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
     def _scene(self, cfg: GreenhouseNavConfig) -> Layout:
         """The episode's scene: drawn from the episode's generator, or the one a fixed seed (or the map) gives."""
         if cfg.scene == "map":
-            return self._scenes.get("map", lambda: layout_from_map(self._map_geometry, np.asarray(cfg.waypoints)))
+            return self._scenes.get("map", lambda: layout_from_map(self._map_geometry, cfg.map_mission()))
         if cfg.scene == "greenhouse":
             params: LayoutParams | CorridorParams = cfg.layout_params()
             generate: Any = generate_layout

@@ -48,7 +48,26 @@ def summarize(episodes: list[EpisodeRecord], strata: list[str] | None = None) ->
         ``episodes``, ``success_rate`` (+ ``_ci``), ``collision_rate`` (+ ``_ci``), ``mean_KEY`` and
         ``iqm_KEY`` (+ ``_ci``) for every numeric key, and the shortcuts ``mean_time``,
         ``mean_time_successful``, ``ate_rmse`` and ``min_clearance`` (the worst episode's) where they apply.
+        Episodes of campaigns (records with ``campaign_run``) add the same keys over the first runs only,
+        prefixed ``first_run_``, and over the later runs, prefixed ``later_runs_`` (e.g.
+        ``later_runs_mean_episode_time``). The runs of one campaign share a world, so their intervals,
+        which treat the episodes as independent, are somewhat too narrow.
     """
+    summary = _summarize(episodes, strata)
+    if any("campaign_run" in e for e in episodes):
+        for part, later in (("first_run", False), ("later_runs", True)):
+            pick = [i for i, e in enumerate(episodes) if bool(e.get("campaign_run")) == later]
+            if pick:
+                sub = _summarize([episodes[i] for i in pick], None if strata is None else [strata[i] for i in pick])
+                summary.update({f"{part}_{k}": v for k, v in sub.items()})
+    return summary
+
+
+#: Record keys that are not metrics: never summarised.
+_NOT_METRICS = frozenset({"seed", "is_success", "collision", "truncated", "campaign_run", "layout_seed"})
+
+
+def _summarize(episodes: list[EpisodeRecord], strata: list[str] | None) -> dict[str, Any]:
     summary: dict[str, Any] = {"episodes": len(episodes)}
     if not episodes:
         return summary
@@ -59,9 +78,10 @@ def summarize(episodes: list[EpisodeRecord], strata: list[str] | None = None) ->
         col = [bool(e["collision"]) for e in episodes]
         summary["collision_rate"] = float(np.mean(col))
         summary["collision_rate_ci"] = rate_interval(col)
-    skip = {"seed", "is_success", "collision", "truncated"}
-    for key, value in episodes[0].items():
-        if key in skip or isinstance(value, bool) or not isinstance(value, (int, float)):
+    keys = dict.fromkeys(k for e in episodes for k in e)  # in order; a key may be None in some episodes
+    for key in keys:
+        values = [e.get(key) for e in episodes]
+        if key in _NOT_METRICS or not any(_is_number(v) for v in values) or any(isinstance(v, bool) for v in values):
             continue
         vals = np.array([e[key] if e.get(key) is not None else np.nan for e in episodes], dtype=float)
         finite = np.any(np.isfinite(vals))
@@ -79,6 +99,10 @@ def summarize(episodes: list[EpisodeRecord], strata: list[str] | None = None) ->
         clearances = [e["min_clearance"] for e in episodes if e.get("min_clearance") is not None]
         summary["min_clearance"] = float(np.min(clearances)) if clearances else None
     return summary
+
+
+def _is_number(value: Any) -> bool:
+    return isinstance(value, (int, float)) and not isinstance(value, bool)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -126,12 +150,31 @@ def _plan(requests: list[EvalRequest]) -> list[_Level]:
         )
         for k, (label, base) in enumerate(bases):
             kwargs, privileged = resolve_env_kwargs(request, base)
-            jobs = [
-                EpisodeJob(request.env_id, kwargs, request.policy, request.seed + i, i < request.record_traces)
-                for i in range(request.episodes)
-            ]
+            jobs = episode_jobs(request, kwargs)
             levels.append(_Level(r, k, request, label or request.label, kwargs, privileged, jobs))
     return levels
+
+
+def episode_jobs(request: EvalRequest, kwargs: Mapping[str, Any]) -> list[EpisodeJob]:
+    """The jobs of one level: one per episode, or one per campaign of ``request.campaign_runs`` episodes.
+
+    Campaign c runs seeds ``seed + c * runs ..`` in the world of ``layout_seed = seed + c * runs`` (its first
+    seed), unless the arguments already fix ``layout_seed`` (then every campaign drives that one world).
+    """
+    runs = request.campaign_runs
+    if runs == 1:
+        return [
+            EpisodeJob(request.env_id, kwargs, request.policy, request.seed + i, i < request.record_traces)
+            for i in range(request.episodes)
+        ]
+    jobs = []
+    for c in range(request.episodes // runs):
+        first = request.seed + c * runs
+        fixed = dict(kwargs)
+        if int(fixed.get("layout_seed", -1)) < 0:
+            fixed["layout_seed"] = first
+        jobs.append(EpisodeJob(request.env_id, fixed, request.policy, first, c < request.record_traces, runs))
+    return jobs
 
 
 def evaluate(
@@ -174,7 +217,7 @@ def evaluate_many(
     """
     levels = _plan(requests)
     jobs = [job for level in levels for job in level.jobs]
-    where = [(level, i) for level in levels for i in range(len(level.jobs))]
+    where = [(level, i) for level in levels for i in range(level.request.episodes)]
     display = _OrderedDisplay(where, progress)
     t0 = time.perf_counter()
     done = 0
@@ -198,8 +241,8 @@ def evaluate_many(
     docs: list[list[EvaluationDocument]] = [[] for _ in requests]
     start = 0
     for level in levels:
-        level_outs = outs[start : start + len(level.jobs)]
-        start += len(level.jobs)
+        level_outs = outs[start : start + level.request.episodes]
+        start += level.request.episodes
         docs[level.request_index].append(_level_doc(level, level_outs))
     results: list[EvaluationDocument] = []
     for request, level_docs in zip(requests, docs, strict=True):
@@ -227,15 +270,11 @@ def evaluate_level(
 ) -> EvaluationDocument:
     """Evaluate one set of env arguments (one level of a scenario)."""
     kwargs, privileged = resolve_env_kwargs(request, base)
-    jobs = [
-        EpisodeJob(request.env_id, kwargs, request.policy, request.seed + i, i < request.record_traces)
-        for i in range(request.episodes)
-    ]
-    level = _Level(0, 0, request, label, kwargs, privileged, jobs)
-    display = _OrderedDisplay([(level, i) for i in range(len(jobs))], progress)
+    level = _Level(0, 0, request, label, kwargs, privileged, episode_jobs(request, kwargs))
+    display = _OrderedDisplay([(level, i) for i in range(request.episodes)], progress)
     try:
         outs = run_episodes(
-            jobs, workers=workers, ray=ray, on_result=lambda k, _, out: display.finished(k, out["record"])
+            level.jobs, workers=workers, ray=ray, on_result=lambda k, _, out: display.finished(k, out["record"])
         )
     finally:
         display.close()
@@ -245,12 +284,14 @@ def evaluate_level(
 def _level_doc(level: _Level, outs: list[EpisodeOutput]) -> EvaluationDocument:
     request = level.request
     episodes = [out["record"] for out in outs]
+    if request.campaign_runs > 1:  # the world each campaign drove
+        for job in level.jobs:
+            for k in range(job.runs):
+                episodes[job.seed - request.seed + k]["layout_seed"] = int(job.env_kwargs["layout_seed"])
     traces: list[TraceDocument] = [
-        {"seed": job.seed, "data": out["trace"]}
-        for job, out in zip(level.jobs, outs, strict=True)
-        if out["trace"] is not None
+        {"seed": request.seed + i, "data": out["trace"]} for i, out in enumerate(outs) if out["trace"] is not None
     ]
-    return {
+    doc: EvaluationDocument = {
         "env_id": request.env_id,
         "scenario": request.scenario,
         "label": level.label or request.scenario,
@@ -265,6 +306,9 @@ def _level_doc(level: _Level, outs: list[EpisodeOutput]) -> EvaluationDocument:
         "episodes": episodes,
         "traces": traces,
     }
+    if request.campaign_runs > 1:
+        doc["campaign_runs"] = request.campaign_runs
+    return doc
 
 
 class _OrderedDisplay:
@@ -318,6 +362,14 @@ def format_summary(result: Mapping[str, Any]) -> str:
             lines.append(f"  {name:<24} {format_interval(value, s.get(key + '_ci'), fmt):<30} {iqm_text}")
     if s.get("min_clearance") is not None:
         lines.append(f"  {'min_clearance (worst)':<24} {s['min_clearance']:.3f}")
+    for part, name in (("first_run_", "first runs"), ("later_runs_", "later runs")):
+        if f"{part}episodes" not in s:
+            continue
+        lines.append(f"  campaigns, {name} ({s[part + 'episodes']} episodes):")
+        for key in ("success_rate", "mean_episode_time", "mean_max_cross_track", "mean_cross_track_corridors_max"):
+            if s.get(part + key) is not None:
+                fmt = "{:.2f}" if key.endswith("rate") else _FORMATS.get(key[len("mean_") :], "{:.3g}")
+                lines.append(f"    {key:<30} {format_interval(s[part + key], s.get(part + key + '_ci'), fmt)}")
     lines.append("  " + INTERVALS_NOTE)
     return "\n".join(lines)
 

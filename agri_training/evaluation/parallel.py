@@ -1,17 +1,19 @@
 """Run evaluation episodes on every local core (worker processes) or on a Ray cluster, identically to a serial run.
 
-The unit of work is one :class:`EpisodeJob`: an env (id + resolved arguments), a policy and one seed.
-:func:`run_episodes` runs a list of jobs and returns their outputs (what
-:func:`agri_training.evaluate.run_episode` returns) in the order of the jobs, whichever worker ran which
-job, so every record equals the serial one except its ``wall_time_s``. Three backends:
+The unit of work is one :class:`EpisodeJob`: an env (id + resolved arguments), a policy and one seed, or
+a campaign of ``runs`` episodes on seeds ``seed .. seed + runs - 1`` that one policy drives one after the
+other, keeping what it learned (:func:`run_campaign`). :func:`run_episodes` runs a list of jobs and
+returns their episodes' outputs (what :func:`agri_training.evaluate.run_episode` returns) in the order of
+the jobs and of their seeds, whichever worker ran which job, so every record equals the serial one except
+its ``wall_time_s``. Three backends:
 
 - ``workers=1``: in this process, one episode after the other (the reference).
 - ``workers=N > 1``: a pool of N worker processes (``forkserver`` start method, so no thread or pybullet
   client of the caller is forked). Each worker builds an env once per configuration and reuses it across
   the seeds it is handed (``reset(seed=...)`` re-seeds everything; ``tests/training/test_parallel.py`` checks
-  reused envs against fresh ones). The policy is built afresh for every episode, on every backend: not
+  reused envs against fresh ones). The policy is built afresh for every job, on every backend: not
   every policy forgets everything on ``episode_start`` (``luo-apf``'s sampling stream runs on across
-  episodes), and an episode's record must depend on its seed only, not on which episodes its worker ran
+  episodes), and an episode's record must depend on its job only, not on which jobs its worker ran
   before. Building a baseline policy costs microseconds.
 - ``ray=ADDRESS``: the same jobs as Ray tasks of one CPU each. ``"local"`` starts a private Ray instance
   for this run and shuts it down at the end; ``"auto"`` joins the cluster started on this machine with
@@ -54,8 +56,10 @@ class EpisodeJob:
         env_id: Registered env id.
         env_kwargs: Resolved ``gym.make`` arguments (JSON-able).
         policy: Baseline name or checkpoint path (what :func:`agri_training.evaluate.load_policy` accepts).
-        seed: Seed of ``env.reset``.
-        trace: Whether the episode records the env's per-step ``trace_keys``.
+        seed: Seed of ``env.reset`` (of a campaign's first run).
+        trace: Whether the episode (every run of the campaign) records the env's per-step ``trace_keys``.
+        runs: Episodes of the campaign, on seeds ``seed .. seed + runs - 1``, driven by one policy; 1: a
+            single episode.
     """
 
     env_id: str
@@ -63,19 +67,23 @@ class EpisodeJob:
     policy: str
     seed: int
     trace: bool = False
+    runs: int = 1
 
     def __post_init__(self) -> None:
         if not isinstance(self.seed, int) or isinstance(self.seed, bool) or self.seed < 0:
             raise ValueError(f"seed must be an int >= 0, got {self.seed!r}")
+        if not isinstance(self.runs, int) or isinstance(self.runs, bool) or self.runs < 1:
+            raise ValueError(f"runs must be an int >= 1, got {self.runs!r}")
 
     def config_key(self) -> str:
         """Identity of the (env, policy) pair the job runs on; equal keys share a built env and policy."""
         return json.dumps([self.env_id, dict(self.env_kwargs), self.policy], sort_keys=True, default=repr)
 
     def describe(self) -> str:
-        """``seed S of POLICY on ENV_ID (args)``, for messages."""
+        """``seed S of POLICY on ENV_ID (args)`` (``campaign of R runs from seed S ...``), for messages."""
         args = ", ".join(f"{k}={v!r}" for k, v in sorted(self.env_kwargs.items()))
-        return f"seed {self.seed} of {self.policy} on {self.env_id}" + (f" ({args})" if args else "")
+        what = f"seed {self.seed}" if self.runs == 1 else f"campaign of {self.runs} runs from seed {self.seed}"
+        return f"{what} of {self.policy} on {self.env_id}" + (f" ({args})" if args else "")
 
 
 class EpisodeError(RuntimeError):
@@ -110,13 +118,30 @@ def clear_cache() -> None:
         _CACHE.popitem()[1][0].close()
 
 
+def run_campaign(
+    env: gym.Env[Any, Any], policy: Any, seed: int, runs: int, trace_keys: tuple[str, ...] | None
+) -> list[EpisodeOutput]:
+    """A campaign: ``runs`` episodes on seeds ``seed, seed + 1, ...`` driven by one policy, one after the other.
+
+    The policy is not rebuilt between runs, so what it keeps across episodes (the hybrid's sensory map) carries
+    over: run k is the k-th time it drives this world. Each record gets ``campaign_run`` (0 for the first run).
+    """
+    outs = []
+    for k in range(runs):
+        out = run_episode(env, policy, seed + k, trace_keys)
+        if runs > 1:
+            out["record"]["campaign_run"] = k
+        outs.append(out)
+    return outs
+
+
 def run_job(job: EpisodeJob) -> dict[str, Any]:
     """Run one job in this process, on the env of an earlier job with the same configuration and a fresh policy.
 
     Returns:
-        ``{"ok": True, "out": run_episode's output}``, or ``{"ok": False, "stage": "build" | "episode",
-        "error": ..., "exc_type": ..., "traceback": ...}`` when building or running raised (so that every
-        backend reports failures the same way, and a failed build's ``ValueError`` stays a user error).
+        ``{"ok": True, "outs": [run_episode's output per run]}``, or ``{"ok": False, "stage": "build" |
+        "episode", "error": ..., "exc_type": ..., "traceback": ...}`` when building or running raised (so that
+        every backend reports failures the same way, and a failed build's ``ValueError`` stays a user error).
     """
     stage = "build"
     try:
@@ -124,7 +149,7 @@ def run_job(job: EpisodeJob) -> dict[str, Any]:
         policy = load_policy(job.policy, env)
         limit_torch_threads()  # loading an SB3 checkpoint imports torch
         stage = "episode"
-        out = run_episode(env, policy, job.seed, trace_keys if job.trace else None)
+        outs = run_campaign(env, policy, job.seed, job.runs, trace_keys if job.trace else None)
     except Exception as exc:  # reported to the caller with the job's seed
         if stage == "episode":  # the env may be left mid-episode in a bad state: rebuild it next time
             _CACHE.pop(job.config_key())[0].close()
@@ -135,13 +160,13 @@ def run_job(job: EpisodeJob) -> dict[str, Any]:
             "error": f"{type(exc).__name__}: {exc}",
             "traceback": traceback.format_exc(),
         }
-    return {"ok": True, "out": out}
+    return {"ok": True, "outs": outs}
 
 
-def _unwrap(job: EpisodeJob, result: dict[str, Any]) -> EpisodeOutput:
+def _unwrap(job: EpisodeJob, result: dict[str, Any]) -> list[EpisodeOutput]:
     if result["ok"]:
-        out: EpisodeOutput = result["out"]
-        return out
+        outs: list[EpisodeOutput] = result["outs"]
+        return outs
     if result["stage"] == "build" and result["exc_type"] == "ValueError":
         # A bad env argument or policy name: the same clear user error as in a serial run.
         raise ValueError(result["error"].removeprefix("ValueError: "))
@@ -150,7 +175,8 @@ def _unwrap(job: EpisodeJob, result: dict[str, Any]) -> EpisodeOutput:
 
 
 
-#: ``on_result(index, job, output)``: called in this process as each job finishes (in completion order).
+#: ``on_result(index, job, output)``: called in this process for each episode as its job finishes (in
+#: completion order); ``index`` counts episodes in job and seed order.
 ResultCallback = Callable[[int, EpisodeJob, EpisodeOutput], None]
 
 #: What the worker processes import once (numba kernels loaded, envs and baselines registered).
@@ -167,7 +193,7 @@ def run_episodes(
     ray: str | None = None,
     on_result: ResultCallback | None = None,
 ) -> list[EpisodeOutput]:
-    """Run the jobs and return their outputs in job order (each as :func:`~.episode.run_episode`'s).
+    """Run the jobs and return their episodes' outputs in job and seed order (each as :func:`~.episode.run_episode`'s).
 
     Args:
         jobs: The episodes.
@@ -180,12 +206,16 @@ def run_episodes(
         ValueError: For ``workers < 1``, a missing ``ray`` extra, or an env/policy that cannot be built.
         EpisodeError: When an episode raises (the run stops; unfinished jobs are cancelled).
     """
-    outs: list[EpisodeOutput | None] = [None] * len(jobs)
+    first = [0]
+    for job in jobs:
+        first.append(first[-1] + job.runs)
+    outs: list[EpisodeOutput | None] = [None] * first[-1]
 
     def done(i: int, result: dict[str, Any]) -> None:
-        outs[i] = out = _unwrap(jobs[i], result)
-        if on_result is not None:
-            on_result(i, jobs[i], out)
+        for k, out in enumerate(_unwrap(jobs[i], result)):
+            outs[first[i] + k] = out
+            if on_result is not None:
+                on_result(first[i] + k, jobs[i], out)
 
     try:
         # Jobs go out in order, two per worker in flight: jobs of one configuration stay together on a

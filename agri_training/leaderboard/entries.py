@@ -153,6 +153,7 @@ def run_blocks(
             env_kwargs=dict(b.env_kwargs),
             record_traces=b.traces,
             label=b.label,
+            campaign_runs=b.suite.campaign_runs,
         )
         for b in blocks
     ]
@@ -202,15 +203,28 @@ def evaluate_entries(
     progress: bool = True,
     command: str = "",
     ray: str | None = None,
+    traces: list[list[Any]] | None = None,
 ) -> list[dict[str, Any]]:
-    """Evaluate each (suite, policy reference) pair and return the entries, all blocks in one pool."""
+    """Evaluate each (suite, policy reference) pair and return the entries, all blocks in one pool.
+
+    Args:
+        pairs: The (suite, policy reference) pairs.
+        workers: Worker processes (see :func:`run_blocks`).
+        progress: Show the progress bar.
+        command: The command recorded in the entries.
+        ray: Run the episodes as Ray tasks.
+        traces: When given, every episode records its per-step trace, and this list receives, per pair, the
+            traces of each level (entries never hold traces; a report that evaluates afresh plots them).
+    """
     blocks: list[Block] = []
     spans = []
     for suite, ref in pairs:
-        bl = blocks_of(suite, policy_argument(ref))
+        bl = blocks_of(suite, policy_argument(ref), suite.episodes if traces is not None else 0)
         spans.append((len(blocks), len(blocks) + len(bl)))
         blocks += bl
     results = run_blocks(blocks, workers, progress, ray)
+    if traces is not None:
+        traces += [[doc["traces"] for doc in results[a:b]] for a, b in spans]
     return [make_entry(suite, ref, results[a:b], command) for (suite, ref), (a, b) in zip(pairs, spans, strict=True)]
 
 
@@ -233,10 +247,15 @@ def load_entries(entries_dir: Path | str = ENTRIES_DIR) -> list[dict[str, Any]]:
 
 
 def all_baseline_pairs(suites: Iterable[Suite]) -> list[tuple[Suite, dict[str, Any]]]:
-    """Every registered policy (baselines and shipped learned ones) on every suite of its env it can run."""
+    """Every registered policy (baselines and shipped learned ones) on every suite of its env it can run.
+
+    A suite that names its ``policies`` gets those only.
+    """
     pairs = []
     for suite in suites:
         for spec in list_policies(suite.env_id):
+            if suite.policies is not None and spec.name not in suite.policies:
+                continue
             # a policy that needs other env arguments than the suite pins cannot run it (luo-apf drives joints,
             # the reach suite end-effector steps; the learned reach policy is sized for one cluster)
             if any(k in suite.env_kwargs and suite.env_kwargs[k] != v for k, v in spec.env_kwargs.items()):

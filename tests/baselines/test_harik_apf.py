@@ -271,3 +271,14 @@ def test_corridor_must_reach_20_seeds():
 def test_repeatability_in_the_office_corridor_completed_by_harik_apf():
     infos = scenario_run("repeatability", "harik-apf", range(2))
     assert all(i["is_success"] and i["waypoints_reached"] == 40 for i in infos)
+
+
+def test_harik_apf_gt_drives_the_example_maps_own_waypoints():
+    """scene='map' on the shipped example map with no waypoints given: the map's loop 0 -> ... -> 7 -> 0."""
+    from agri_envs.scenes import EXAMPLE_MAP
+
+    env = gym.make("agri_envs/GreenhouseNav-v2", scene="map", map_yaml=str(EXAMPLE_MAP), n_people=0, full_scan=True)
+    for seed in (0, 1):
+        record = run_episode(env, make_policy("harik-apf-gt", env), seed, None)["record"]
+        assert record["is_success"] and not record["collision"] and record["waypoints_reached"] == 8, record
+    env.close()

@@ -209,3 +209,17 @@ def test_checked_gauss_newton_never_raises_the_matching_cost(scene):
             before = _matching_cost(*args, *pose)
             after = _gauss_newton(*args, pose, 5, 0.2, 3)
             assert after <= before and after == pytest.approx(_matching_cost(*args, *pose))
+
+
+@pytest.mark.parametrize("constant_velocity", [True, False])
+def test_constant_velocity_prediction_follows_a_fast_turn_on_the_spot(scene, constant_velocity):
+    """A turn on the spot speeding up to 0.4 rad per scan: matched from the last pose, the estimate is lost."""
+    start = scene.robot.pose.copy()
+    slam = make_slam(scene, constant_velocity=constant_velocity)
+    heading, worst = 0.0, 0.0
+    for k in range(40):
+        heading += min(0.04 * k, 0.4)
+        pose = slam.update(exact_scan(scene, compose(start, (0.0, 0.0, heading))))
+        error = abs(math.atan2(math.sin(pose[2] - heading), math.cos(pose[2] - heading))) + math.hypot(*pose[:2])
+        worst = max(worst, error)
+    assert (worst < 0.05) == constant_velocity, worst
