@@ -29,6 +29,7 @@ from agri_envs.sim2d.batched import (
     py_hypot,
     sonar_scan,
     step_people,
+    wheel_odometry,
 )
 from agri_envs.sim2d.raycast import footprint_clearance
 from agri_envs.sim2d.vector import BatchedEnv, InfoKey, grown
@@ -260,14 +261,8 @@ def _step_worlds(rngs: Any, actions: np.ndarray, active: np.ndarray, c: _Constan
             s.path_length[i] += travelled
             if c.localization == _GROUND_TRUTH:
                 est[0], est[1], est[2] = pose[0], pose[1], pose[2]
-            elif c.localization == _ODOMETRY:  # WheelOdometry.integrate
-                v_meas = vel[0] * (1.0 + c.odometry_noise * rng.standard_normal())
-                w_meas = vel[1] * (1.0 + c.odometry_noise * rng.standard_normal()) + s.gyro_bias[i]
-                th_mid = est[2] + 0.5 * w_meas * c.dt
-                th_new = est[2] + w_meas * c.dt
-                est[0] = est[0] + v_meas * c.dt * math.cos(th_mid)
-                est[1] = est[1] + v_meas * c.dt * math.sin(th_mid)
-                est[2] = math.atan2(math.sin(th_new), math.cos(th_new))
+            elif c.localization == _ODOMETRY:
+                wheel_odometry(rng, est, vel[0], vel[1], c.dt, c.odometry_noise, s.gyro_bias[i])
             s.steps[i] += 1
             clearance = footprint_clearance(
                 pose[0], pose[1], pose[2], c.half_length, c.half_width, circles, capsules, -1
@@ -339,8 +334,12 @@ def _step_worlds(rngs: Any, actions: np.ndarray, active: np.ndarray, c: _Constan
             c.sonar_min,
             c.sonar_max,
             c.sonar_noise,
+            0.0,
             circles,
             capsules,
+            circles,
+            capsules,
+            sonar,
             sonar,
         )
         pooled(scan, c.pool_starts, c.lidar_max, o.lidar[i])
