@@ -22,11 +22,11 @@ import numba
 import numpy as np
 from gymnasium.vector import AutoresetMode
 
+from agri_envs._vector import BatchedEnv, InfoKey, grown
 from agri_envs.coverage import robot as fito
 from agri_envs.coverage.greenhouse_coverage import GreenhouseCoverageEnv
 from agri_envs.sim2d.batched import compass_read, drive_box, py_hypot, sonar_scan, track_odometry
 from agri_envs.sim2d.raycast import footprint_clearance
-from agri_envs.sim2d.vector import BatchedEnv, InfoKey, grown
 
 __all__ = ["GreenhouseCoverageVectorEnv"]
 
@@ -331,7 +331,7 @@ class GreenhouseCoverageVectorEnv(BatchedEnv):
     same spaces per sub-env and the same episodes: sub-env ``i`` gives what ``gym.make(id, **kwargs)`` gives for
     the same seed and actions, bit for bit. Episodes are set up by the single env's own ``reset``; the steps
     run in one compiled loop over all sub-envs. Gymnasium's vector API as
-    :class:`~agri_envs.sim2d.vector.BatchedEnv` describes it.
+    :class:`~agri_envs._vector.BatchedEnv` describes it.
 
     ``envs`` holds the sub-envs. Their greenhouse and corridors are the episode's; their robot, coverage and
     counters are the vector env's copy from the episode's start (the steps run on the vector env's arrays).

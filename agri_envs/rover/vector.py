@@ -21,6 +21,7 @@ import numba
 import numpy as np
 from gymnasium.vector import AutoresetMode
 
+from agri_envs._vector import BatchedEnv, InfoKey, grown
 from agri_envs.rover.greenhouse_nav import GreenhouseNavEnv
 from agri_envs.sim2d.batched import (
     drive_box,
@@ -32,7 +33,6 @@ from agri_envs.sim2d.batched import (
     wheel_odometry,
 )
 from agri_envs.sim2d.raycast import footprint_clearance
-from agri_envs.sim2d.vector import BatchedEnv, InfoKey, grown
 
 __all__ = ["GreenhouseNavVectorEnv"]
 
@@ -391,7 +391,7 @@ class GreenhouseNavVectorEnv(BatchedEnv):
     spaces per sub-env, and the same episodes: sub-env ``i`` gives what ``gym.make(id, **kwargs)`` gives for the
     same seed and actions, bit for bit. Episodes are set up by the single env's own ``reset`` (so every reset
     option and scene argument works batched too); the steps run in one compiled loop over all sub-envs.
-    Gymnasium's vector API as :class:`~agri_envs.sim2d.vector.BatchedEnv` describes it: per-sub-env seeds and
+    Gymnasium's vector API as :class:`~agri_envs._vector.BatchedEnv` describes it: per-sub-env seeds and
     reset options (``{"start_waypoint": np.array([0, 3, 1, ...])}``), reset masks, the three autoreset modes,
     ``max_episode_steps``, ``info`` as a dict of arrays with ``_key`` masks (``truncation_reason`` only on the
     sub-envs the env truncated), ``rgb_array`` frames.
