@@ -10,7 +10,7 @@ time of the single envs next to BipedalWalker-v3's.
     python benchmarks/bench_vector.py [--seconds 2] [--rounds 5] [--sizes 1 16 64 256] [--resets 300]
 
 Goals (issue 20): batched GreenhouseNav at 64 envs >= 3x BipedalWalker-v3's steps/s and >= 3x the single
-env's; single-env median resets <= half of BipedalWalker-v3's.
+env's; single-env median resets <= half of BipedalWalker-v3's. GreenhouseCoverage is measured the same way.
 """
 
 from __future__ import annotations
@@ -84,7 +84,7 @@ def main() -> None:
     parser.add_argument("--rounds", type=int, default=5, help="measurements of each env, taken in turns")
     parser.add_argument("--sizes", type=int, nargs="+", default=[1, 16, 64, 256])
     parser.add_argument("--resets", type=int, default=300)
-    parser.add_argument("--envs", nargs="+", default=[NAV], help="batched env ids to measure")
+    parser.add_argument("--envs", nargs="+", default=[NAV, COVERAGE], help="batched env ids to measure")
     args = parser.parse_args()
     box2d_hint = "install box2d (dev extra; pip install box2d, which may need swig)"
     runners: dict[str, Callable[[float], float]] = {}

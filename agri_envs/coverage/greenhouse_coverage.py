@@ -158,6 +158,10 @@ class GreenhouseCoverageEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
 
         env = gym.make("agri_envs/GreenhouseCoverage-v0", n_rows=6, row_bend=0.1, vegetation_echo_prob=0.3)
 
+    Batched: ``gym.make_vec("agri_envs/GreenhouseCoverage-v0", num_envs=64, **kwargs)`` steps 64 of these worlds
+    in one compiled loop (:class:`~agri_envs.coverage.vector.GreenhouseCoverageVectorEnv`), each sub-env's
+    episodes bit for bit this env's for the same seed and actions.
+
     ## Baselines
 
     ``gonzalez-deliberative`` (Voronoi diagram, corridor-covering search, Pure Pursuit; privileged: the true
@@ -166,7 +170,8 @@ class GreenhouseCoverageEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
 
     ## Version History
 
-    * v0: initial release.
+    * v0: initial release. Later, without a version change: the batched form (``gym.make_vec``) and resets
+      that reuse the pymunk world.
 
     ## References
 

@@ -15,16 +15,13 @@ This module is the single env's twin and lives beside it: it reads and writes th
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
 from typing import Any, NamedTuple
 
 import numba
 import numpy as np
-from gymnasium import spaces
-from gymnasium.vector import AutoresetMode, VectorEnv
-from gymnasium.vector.utils import batch_space
-from numba.typed import List as TypedList
+from gymnasium.vector import AutoresetMode
 
+from agri_envs._vector import BatchedEnv, InfoKey, grown
 from agri_envs.rover.greenhouse_nav import GreenhouseNavEnv
 from agri_envs.sim2d.batched import (
     drive_box,
@@ -33,6 +30,7 @@ from agri_envs.sim2d.batched import (
     py_hypot,
     sonar_scan,
     step_people,
+    wheel_odometry,
 )
 from agri_envs.sim2d.raycast import footprint_clearance
 
@@ -41,7 +39,7 @@ __all__ = ["GreenhouseNavVectorEnv"]
 _GROUND_TRUTH, _ODOMETRY, _NONE = 0, 1, 2
 
 #: ``info`` keys of a step, in the single env's order: (key, dtype, column of the array of that dtype).
-_INFO: tuple[tuple[str, type, int], ...] = (
+_INFO: tuple[InfoKey, ...] = (
     ("reward_progress", float, 0),
     ("reward_waypoint", float, 1),
     ("reward_success", float, 2),
@@ -71,7 +69,6 @@ _INFO: tuple[tuple[str, type, int], ...] = (
     ("est_y", float, 18),
     ("est_yaw", float, 19),
 )
-_N_INFO = {float: 20, int: 4, bool: 4}
 
 
 class _Constants(NamedTuple):
@@ -264,14 +261,8 @@ def _step_worlds(rngs: Any, actions: np.ndarray, active: np.ndarray, c: _Constan
             s.path_length[i] += travelled
             if c.localization == _GROUND_TRUTH:
                 est[0], est[1], est[2] = pose[0], pose[1], pose[2]
-            elif c.localization == _ODOMETRY:  # WheelOdometry.integrate
-                v_meas = vel[0] * (1.0 + c.odometry_noise * rng.standard_normal())
-                w_meas = vel[1] * (1.0 + c.odometry_noise * rng.standard_normal()) + s.gyro_bias[i]
-                th_mid = est[2] + 0.5 * w_meas * c.dt
-                th_new = est[2] + w_meas * c.dt
-                est[0] = est[0] + v_meas * c.dt * math.cos(th_mid)
-                est[1] = est[1] + v_meas * c.dt * math.sin(th_mid)
-                est[2] = math.atan2(math.sin(th_new), math.cos(th_new))
+            elif c.localization == _ODOMETRY:
+                wheel_odometry(rng, est, vel[0], vel[1], c.dt, c.odometry_noise, s.gyro_bias[i])
             s.steps[i] += 1
             clearance = footprint_clearance(
                 pose[0], pose[1], pose[2], c.half_length, c.half_width, circles, capsules, -1
@@ -343,8 +334,12 @@ def _step_worlds(rngs: Any, actions: np.ndarray, active: np.ndarray, c: _Constan
             c.sonar_min,
             c.sonar_max,
             c.sonar_noise,
+            0.0,
             circles,
             capsules,
+            circles,
+            capsules,
+            sonar,
             sonar,
         )
         pooled(scan, c.pool_starts, c.lidar_max, o.lidar[i])
@@ -388,17 +383,7 @@ def _step_worlds(rngs: Any, actions: np.ndarray, active: np.ndarray, c: _Constan
         o.info_b[i, 3] = truncated
 
 
-def _grown(a: np.ndarray, shape: tuple[int, ...]) -> np.ndarray:
-    """``a`` copied into a zero array at least ``shape`` large (room to spare along the grown axes)."""
-    new = tuple(want + (want - old) // 2 if want > old else old for old, want in zip(a.shape, shape, strict=True))
-    if new == a.shape:
-        return a
-    b = np.zeros(new, dtype=a.dtype)
-    b[tuple(slice(0, n) for n in a.shape)] = a
-    return b
-
-
-class GreenhouseNavVectorEnv(VectorEnv[dict[str, np.ndarray], np.ndarray, np.ndarray]):
+class GreenhouseNavVectorEnv(BatchedEnv):
     """``num_envs`` GreenhouseNav-v2 worlds stepped together: the native vector form of the env.
 
     Made by ``gym.make_vec("agri_envs/GreenhouseNav-v2", num_envs=N, **kwargs)`` (or directly), with every
@@ -406,28 +391,13 @@ class GreenhouseNavVectorEnv(VectorEnv[dict[str, np.ndarray], np.ndarray, np.nda
     spaces per sub-env, and the same episodes: sub-env ``i`` gives what ``gym.make(id, **kwargs)`` gives for the
     same seed and actions, bit for bit. Episodes are set up by the single env's own ``reset`` (so every reset
     option and scene argument works batched too); the steps run in one compiled loop over all sub-envs.
+    Gymnasium's vector API as :class:`~agri_envs._vector.BatchedEnv` describes it: per-sub-env seeds and
+    reset options (``{"start_waypoint": np.array([0, 3, 1, ...])}``), reset masks, the three autoreset modes,
+    ``max_episode_steps``, ``info`` as a dict of arrays with ``_key`` masks (``truncation_reason`` only on the
+    sub-envs the env truncated), ``rgb_array`` frames.
 
-    Contract (Gymnasium's vector API):
-
-    * ``reset(seed=S)`` seeds sub-env ``i`` with ``S + i`` (as ``SyncVectorEnv``); ``seed=[s0, s1, ...]`` gives one
-      seed (or None) per sub-env. ``options`` are the single env's reset options; a value that is a sequence
-      of ``num_envs`` items gives one per sub-env (``{"start_waypoint": np.array([0, 3, 1, ...])}``), any other
-      value goes to every sub-env. ``options={"reset_mask": mask}`` (a bool array) resets only those sub-envs,
-      leaving the others' observations as they are.
-    * ``step(actions)`` takes ``(num_envs, 2)`` actions (clipped to [-1, 1]; NaN or inf raises ``ValueError``
-      naming the sub-env) and returns observations as a dict of ``(num_envs, ...)`` float32 arrays, rewards
-      (float64), terminations and truncations (bool), and ``info`` as a dict of arrays with a ``_key`` bool
-      mask telling which sub-envs have the key (``truncation_reason`` only on truncated ones).
-    * ``autoreset_mode`` (``gym.make_vec(..., autoreset_mode=...)``): ``NEXT_STEP`` (default) resets a finished
-      sub-env on the next ``step``, which then returns its first observation with reward 0 and ignores its
-      action; ``SAME_STEP`` resets it in the step that finishes it and returns the new episode's first
-      observation and ``info``, with the last observation and info of the finished episode in
-      ``info["final_obs"]`` and ``info["final_info"]``; ``DISABLED`` never resets by itself: reset finished
-      sub-envs with ``reset(options={"reset_mask": mask})`` before stepping them again.
-    * ``max_episode_steps=N`` limits every episode to N steps as ``gym.make(..., max_episode_steps=N)`` does.
-    * ``render_mode="rgb_array"``: ``render()`` returns one frame per sub-env, drawn as the single env draws.
-    * ``envs``: the sub-envs. Their scene, layout and mission are the episode's; their robot, people and
-      counters are the vector env's copy from the episode's start (the steps run on the vector env's arrays).
+    ``envs`` holds the sub-envs. Their scene, layout and mission are the episode's; their robot, people and
+    counters are the vector env's copy from the episode's start (the steps run on the vector env's arrays).
 
     Example::
 
@@ -438,7 +408,8 @@ class GreenhouseNavVectorEnv(VectorEnv[dict[str, np.ndarray], np.ndarray, np.nda
     Args:
         num_envs: Number of sub-envs, >= 1.
         autoreset_mode: A :class:`gymnasium.vector.AutoresetMode` or its value (``"NextStep"``, ...).
-        max_episode_steps: Explicit step limit of every episode (None: the mission-sized one).
+        max_episode_steps: Explicit step limit of every episode (None: the mission-sized one), as
+            ``gym.make(..., max_episode_steps=N)`` sets it (the crash penalty and ``info`` follow it).
         render_mode: None or ``"rgb_array"``.
         **kwargs: The single env's arguments.
 
@@ -448,6 +419,7 @@ class GreenhouseNavVectorEnv(VectorEnv[dict[str, np.ndarray], np.ndarray, np.nda
     """
 
     metadata = {"render_modes": ["rgb_array"], "render_fps": 15, "autoreset_mode": AutoresetMode.NEXT_STEP}
+    INFO_KEYS = _INFO
 
     def __init__(
         self,
@@ -458,49 +430,41 @@ class GreenhouseNavVectorEnv(VectorEnv[dict[str, np.ndarray], np.ndarray, np.nda
         render_mode: str | None = None,
         **kwargs: Any,
     ) -> None:
-        if isinstance(num_envs, bool) or not isinstance(num_envs, (int, np.integer)) or num_envs < 1:
-            raise ValueError(f"num_envs must be an integer >= 1, got {num_envs!r}")
-        try:
-            mode = AutoresetMode(autoreset_mode)
-        except ValueError:
-            valid = [m.value for m in AutoresetMode]
-            raise ValueError(
-                f"autoreset_mode must be an AutoresetMode or one of {valid}, got {autoreset_mode!r}"
-            ) from None
-        if max_episode_steps is not None and (
-            isinstance(max_episode_steps, bool)
-            or not isinstance(max_episode_steps, (int, np.integer))
-            or max_episode_steps < 1
-        ):
-            raise ValueError(f"max_episode_steps must be an integer >= 1 or None, got {max_episode_steps!r}")
-        if render_mode not in (None, "rgb_array"):
-            raise ValueError(f"render_mode must be None or 'rgb_array' for the vector env, got {render_mode!r}")
-        self.num_envs = int(num_envs)
-        self.autoreset_mode = mode
-        self.metadata = {**type(self).metadata, "autoreset_mode": mode}
-        self.render_mode = render_mode
-        self.envs = [GreenhouseNavEnv(render_mode=render_mode, **kwargs) for _ in range(self.num_envs)]
-        for env in self.envs:
-            env.explicit_max_episode_steps = None if max_episode_steps is None else int(max_episode_steps)
+        super().__init__(GreenhouseNavEnv, num_envs, autoreset_mode, max_episode_steps, render_mode, kwargs)
+        self.envs: list[GreenhouseNavEnv] = self.envs  # type: ignore[assignment]
+        for env in self.envs:  # what SyncTimeLimit tells a single env made with an explicit limit
+            env.explicit_max_episode_steps = self.max_episode_steps
         first = self.envs[0]
         self.config = first.config
-        self.single_observation_space: spaces.Dict = first.observation_space  # type: ignore[assignment]
-        self.single_action_space = first.action_space
-        self.observation_space = batch_space(self.single_observation_space, self.num_envs)
-        self.action_space = batch_space(self.single_action_space, self.num_envs)
         self._constants = self._shared_constants(first)
         self._state = self._empty_state()
-        self._out = self._empty_output()
-        self._rngs: Any = None  # the sub-envs' generators, as a numba typed list (after the first reset)
-        self._rng_objects: list[Any] = [None] * self.num_envs
-        self._autoreset = np.zeros(self.num_envs, dtype=np.bool_)
-        self._max_episode_steps = None if max_episode_steps is None else int(max_episode_steps)
-        self._elapsed = np.zeros(self.num_envs, dtype=np.int64)  # steps since each sub-env's reset
-        self._trails: list[list[tuple[float, float]]] = [[] for _ in range(self.num_envs)]  # with render_mode only
-        self._started = False
-        self.closed = False
+        n = self.num_envs
+        self._trail = np.zeros((n, self.config.frame_skip, 2))  # a position per control period of a step
+        obs = self._obs
 
-    # -- set-up -----------------------------------------------------------------------------------------------
+        def key(name: str) -> np.ndarray:
+            return obs[name] if name in obs else np.zeros((n, 0), np.float32)
+
+        self._out = _Output(
+            lidar=key("lidar"),
+            sonar=key("sonar"),
+            velocity=key("velocity"),
+            waypoint=key("waypoint"),
+            next_waypoint=key("next_waypoint"),
+            target=key("target"),
+            scan=key("scan"),
+            scan_m=np.zeros((n, first.lidar.spec.n_beams)),
+            sonar_m=np.zeros((n, len(first.sonars))),
+            reward=self._reward,
+            terminated=self._terminated,
+            truncated=self._truncated,
+            info_f=self._info[float],
+            info_i=self._info[int],
+            info_b=self._info[bool],
+            trail=self._trail,
+            periods=self._periods,
+        )
+
     @staticmethod
     def _shared_constants(env: GreenhouseNavEnv) -> _Constants:
         cfg = env.config
@@ -552,8 +516,8 @@ class GreenhouseNavVectorEnv(VectorEnv[dict[str, np.ndarray], np.ndarray, np.nda
         )
 
     def _empty_state(self) -> _State:
-        """Arrays for one world of each kind of thing; :meth:`_load` grows them to what the episodes need."""
-        n, p, n_circles, n_capsules, n_targets, n_nodes, degree = self.num_envs, 0, 0, 0, 0, 0, 0
+        """Arrays for no world yet; :meth:`_load` grows them to what the episodes need."""
+        n = self.num_envs
         f = np.zeros
         return _State(
             pose=f((n, 3)),
@@ -574,52 +538,24 @@ class GreenhouseNavVectorEnv(VectorEnv[dict[str, np.ndarray], np.ndarray, np.nda
             n_people=f(n, np.int64),
             n_circles=f(n, np.int64),
             n_capsules=f(n, np.int64),
-            circles=f((n, n_circles, 3)),
-            capsules=f((n, n_capsules, 5)),
-            targets=f((n, n_targets, 2)),
-            prev_node=f((n, p), np.int64),
-            next_node=f((n, p), np.int64),
-            speed=f((n, p)),
-            mode=f((n, p), np.int64),
-            timer=f((n, p)),
-            reacted=f((n, p), np.bool_),
-            nodes=f((n, n_nodes, 2)),
-            adjacency=f((n, n_nodes, degree), np.int64),
-            degree=f((n, n_nodes), np.int64),
+            circles=f((n, 0, 3)),
+            capsules=f((n, 0, 5)),
+            targets=f((n, 0, 2)),
+            prev_node=f((n, 0), np.int64),
+            next_node=f((n, 0), np.int64),
+            speed=f((n, 0)),
+            mode=f((n, 0), np.int64),
+            timer=f((n, 0)),
+            reacted=f((n, 0), np.bool_),
+            nodes=f((n, 0, 2)),
+            adjacency=f((n, 0, 0), np.int64),
+            degree=f((n, 0), np.int64),
             crowd=f((n, 4)),
         )
 
-    def _empty_output(self) -> _Output:
-        n = self.num_envs
-        space = self.single_observation_space
-
-        def obs(key: str) -> np.ndarray:
-            shape: tuple[int, ...] = space[key].shape or () if key in space.spaces else (0,)
-            return np.zeros((n, *shape), np.float32)
-
-        n_beams = self.envs[0].lidar.spec.n_beams
-        return _Output(
-            lidar=obs("lidar"),
-            sonar=obs("sonar"),
-            velocity=obs("velocity"),
-            waypoint=obs("waypoint"),
-            next_waypoint=obs("next_waypoint"),
-            target=obs("target"),
-            scan=obs("scan"),
-            scan_m=np.zeros((n, n_beams)),
-            sonar_m=np.zeros((n, len(self.envs[0].sonars))),
-            reward=np.zeros(n),
-            terminated=np.zeros(n, np.bool_),
-            truncated=np.zeros(n, np.bool_),
-            info_f=np.zeros((n, _N_INFO[float])),
-            info_i=np.zeros((n, _N_INFO[int]), np.int64),
-            info_b=np.zeros((n, _N_INFO[bool]), np.bool_),
-            trail=np.zeros((n, self.config.frame_skip, 2)),
-            periods=np.zeros(n, np.int64),
-        )
-
-    def _load(self, i: int, obs: dict[str, np.ndarray], info: dict[str, Any]) -> None:
-        """Copy sub-env ``i``'s freshly reset episode (and its first observation and info) into the arrays."""
+    # -- BatchedEnv's hooks -------------------------------------------------------------------------------------
+    def _load(self, i: int) -> None:
+        """Copy sub-env ``i``'s freshly reset episode into the arrays."""
         env = self.envs[i]
         assert env.world is not None
         world, crowd, task = env.world, env.crowd, env.task
@@ -638,7 +574,7 @@ class GreenhouseNavVectorEnv(VectorEnv[dict[str, np.ndarray], np.ndarray, np.nda
             **{name: (p,) for name in ("prev_node", "next_node", "speed", "mode", "timer", "reacted")},
         }
         grow = {
-            name: _grown(getattr(s, name), (self.num_envs, *shape))
+            name: grown(getattr(s, name), (self.num_envs, *shape))
             for name, shape in sizes.items()
             if any(want > have for want, have in zip(shape, getattr(s, name).shape[1:], strict=True))
         }
@@ -672,217 +608,31 @@ class GreenhouseNavVectorEnv(VectorEnv[dict[str, np.ndarray], np.ndarray, np.nda
         s.reacted[i, :p] = crowd.reacted
         spec = crowd.spec
         s.crowd[i] = (spec.notice_distance, spec.tease_prob, spec.stand_range[0], spec.stand_range[1])
-        s.nodes[i, : len(graph.nodes)] = graph.nodes
+        s.nodes[i, :n_nodes] = graph.nodes
         for k, neighbours in enumerate(graph.adjacency):
             s.degree[i, k] = len(neighbours)
             s.adjacency[i, k, : len(neighbours)] = neighbours
-        o = self._out
-        for key, value in obs.items():
-            getattr(o, key)[i] = value
-        o.scan_m[i] = env._last_scan
-        o.sonar_m[i] = env._last_sonar
-        self._write_info(i, info)
-        self._elapsed[i] = 0
-        if env.np_random is not self._rng_objects[i]:  # a seeded reset made a new generator
-            self._rng_objects[i] = env.np_random
-            if self._rngs is not None:
-                self._rngs[i] = env.np_random
-        self._trails[i] = [(float(env.robot.pose[0]), float(env.robot.pose[1]))] if self.render_mode else []
-
-    def _write_info(self, i: int, info: dict[str, Any]) -> None:
-        """Put one sub-env's ``info`` dict into the info arrays' row ``i``."""
-        arrays = {float: self._out.info_f, int: self._out.info_i, bool: self._out.info_b}
-        for key, kind, col in _INFO:
-            if key in info:
-                arrays[kind][i, col] = info[key]
-
-    # -- the vector API ---------------------------------------------------------------------------------------
-    def reset(
-        self, *, seed: int | Sequence[int | None] | None = None, options: dict[str, Any] | None = None
-    ) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
-        """Reset every sub-env (or those of ``options["reset_mask"]``); see the class docstring."""
-        if self.closed:
-            raise RuntimeError("the vector env is closed")
-        seeds = self._seeds(seed)
-        opts = dict(options or {})
-        mask = self._reset_mask(opts.pop("reset_mask", None))
-        per_env = self._per_env_options(opts)
-        if mask is None or not self._started:  # the first reset sets every sub-env up
-            mask = np.ones(self.num_envs, dtype=np.bool_)
-        for i in np.flatnonzero(mask).tolist():
-            obs, info = self.envs[i].reset(seed=seeds[i], options=per_env[i])
-            self._load(i, obs, info)
-        if self._rngs is None:
-            self._rngs = TypedList(self._rng_objects)
-        self._started = True
-        self._autoreset[mask] = False
-        self._out.terminated[mask] = False
-        self._out.truncated[mask] = False
-        return self._observations(), self._infos(mask, {})
-
-    def step(
-        self, actions: np.ndarray
-    ) -> tuple[dict[str, np.ndarray], np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
-        """Step every sub-env (see the class docstring for what happens to finished ones)."""
-        if self.closed or not self._started:
-            raise RuntimeError("call reset() before step()" if not self.closed else "the vector env is closed")
-        a = self._checked_actions(actions)
-        o = self._out
-        if self.autoreset_mode == AutoresetMode.DISABLED and self._autoreset.any():
-            done = np.flatnonzero(self._autoreset).tolist()
-            raise RuntimeError(
-                f"sub-envs {done} finished their episodes: reset them with reset(options={{'reset_mask': mask}}) "
-                "before stepping them again (autoreset_mode=DISABLED)"
-            )
-        stepping = ~self._autoreset if self.autoreset_mode == AutoresetMode.NEXT_STEP else np.ones_like(self._autoreset)
-        _step_worlds(self._rngs, a, stepping, self._constants, self._state, o)
-        # the env's own truncations say why in info; TimeLimit's below do not
-        reasons = {int(i): self._truncation_reason(int(i)) for i in np.flatnonzero(stepping & o.truncated)}
-        self._elapsed[stepping] += 1
-        if self._max_episode_steps is not None:  # gym.make's TimeLimit: truncated at N steps even when terminated
-            o.truncated[stepping & (self._elapsed >= self._max_episode_steps)] = True
+        self._out.scan_m[i] = env._last_scan
+        self._out.sonar_m[i] = env._last_sonar
         if self.render_mode:
-            for k in np.flatnonzero(stepping).tolist():
-                self._trails[k].extend(map(tuple, o.trail[k, : o.periods[k]].tolist()))
-        final: dict[str, Any] = {}
-        if self.autoreset_mode == AutoresetMode.NEXT_STEP:
-            for i in np.flatnonzero(self._autoreset).tolist():
-                obs, info = self.envs[i].reset()
-                self._load(i, obs, info)
-                o.reward[i] = 0.0
-                o.terminated[i] = o.truncated[i] = False
-        elif self.autoreset_mode == AutoresetMode.SAME_STEP:
-            for i in np.flatnonzero(o.terminated | o.truncated).tolist():
-                final = self._add_info(
-                    final,
-                    {"final_obs": self._observation(i), "final_info": self._info(i, reasons.pop(i, None))},
-                    i,
-                )
-                obs, info = self.envs[i].reset()
-                self._load(i, obs, info)
-        self._autoreset = o.terminated | o.truncated
-        infos = self._infos(np.ones(self.num_envs, dtype=np.bool_), reasons)
-        infos.update(final)
-        return self._observations(), o.reward.copy(), o.terminated.copy(), o.truncated.copy(), infos
+            self._trails[i] = list(env._trail)
 
-    def render(self) -> tuple[np.ndarray, ...] | None:
-        """One ``rgb_array`` frame per sub-env, as the single env draws it (None without a render mode)."""
-        if self.render_mode is None:
-            return None
-        if not self._started:
-            raise RuntimeError("call reset() before render()")
-        frames = []
-        for i, env in enumerate(self.envs):
-            self._store(i)
-            frame = env.render()
-            assert frame is not None
-            frames.append(frame)
-        return tuple(frames)
+    def _run(self, actions: np.ndarray, stepping: np.ndarray) -> None:
+        _step_worlds(self._rngs, actions, stepping, self._constants, self._state, self._out)
 
-    def close_extras(self, **kwargs: Any) -> None:
-        """Close every sub-env (their renderers and pymunk worlds)."""
-        for env in self.envs:
-            env.close()
-
-    # -- helpers ----------------------------------------------------------------------------------------------
-    def _seeds(self, seed: int | Sequence[int | None] | None) -> list[int | None]:
-        if seed is None:
-            return [None] * self.num_envs
-        if isinstance(seed, (int, np.integer)) and not isinstance(seed, bool):
-            return [int(seed) + i for i in range(self.num_envs)]
-        if isinstance(seed, bool):
-            raise ValueError(f"reset: seed must be an int, None or one seed per sub-env, got {seed!r}")
-        seeds = list(seed)
-        if len(seeds) != self.num_envs:
-            raise ValueError(
-                f"reset: seed must be an int, None or {self.num_envs} seeds (one per sub-env), got {len(seeds)}"
+    def _truncation_reasons(self, truncated: np.ndarray) -> dict[int, str]:
+        s = self._state
+        reasons = {}
+        for i in np.flatnonzero(truncated).tolist():
+            limit = int(s.max_steps[i])
+            reasons[i] = (
+                f"time limit: {limit} steps ({limit * self.config.control_period:.1f} s, "
+                f"{self.envs[i].time_limit_source}) reached at waypoint {int(s.task_index[i])}/{int(s.n_targets[i])}"
             )
-        return seeds
-
-    def _reset_mask(self, mask: Any) -> np.ndarray | None:
-        if mask is None:
-            return None
-        if not isinstance(mask, np.ndarray) or mask.dtype != np.bool_ or mask.shape != (self.num_envs,):
-            raise ValueError(f"reset option reset_mask must be a bool array of shape ({self.num_envs},), got {mask!r}")
-        if not mask.any():
-            raise ValueError("reset option reset_mask must select at least one sub-env")
-        return mask
-
-    def _per_env_options(self, options: dict[str, Any]) -> list[dict[str, Any] | None]:
-        """One options dict per sub-env: sequences of ``num_envs`` values are split, others shared."""
-        if not options:
-            return [None] * self.num_envs
-        out: list[dict[str, Any]] = [{} for _ in range(self.num_envs)]
-        for key, value in options.items():
-            if isinstance(value, (list, tuple, np.ndarray)):
-                if len(value) != self.num_envs:
-                    raise ValueError(
-                        f"reset option {key!r}: give one value for every sub-env ({self.num_envs}) or a single value, "
-                        f"got {len(value)}"
-                    )
-                values = value.tolist() if isinstance(value, np.ndarray) else list(value)
-            else:
-                values = [value] * self.num_envs
-            for opts, v in zip(out, values, strict=True):
-                opts[key] = v
-        return list(out)
-
-    def _checked_actions(self, actions: Any) -> np.ndarray:
-        a = np.asarray(actions, dtype=np.float64)
-        if a.shape != (self.num_envs, 2):
-            raise ValueError(f"actions must have shape ({self.num_envs}, 2), got {a.shape}")
-        bad = ~np.isfinite(a).all(axis=1)
-        if bad.any():
-            raise ValueError(f"actions of sub-envs {np.flatnonzero(bad).tolist()} contain NaN or inf")
-        return np.minimum(np.maximum(a, -1.0), 1.0)
-
-    def _truncation_reason(self, i: int) -> str:
-        env, s = self.envs[i], self._state
-        limit = int(s.max_steps[i])
-        return (
-            f"time limit: {limit} steps ({limit * self.config.control_period:.1f} s, {env.time_limit_source})"
-            f" reached at waypoint {int(s.task_index[i])}/{int(s.n_targets[i])}"
-        )
-
-    def _observations(self) -> dict[str, np.ndarray]:
-        o = self._out
-        return {key: getattr(o, key).copy() for key in self.single_observation_space.spaces}
-
-    def _observation(self, i: int) -> dict[str, np.ndarray]:
-        o = self._out
-        return {key: getattr(o, key)[i].copy() for key in self.single_observation_space.spaces}
-
-    def _info(self, i: int, reason: str | None) -> dict[str, Any]:
-        """Sub-env ``i``'s info as the single env returns it (Python scalars)."""
-        arrays = {float: self._out.info_f, int: self._out.info_i, bool: self._out.info_b}
-        info = {key: kind(arrays[kind][i, col]) for key, kind, col in _INFO if self._has(key)}
-        if reason is not None:
-            info["truncation_reason"] = reason
-        return info
+        return reasons
 
     def _has(self, key: str) -> bool:
         return not (key.startswith("est_") and self.config.localization == "none")
-
-    def _infos(self, mask: np.ndarray, reasons: dict[int, str]) -> dict[str, Any]:
-        """The info dict of arrays for the sub-envs of ``mask`` (as ``VectorEnv._add_info`` lays it out)."""
-        arrays = {float: self._out.info_f, int: self._out.info_i, bool: self._out.info_b}
-        full = bool(mask.all())
-        infos: dict[str, Any] = {}
-        for key, kind, col in _INFO:
-            if not self._has(key):
-                continue
-            values = arrays[kind][:, col].copy()
-            if not full:
-                values[~mask] = 0
-            infos[key] = values
-            infos[f"_{key}"] = mask.copy()
-        if reasons:
-            text = np.full(self.num_envs, None, dtype=object)
-            has = np.zeros(self.num_envs, dtype=np.bool_)
-            for i, reason in reasons.items():
-                text[i], has[i] = reason, True
-            infos["truncation_reason"], infos["_truncation_reason"] = text, has
-        return infos
 
     def _store(self, i: int) -> None:
         """Write world ``i``'s current state back into its sub-env (for drawing it)."""

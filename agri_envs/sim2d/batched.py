@@ -432,19 +432,88 @@ def sonar_scan(
     min_range: float,
     max_range: float,
     noise_std: float,
+    slip_prob: float,
     circles: np.ndarray,
     capsules: np.ndarray,
+    solid_circles: np.ndarray,
+    solid_capsules: np.ndarray,
     out: np.ndarray,
+    hard: np.ndarray,
 ) -> None:
-    """:meth:`~agri_envs.sim2d.sensors.SonarArray.ranges` (no foliage echoes) of a body at ``pose``, into ``out``."""
+    """:meth:`~agri_envs.sim2d.sensors.SonarArray.ranges` of a body at ``pose``, written into ``out`` (m).
+
+    With ``slip_prob > 0`` a reading whose echo comes off foliage (the solid obstacles alone read farther)
+    slips long with that probability, as the single env's sonars do; ``hard`` is scratch for those readings.
+    """
     sonar_ranges(pose[0], pose[1], pose[2], mounts, half_aperture, max_range, circles, capsules, out)
-    for k in range(out.shape[0]):
+    n = out.shape[0]
+    for k in range(n):
         out[k] = max(out[k], min_range)
+    if slip_prob > 0.0:
+        sonar_ranges(pose[0], pose[1], pose[2], mounts, half_aperture, max_range, solid_circles, solid_capsules, hard)
+        slip = np.zeros(n, dtype=np.bool_)
+        for k in range(n):  # every sonar's chance is drawn, then the slipped readings' lengths, as NumPy does
+            hard[k] = max(hard[k], min_range)
+            slip[k] = rng.random() < slip_prob
+        for k in range(n):
+            if slip[k] and out[k] < hard[k] - 1e-9:
+                out[k] = out[k] + (hard[k] - out[k]) * rng.random()
     if noise_std > 0.0:
-        for k in range(out.shape[0]):
+        for k in range(n):
             out[k] = out[k] + noise_std * rng.standard_normal()
-        for k in range(out.shape[0]):
+        for k in range(n):
             out[k] = min(max(out[k], min_range), max_range)
+
+
+@numba.njit(cache=True)
+def wheel_odometry(
+    rng: np.random.Generator, estimate: np.ndarray, v: float, w: float, dt: float, noise: float, gyro_bias: float
+) -> None:
+    """:meth:`~agri_envs.sim2d.odometry.WheelOdometry.integrate`: ``estimate`` (x, y, yaw) after ``dt``, in place."""
+    v = v * (1.0 + noise * rng.standard_normal())
+    w = w * (1.0 + noise * rng.standard_normal()) + gyro_bias
+    th = estimate[2]
+    th_mid = th + 0.5 * w * dt
+    estimate[0] = estimate[0] + v * dt * math.cos(th_mid)
+    estimate[1] = estimate[1] + v * dt * math.sin(th_mid)
+    estimate[2] = math.atan2(math.sin(th + w * dt), math.cos(th + w * dt))
+
+
+@numba.njit(cache=True)
+def compass_read(rng: np.random.Generator, yaw: float, bias: float, noise_std: float) -> float:
+    """:meth:`~agri_envs.sim2d.odometry.Compass.read`: the measured heading (rad) of a body heading ``yaw``."""
+    h = yaw + bias
+    if noise_std > 0:
+        h += noise_std * rng.standard_normal()
+    return math.atan2(math.sin(h), math.cos(h))
+
+
+@numba.njit(cache=True)
+def track_odometry(
+    rng: np.random.Generator,
+    v: float,
+    w: float,
+    heading: float,
+    dt: float,
+    gauge: float,
+    scale: np.ndarray,
+    noise: float,
+    estimate: np.ndarray,
+) -> tuple[float, float]:
+    """:meth:`~agri_envs.sim2d.odometry.TrackOdometry.update`: measured ``(v, w)``; ``estimate`` ``(x, y)`` advances."""
+    half = 0.5 * gauge
+    left = (v - w * half) * scale[0]
+    right = (v + w * half) * scale[1]
+    if noise > 0:
+        n_left = rng.standard_normal()
+        n_right = rng.standard_normal()
+        left = left * (1.0 + noise * n_left)
+        right = right * (1.0 + noise * n_right)
+    v_meas = 0.5 * (left + right)
+    w_meas = (right - left) / gauge
+    estimate[0] = estimate[0] + v_meas * dt * math.cos(heading)
+    estimate[1] = estimate[1] + v_meas * dt * math.sin(heading)
+    return v_meas, w_meas
 
 
 @numba.njit(cache=True)
