@@ -24,8 +24,8 @@ evaluated. The keys:
 | ``eval_freq``, ``eval_episodes``, ``eval_seed`` | periodic evaluation every N steps on seeds S.. S+n-1 |
 | ``checkpoint_freq`` | weights-only checkpoint every N steps (0: none) |
 | ``torch_threads`` | torch CPU threads (1 beside env workers) |
-| ``update_threads`` | torch CPU threads of the gradient updates (null: ``torch_threads``); PPO's rollout and |
-| | updates alternate, so the updates may use the cores the rollout leaves idle |
+| ``update_threads`` | torch CPU threads of the gradient updates, at most (null: ``torch_threads``); PPO's |
+| | rollout and updates alternate, so each update uses up to this many of the cores idle when it starts |
 
 A run directory holds ``policy.pt`` (the final weights, a ``state_dict``), ``normalize.json`` (the
 observation statistics), ``config.yaml`` (the resolved config), ``meta.json`` (exact command, package
@@ -383,18 +383,37 @@ def make_vec_env(config: Mapping[str, Any]) -> Any:
     return venv
 
 
-def with_update_threads(cls: Any, threads: int) -> Any:
-    """``cls`` (an SB3 algorithm) whose gradient updates (``train``) run with ``threads`` torch threads.
+def idle_cores(loadavg: Path = Path("/proc/loadavg")) -> int:
+    """This process's cores that nothing else runs on now: its cores less the other runnable threads, at least 1.
+
+    Reads the kernel's count of runnable threads (Linux's ``/proc/loadavg``; the caller is one of them);
+    where that is not available, all of the process's cores.
+    """
+    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1
+    try:
+        runnable = int(loadavg.read_text().split()[3].split("/")[0])
+    except (OSError, ValueError, IndexError):
+        return cores
+    return max(1, cores - (runnable - 1))
+
+
+def with_update_threads(cls: Any, threads: int, idle: Callable[[], int] = idle_cores) -> Any:
+    """``cls`` (an SB3 algorithm) whose gradient updates (``train``) run on up to ``threads`` torch threads.
 
     The rollout keeps the threads set before (a batch of a few dozen observations gains nothing from more);
-    the updates, which alternate with it, use the cores it leaves idle.
+    the updates, which alternate with it, use the cores it leaves idle: each update takes as many threads as
+    cores are idle when it starts (``idle()``), at most ``threads``. A thread more than the free cores does
+    not help, it hurts: its peers wait for it at every parallel region while the OS runs another process on
+    its core (``benchmarks/bench_update_threads.py``). The count goes to the logger as ``train/update_threads``.
     """
     import torch
 
     class UpdateThreads(cls):  # type: ignore[misc,valid-type]
         def train(self, *args: Any, **kwargs: Any) -> Any:
             before = torch.get_num_threads()
-            torch.set_num_threads(threads)
+            now = max(1, min(threads, idle()))
+            torch.set_num_threads(now)
+            self.logger.record("train/update_threads", now)
             try:
                 return super().train(*args, **kwargs)
             finally:

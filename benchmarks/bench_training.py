@@ -16,6 +16,7 @@ last line is ``old path X decisions/s, new path Y decisions/s, ratio R``. Run it
 
     python benchmarks/bench_training.py --timesteps 65536
     python benchmarks/bench_training.py --timesteps 65536 --new-path sync   # the new path on single envs
+    python benchmarks/bench_training.py --timesteps 65536 --update-threads 1   # updates on one core
 """
 
 from __future__ import annotations
@@ -92,12 +93,14 @@ def main() -> None:
     parser.add_argument(
         "--new-path", choices=("batched", "sync"), default="batched", help="sync: the new path on single envs"
     )
+    parser.add_argument("--update-threads", type=int, default=None, help="the new path's (default: the YAML's)")
     args = parser.parse_args()
     settle_idle_threads()  # as the agri command does, before torch is imported
     print(f"load average {os.getloadavg()[0]:.2f} on {os.cpu_count()} cores at the start")
     old, done = decisions_per_second(OLD_PATH, args.timesteps)
     print(f"old path: {done} decisions, {old:,.0f} decisions/s", flush=True)
-    new, done = decisions_per_second({}, args.timesteps, batched=args.new_path == "batched")
+    threads = {} if args.update_threads is None else {"update_threads": args.update_threads}
+    new, done = decisions_per_second(threads, args.timesteps, batched=args.new_path == "batched")
     print(f"new path ({args.new_path} envs): {done} decisions, {new:,.0f} decisions/s", flush=True)
     print(f"load average {os.getloadavg()[0]:.2f} at the end")
     print(f"old path {old:,.0f} decisions/s, new path {new:,.0f} decisions/s, ratio {new / old:.2f}")

@@ -7,6 +7,8 @@ observation wrappers, curricula, ``Monitor`` statistics and ``VecNormalize`` on 
 
 import dataclasses
 import functools
+import os
+import types
 
 import gymnasium as gym
 import numpy as np
@@ -33,7 +35,15 @@ from agri_training.learned.vector import (
     make_sync_vector_env,
     split_info,
 )
-from agri_training.train import TrainRequest, make_vec_env, resolve_config, train, with_update_threads
+from agri_training.train import (
+    TrainRequest,
+    idle_cores,
+    make_vec_env,
+    make_vector_train_env,
+    resolve_config,
+    train,
+    with_update_threads,
+)
 
 ENV_ID = "agri_envs/GreenhouseNav-v2"
 #: Short episodes (truncations), people who stand in the way (collisions), and the recipe's wrappers.
@@ -257,18 +267,32 @@ def test_every_wrapper_has_a_vector_form():
     assert set(VECTOR_TRAIN_WRAPPERS) == set(TRAIN_WRAPPERS)
 
 
-def test_update_threads_apply_to_the_gradient_updates_only():
+def test_update_threads_take_the_idle_cores_at_most(tmp_path):
+    recorded = []
+
     class Algorithm:
+        logger = types.SimpleNamespace(record=lambda key, value: recorded.append((key, value)))
+
         def train(self):
             return torch.get_num_threads()
 
     before = torch.get_num_threads()
     torch.set_num_threads(1)
     try:
-        assert with_update_threads(Algorithm, 2)().train() == 2
-        assert torch.get_num_threads() == 1
+        assert with_update_threads(Algorithm, 2, idle=lambda: 2)().train() == 2
+        assert torch.get_num_threads() == 1  # the rollout's threads again
+        assert with_update_threads(Algorithm, 2, idle=lambda: 1)().train() == 1  # the other core is taken
+        assert with_update_threads(Algorithm, 2, idle=lambda: 8)().train() == 2
+        assert recorded == [("train/update_threads", 2), ("train/update_threads", 1), ("train/update_threads", 2)]
     finally:
         torch.set_num_threads(before)
+    cores = len(os.sched_getaffinity(0))
+    loadavg = tmp_path / "loadavg"
+    loadavg.write_text("0.50 0.40 0.30 1/200 4242\n")  # only the caller runs
+    assert idle_cores(loadavg) == cores
+    loadavg.write_text(f"3.00 2.00 1.00 {cores + 5}/200 4242\n")
+    assert idle_cores(loadavg) == 1
+    assert idle_cores(tmp_path / "missing") == cores
 
 
 def test_monitor_and_vec_monitor_count_the_same_episodes():
@@ -312,3 +336,13 @@ def test_a_run_on_the_vector_path_is_the_run_on_the_dummy_path(tmp_path):
     for key in old:
         assert torch.equal(old[key], new[key]), key
     assert (runs["dummy"] / "normalize.json").read_text() == (runs["vector"] / "normalize.json").read_text()
+
+
+def test_vector_path_refusals_name_the_fix(tmp_path):
+    config = resolve_config(
+        TrainRequest(ENV_ID, "ppo", tmp_path, overrides={"vec_env": "vector", "env_kwargs": {"frame_skip": 4}})
+    )
+    with pytest.raises(ValueError, match="set action_repeat, not env_kwargs.frame_skip"):
+        make_vector_train_env(config)
+    with pytest.raises(ValueError, match="vec_env 'vector' applies to Gymnasium envs only"):
+        resolve_config(TrainRequest("robot_chain_v0", "ppo", tmp_path, overrides={"vec_env": "vector"}))
