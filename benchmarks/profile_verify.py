@@ -6,7 +6,8 @@ calls inside it count for themselves), so the parts of an entry add up to its wa
 
 * ``env build``: ``agri_envs.make`` (once per entry and level: the worker's env cache);
 * ``policy build``: ``load_policy`` (once per episode: a fresh policy per job);
-* ``reset`` and ``step``: the env's, through ``gym.make``'s wrappers (the episode loop's calls);
+* ``reset`` and ``step``: the env's, through ``gym.make``'s wrappers (the episode loop's calls), or its batched
+  form's (``gym.make_vec``) where episodes run batched;
 * ``policy``: the policy's ``predict`` without the two parts below;
 * ``network``: a learned policy's forward pass (:class:`~agri_training.learned.inference.PolicyNetwork`);
 * ``SLAM``: ``HectorSlam.update`` (``harik-apf``'s localization);
@@ -32,6 +33,7 @@ pin_numeric_kernels()
 
 import argparse  # noqa: E402
 import functools  # noqa: E402
+import importlib  # noqa: E402
 import json  # noqa: E402
 import os  # noqa: E402
 import subprocess  # noqa: E402
@@ -40,6 +42,8 @@ import time  # noqa: E402
 from collections import defaultdict  # noqa: E402
 from collections.abc import Callable  # noqa: E402
 from typing import Any  # noqa: E402
+
+import gymnasium as gym  # noqa: E402
 
 import agri_envs  # noqa: E402
 import agri_training.evaluation.episode as episode_module  # noqa: E402
@@ -90,6 +94,14 @@ def instrument() -> None:
     for driver in (episode_module._SingleAgent, episode_module._Team):
         driver.reset = timed("reset", driver.reset)  # type: ignore[method-assign]
         driver.step = timed("step", driver.step)  # type: ignore[method-assign]
+    for env_id in agri_envs.env_ids():  # the batched forms' steps and resets, where an env has one
+        entry_point = gym.registry[env_id].vector_entry_point if env_id in gym.registry else None
+        if isinstance(entry_point, str):
+            module, name = entry_point.split(":")
+            vector_class = getattr(importlib.import_module(module), name)
+            if not getattr(vector_class.step, "__wrapped__", None):
+                vector_class.reset = timed("reset", vector_class.reset)
+                vector_class.step = timed("step", vector_class.step)
     PolicyNetwork.act = timed("network", PolicyNetwork.act)  # type: ignore[method-assign]
     HectorSlam.update = timed("SLAM", HectorSlam.update)  # type: ignore[method-assign]
     evaluate_module.summarize = timed("summaries", evaluate_module.summarize)

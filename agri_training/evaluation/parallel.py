@@ -190,7 +190,17 @@ def run_job(job: EpisodeJob) -> dict[str, Any]:
             policies = [load_policy(job.policy, sub_env) for sub_env in envs.envs]
             limit_torch_threads()
             stage = "episode"
-            outs = _run_batch_job(job, envs, policies)
+            try:
+                outs = _run_batch_job(job, envs, policies)
+            except Exception:
+                # Which episode raised? Run them one by one in the reference loop: the one that raises there is
+                # reported with its seed, as without batching. If none does, the batch's own error stands.
+                _VECTOR_CACHE.pop(_vector_key(job)).close()
+                singles = [dataclasses.replace(job, seed=job.seed + i, batch=1) for i in range(job.batch)]
+                for single in singles:
+                    if not (result := run_job(single))["ok"]:
+                        return {**result, "seed": single.seed}
+                raise
         else:
             env, trace_keys = _env_for(job)
             policy = load_policy(job.policy, env)
@@ -232,6 +242,8 @@ def _unwrap(job: EpisodeJob, result: dict[str, Any]) -> list[EpisodeOutput]:
     if result["stage"] == "build" and result["exc_type"] == "ValueError":
         # A bad env argument or policy name: the same clear user error as in a serial run.
         raise ValueError(result["error"].removeprefix("ValueError: "))
+    if "seed" in result:  # the episode of a batch that raised when run alone
+        job = dataclasses.replace(job, seed=result["seed"], batch=1)
     raise EpisodeError(job, result["error"], result["traceback"])
 
 

@@ -5,13 +5,13 @@ import math
 import gymnasium as gym
 import numpy as np
 import pytest
+from hector_reference import ReferenceHectorSlam
 
 import agri_envs  # noqa: F401
 from agri_baselines import make_policy, policy_spec
 from agri_baselines.hector_slam import HectorSlam, HectorSlamConfig, interpolate_map
 from agri_envs.sim2d.gridmap import rasterize
 from agri_training.evaluation.episode import localization_errors, run_episode, start_frame_to_world
-from hector_reference import ReferenceHectorSlam
 
 ENV_ID = "agri_envs/GreenhouseNav-v2"
 
