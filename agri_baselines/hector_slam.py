@@ -189,6 +189,45 @@ def _matching_cost(
 
 
 @numba.njit(cache=True)
+def _normal_equations(
+    prob: np.ndarray, cell: float, origin: float, px: np.ndarray, py: np.ndarray, x: float, y: float, psi: float
+) -> tuple[float, float, float, float, float, float, float, float, float, float]:
+    """One pass over the scan at pose ``(x, y, psi)``: the Gauss-Newton sums and the matching cost.
+
+    Returns ``(h00, h01, h02, h11, h12, h22, b0, b1, b2, cost)``: ``H`` and ``b`` of ``H dxi = sum J^T (1 - M)``
+    over the points on the grid (Kohlbrecher eqs. 9-13), and :func:`_matching_cost` (off-grid points count as
+    misses), each summed in point order, so each equals what a pass computing it alone gives.
+    """
+    c = math.cos(psi)
+    s = math.sin(psi)
+    tx = (x - origin) / cell
+    ty = (y - origin) / cell
+    h00 = h01 = h02 = h11 = h12 = h22 = 0.0
+    b0 = b1 = b2 = 0.0
+    cost = 0.0
+    for k in range(px.shape[0]):
+        mx = tx + c * px[k] - s * py[k]
+        my = ty + s * px[k] + c * py[k]
+        value, gx, gy, ok = _interpolate(prob, mx, my)
+        residual = 1.0 - value if ok else 1.0
+        cost += residual * residual
+        if not ok:
+            continue
+        # dS/dpsi of the rotated point (map cells per radian).
+        j2 = gx * (-s * px[k] - c * py[k]) + gy * (c * px[k] - s * py[k])
+        b0 += gx * residual
+        b1 += gy * residual
+        b2 += j2 * residual
+        h00 += gx * gx
+        h01 += gx * gy
+        h02 += gx * j2
+        h11 += gy * gy
+        h12 += gy * j2
+        h22 += j2 * j2
+    return h00, h01, h02, h11, h12, h22, b0, b1, b2, cost
+
+
+@numba.njit(cache=True)
 def _gauss_newton(
     prob: np.ndarray,
     cell: float,
@@ -205,6 +244,9 @@ def _gauss_newton(
     Translations are handled in map cells so that H is well scaled on every level. With
     ``max_halvings > 0`` a step must lower the cost, else it is halved up to that many times and the
     level ends when none does; ``max_halvings = 0`` takes every step, as hector_mapping does.
+
+    The cost of a tried pose and the next iteration's sums there come from one pass over the scan
+    (:func:`_normal_equations`): an accepted step's pass is the next iteration's.
     """
     n = points.shape[0]
     px = np.empty(n)  # the endpoints in cells of this level, once for every pass over them
@@ -212,32 +254,10 @@ def _gauss_newton(
     for k in range(n):
         px[k] = points[k, 0] / cell
         py[k] = points[k, 1] / cell
-    cost = _matching_cost(prob, cell, origin, px, py, pose[0], pose[1], pose[2])
-    for _ in range(iterations):
-        c = math.cos(pose[2])
-        s = math.sin(pose[2])
-        tx = (pose[0] - origin) / cell
-        ty = (pose[1] - origin) / cell
-        h00 = h01 = h02 = h11 = h12 = h22 = 0.0
-        b0 = b1 = b2 = 0.0
-        for k in range(n):
-            mx = tx + c * px[k] - s * py[k]
-            my = ty + s * px[k] + c * py[k]
-            value, gx, gy, ok = _interpolate(prob, mx, my)
-            if not ok:
-                continue
-            residual = 1.0 - value
-            # dS/dpsi of the rotated point (map cells per radian).
-            j2 = gx * (-s * px[k] - c * py[k]) + gy * (c * px[k] - s * py[k])
-            b0 += gx * residual
-            b1 += gy * residual
-            b2 += j2 * residual
-            h00 += gx * gx
-            h01 += gx * gy
-            h02 += gx * j2
-            h11 += gy * gy
-            h12 += gy * j2
-            h22 += j2 * j2
+    h00, h01, h02, h11, h12, h22, b0, b1, b2, cost = _normal_equations(
+        prob, cell, origin, px, py, pose[0], pose[1], pose[2]
+    )
+    for iteration in range(iterations):
         if h00 == 0.0 or h11 == 0.0:
             break
         # Solve the symmetric 3x3 system by its adjugate (no LAPACK in the hot loop).
@@ -258,15 +278,19 @@ def _gauss_newton(
             pose[0] += dx
             pose[1] += dy
             pose[2] += dpsi
+            if iteration + 1 < iterations:
+                h00, h01, h02, h11, h12, h22, b0, b1, b2, _ = _normal_equations(
+                    prob, cell, origin, px, py, pose[0], pose[1], pose[2]
+                )
             continue
         accepted = False
         for _ in range(max_halvings + 1):
-            new_cost = _matching_cost(prob, cell, origin, px, py, pose[0] + dx, pose[1] + dy, pose[2] + dpsi)
-            if new_cost < cost:
+            tried = _normal_equations(prob, cell, origin, px, py, pose[0] + dx, pose[1] + dy, pose[2] + dpsi)
+            if tried[9] < cost:
                 pose[0] += dx
                 pose[1] += dy
                 pose[2] += dpsi
-                cost = new_cost
+                h00, h01, h02, h11, h12, h22, b0, b1, b2, cost = tried
                 accepted = True
                 break
             dx *= 0.5
