@@ -19,15 +19,17 @@ Run it alone on its cores (``cpuslot``), and read the load it prints.
 
 from __future__ import annotations
 
+import os  # isort: skip
+import sys  # isort: skip
+
 from agri_training.__main__ import pin_numeric_kernels  # isort: skip  (before numpy)
 
-pin_numeric_kernels()
+if "numpy" not in sys.modules:  # a worker process importing this script as __mp_main__ has them already
+    pin_numeric_kernels()
 
 import argparse  # noqa: E402
 import functools  # noqa: E402
-import os  # noqa: E402
 import statistics  # noqa: E402
-import sys  # noqa: E402
 import time  # noqa: E402
 from collections.abc import Callable  # noqa: E402
 from pathlib import Path  # noqa: E402

@@ -27,17 +27,19 @@ Run it alone on its cores (``cpuslot``): the times are wall times.
 
 from __future__ import annotations
 
+import os  # isort: skip
+import sys  # isort: skip
+
 from agri_training.__main__ import pin_numeric_kernels  # isort: skip  (before numpy)
 
-pin_numeric_kernels()
+if "numpy" not in sys.modules:  # a worker process importing this script as __mp_main__ has them already
+    pin_numeric_kernels()
 
 import argparse  # noqa: E402
 import functools  # noqa: E402
 import importlib  # noqa: E402
 import json  # noqa: E402
-import os  # noqa: E402
 import subprocess  # noqa: E402
-import sys  # noqa: E402
 import time  # noqa: E402
 from collections import defaultdict  # noqa: E402
 from collections.abc import Callable  # noqa: E402

@@ -37,11 +37,13 @@ from typing import Any
 import gymnasium as gym
 
 import agri_envs
+from agri_baselines import policy_spec
 from agri_training.core.documents import EpisodeOutput
 from agri_training.core.pool import limit_torch_threads, run_items
 from agri_training.evaluation.batched import run_batch
 from agri_training.evaluation.episode import run_episode
 from agri_training.evaluation.policies import load_policy
+from agri_training.learned.policy import is_run_path
 
 #: Per-process cache of built envs (and their trace keys), keyed by :meth:`EpisodeJob.config_key`. A worker
 #: usually sees one configuration at a time (jobs are handed out in order), so a few entries suffice.
@@ -255,6 +257,18 @@ ResultCallback = Callable[[int, EpisodeJob, EpisodeOutput], None]
 
 #: What the worker processes import once (numba kernels loaded, envs and baselines registered).
 PRELOAD = ("agri_training.evaluation.parallel", "agri_envs", "agri_baselines")
+#: ... and, when a job runs a learned policy, torch (its weights are read with ``torch.load``; about 2 s of imports
+#: that every worker would pay on its first learned episode).
+LEARNED_PRELOAD = ("torch",)
+
+
+def _runs_learned(job: EpisodeJob) -> bool:
+    if is_run_path(job.policy):
+        return True
+    try:
+        return bool(policy_spec(job.policy).learned)
+    except ValueError:
+        return False
 
 
 def _lost(index: int, message: str) -> dict[str, Any]:
@@ -302,7 +316,8 @@ def run_episodes(
     try:
         # Jobs go out in order (or longest first), two per worker in flight: jobs of one configuration stay
         # together on a worker (its cached env is reused) and the tail of the run stays balanced.
-        run_items(run_job, [jobs[i] for i in order], done, workers, ray, PRELOAD, _lost, in_flight_per_worker=2)
+        preload = PRELOAD + (LEARNED_PRELOAD if any(_runs_learned(job) for job in jobs) else ())
+        run_items(run_job, [jobs[i] for i in order], done, workers, ray, preload, _lost, in_flight_per_worker=2)
     finally:
         clear_cache()
     return [o for o in outs if o is not None]
