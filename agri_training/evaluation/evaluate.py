@@ -10,7 +10,7 @@ from __future__ import annotations
 import dataclasses
 import sys
 import time
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from typing import Any, cast
 
 import numpy as np
@@ -27,6 +27,7 @@ from agri_training.core.documents import (
 )
 from agri_training.core.progress import Progress
 from agri_training.core.stats import format_interval, iqm, rate_interval, stratified_bootstrap_ci
+from agri_training.evaluation.batched import BATCH_SIZE, batchable
 from agri_training.evaluation.parallel import EpisodeJob, run_episodes
 from agri_training.evaluation.policies import EvalRequest, resolve_env_kwargs
 
@@ -139,7 +140,7 @@ class _Level:
     jobs: list[EpisodeJob]
 
 
-def _plan(requests: list[EvalRequest]) -> list[_Level]:
+def _plan(requests: list[EvalRequest], batch: int) -> list[_Level]:
     levels = []
     for r, request in enumerate(requests):
         if request.episodes < 1:
@@ -150,18 +151,32 @@ def _plan(requests: list[EvalRequest]) -> list[_Level]:
         )
         for k, (label, base) in enumerate(bases):
             kwargs, privileged = resolve_env_kwargs(request, base)
-            jobs = episode_jobs(request, kwargs)
+            jobs = episode_jobs(request, kwargs, batch)
             levels.append(_Level(r, k, request, label or request.label, kwargs, privileged, jobs))
     return levels
 
 
-def episode_jobs(request: EvalRequest, kwargs: Mapping[str, Any]) -> list[EpisodeJob]:
-    """The jobs of one level: one per episode, or one per campaign of ``request.campaign_runs`` episodes.
+def episode_jobs(request: EvalRequest, kwargs: Mapping[str, Any], batch: int = 1) -> list[EpisodeJob]:
+    """The jobs of one level: one per episode or batch of episodes, or one per campaign of ``campaign_runs``.
 
     Campaign c runs seeds ``seed + c * runs ..`` in the world of ``layout_seed = seed + c * runs`` (its first
     seed), unless the arguments already fix ``layout_seed`` (then every campaign drives that one world).
+    With ``batch > 1``, a policy that :func:`~agri_training.evaluation.batched.batchable` allows on an env with
+    a batched form runs its episodes in batches of at most ``batch`` consecutive seeds, as equal in size as
+    can be (the episodes that record traces apart from the others).
+
+    Raises:
+        ValueError: For ``batch < 1``.
     """
+    if isinstance(batch, bool) or not isinstance(batch, int) or batch < 1:
+        raise ValueError(f"batch must be an int >= 1, got {batch!r}")
     runs = request.campaign_runs
+    if runs == 1 and batch > 1 and batchable(request.env_id, request.policy):
+        traced = min(request.record_traces, request.episodes)
+        return [
+            EpisodeJob(request.env_id, kwargs, request.policy, request.seed + first, first < traced, batch=size)
+            for first, size in _batches(0, traced, batch) + _batches(traced, request.episodes, batch)
+        ]
     if runs == 1:
         return [
             EpisodeJob(request.env_id, kwargs, request.policy, request.seed + i, i < request.record_traces)
@@ -177,16 +192,31 @@ def episode_jobs(request: EvalRequest, kwargs: Mapping[str, Any]) -> list[Episod
     return jobs
 
 
+def _batches(start: int, stop: int, most: int) -> list[tuple[int, int]]:
+    """``(first, size)`` of the fewest runs of at most ``most`` indices covering ``[start, stop)``, sizes within 1."""
+    count = stop - start
+    if count <= 0:
+        return []
+    n = -(-count // most)
+    sizes = [count // n + (1 if k < count % n else 0) for k in range(n)]
+    firsts = [start + sum(sizes[:k]) for k in range(n)]
+    return list(zip(firsts, sizes, strict=True))
+
+
 def evaluate(
-    request: EvalRequest, progress: bool = True, workers: int | None = 1, ray: str | None = None
+    request: EvalRequest,
+    progress: bool = True,
+    workers: int | None = 1,
+    ray: str | None = None,
+    batch: int = BATCH_SIZE,
 ) -> EvaluationDocument:
     """Run the request and return the result document.
 
     For a scenario that sweeps an argument the document holds one result per value under ``levels`` (and
-    the ``summary`` of all levels pooled); otherwise it is a single result. ``workers`` and ``ray`` choose
-    where the episodes run (see :func:`evaluate_many`); the document is the same wherever they run.
+    the ``summary`` of all levels pooled); otherwise it is a single result. ``workers``, ``ray`` and ``batch``
+    choose where and how the episodes run (see :func:`evaluate_many`); the document is the same whichever.
     """
-    return evaluate_many([request], progress, workers, ray)[0]
+    return evaluate_many([request], progress, workers, ray, batch=batch)[0]
 
 
 def evaluate_many(
@@ -195,6 +225,8 @@ def evaluate_many(
     workers: int | None = 1,
     ray: str | None = None,
     on_episode: Callable[[EpisodeProgress], None] | None = None,
+    batch: int = BATCH_SIZE,
+    costs: Sequence[Sequence[float] | None] | None = None,
 ) -> list[EvaluationDocument]:
     """Evaluate several requests in one run of episodes, and return one result document per request.
 
@@ -210,13 +242,20 @@ def evaluate_many(
         ray: Run the episodes as Ray tasks: ``"local"``, ``"auto"`` or a cluster address.
         on_episode: Called after each finished episode (in completion order) with an
             :class:`EpisodeProgress`.
+        batch: Most episodes stepped together in the env's batched form, where the env has one and the
+            policy acts on its observations alone (:mod:`agri_training.evaluation.batched`); 1 runs every
+            episode in the reference loop. The records are the same.
+        costs: Per request, the expected cost of each of its episodes (levels one after the other; any unit,
+            e.g. the seconds a committed entry took), or None. The jobs then start longest first, so that
+            the workers finish together; results do not depend on the order.
 
     Raises:
         ValueError: For bad arguments (unknown scenario, policy, env argument, ``workers < 1``).
         agri_training.parallel.EpisodeError: When an episode raises; it names the seed and the exception.
     """
-    levels = _plan(requests)
+    levels = _plan(requests, batch)
     jobs = [job for level in levels for job in level.jobs]
+    priority = _job_costs(levels, costs) if costs is not None else None
     where = [(level, i) for level in levels for i in range(level.request.episodes)]
     display = _OrderedDisplay(where, progress)
     t0 = time.perf_counter()
@@ -235,7 +274,7 @@ def evaluate_many(
             )
 
     try:
-        outs = run_episodes(jobs, workers=workers, ray=ray, on_result=on_result)
+        outs = run_episodes(jobs, workers=workers, ray=ray, on_result=on_result, priority=priority)
     finally:
         display.close()
     docs: list[list[EvaluationDocument]] = [[] for _ in requests]
@@ -260,6 +299,21 @@ def evaluate_many(
     return results
 
 
+def _job_costs(levels: list[_Level], costs: Sequence[Sequence[float] | None]) -> list[float]:
+    """Each job's expected cost: the sum of its episodes' (0 where a request has none)."""
+    if len(costs) != len({level.request_index for level in levels}):
+        raise ValueError(f"costs: one entry per request expected, got {len(costs)}")
+    out = []
+    offset = {r: 0 for r in range(len(costs))}
+    for level in levels:
+        per_episode = costs[level.request_index]
+        for job in level.jobs:
+            start = offset[level.request_index]
+            offset[level.request_index] += job.episodes
+            out.append(float(sum(per_episode[start : start + job.episodes])) if per_episode is not None else 0.0)
+    return out
+
+
 def evaluate_level(
     request: EvalRequest,
     base: Mapping[str, Any] | None,
@@ -267,10 +321,11 @@ def evaluate_level(
     label: str | None = None,
     workers: int | None = 1,
     ray: str | None = None,
+    batch: int = BATCH_SIZE,
 ) -> EvaluationDocument:
     """Evaluate one set of env arguments (one level of a scenario)."""
     kwargs, privileged = resolve_env_kwargs(request, base)
-    level = _Level(0, 0, request, label, kwargs, privileged, episode_jobs(request, kwargs))
+    level = _Level(0, 0, request, label, kwargs, privileged, episode_jobs(request, kwargs, batch))
     display = _OrderedDisplay([(level, i) for i in range(request.episodes)], progress)
     try:
         outs = run_episodes(
