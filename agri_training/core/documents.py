@@ -11,7 +11,7 @@ from __future__ import annotations
 import math
 import subprocess
 from pathlib import Path
-from typing import Any, TypedDict
+from typing import Any, NotRequired, TypedDict
 
 import numpy as np
 
@@ -28,17 +28,19 @@ class EpisodeOutput(TypedDict):
 
 
 class TraceDocument(TypedDict):
-    """The per-step trace of one episode of an evaluation."""
+    """The per-step trace of one episode of an evaluation (``record``: its whole record, where a report keeps it)."""
 
     seed: int
     data: dict[str, Any]
+    record: NotRequired[dict[str, Any] | None]
 
 
 class EvaluationDocument(TypedDict, total=False):
     """The result of evaluating a policy on one env (one level of a scenario, or all levels pooled).
 
     A scenario that sweeps an argument has ``sweep`` and ``levels`` (one document per value) instead of
-    ``episodes`` and ``traces``; ``summary`` is then pooled over the levels.
+    ``episodes`` and ``traces``; ``summary`` is then pooled over the levels. An evaluation in campaigns has
+    ``campaign_runs`` (runs per campaign; the records carry ``campaign_run`` and ``layout_seed``).
     """
 
     env_id: str
@@ -56,6 +58,7 @@ class EvaluationDocument(TypedDict, total=False):
     traces: list[TraceDocument]
     sweep: dict[str, Any]
     levels: list[EvaluationDocument]
+    campaign_runs: int
 
 
 #: Per-episode keys that measure the computer, not the policy (wall-clock and planning times): they are
