@@ -99,6 +99,7 @@ def register_envs() -> None:
         register(
             id="agri_envs/GreenhouseCoverage-v1",
             entry_point="agri_envs.coverage.greenhouse_coverage:GreenhouseCoverageEnv",
+            vector_entry_point="agri_envs.coverage.vector:GreenhouseCoverageVectorEnv",
         )
 
 

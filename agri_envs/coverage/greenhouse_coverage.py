@@ -192,8 +192,9 @@ class GreenhouseCoverageEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
 
         env = gym.make("agri_envs/GreenhouseCoverage-v1", n_rows=6, row_bend=0.1, vegetation_echo_prob=0.3)
 
-    Batched: v0 had a batched form (``gym.make_vec``); v1's memory and progress reward are not in it yet, so
-    ``gym.make_vec`` on v1 steps single envs.
+    Batched: ``gym.make_vec("agri_envs/GreenhouseCoverage-v1", num_envs=64, **kwargs)`` steps 64 of these worlds
+    in one compiled loop (:class:`~agri_envs.coverage.vector.GreenhouseCoverageVectorEnv`), each sub-env's
+    episodes bit for bit this env's for the same seed and actions (its memory and progress reward included).
 
     ## Baselines
 
@@ -211,7 +212,7 @@ class GreenhouseCoverageEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
       size followed ``n_rows``) is gone. New reward term ``reward_progress`` (0.3 per metre along the
       covering serpentine, turns included); with v0's reward PPO parked after the first corridor. New
       argument ``scene_distribution``; ``info["subgoal_index"]``. Dynamics, sensors, the other reward terms,
-      termination and time limits are unchanged.
+      termination and time limits are unchanged. Later, without a version change: the batched form again.
 
     ## References
 

@@ -1,11 +1,12 @@
-"""GreenhouseCoverage-v0 as a native Gymnasium ``VectorEnv``: N greenhouses covered together in one compiled loop.
+"""GreenhouseCoverage-v1 as a native Gymnasium ``VectorEnv``: N greenhouses covered together in one compiled loop.
 
-``gym.make_vec("agri_envs/GreenhouseCoverage-v0", num_envs=N, **kwargs)`` builds
+``gym.make_vec("agri_envs/GreenhouseCoverage-v1", num_envs=N, **kwargs)`` builds
 :class:`GreenhouseCoverageVectorEnv`. Each sub-env is a
 :class:`~agri_envs.coverage.greenhouse_coverage.GreenhouseCoverageEnv` whose own ``reset`` sets every episode
-up; :func:`_step_worlds` then steps all the worlds (drive with exact contact, crop or other contact, compass,
-track encoders, coverage bins and reward, sonars with their foliage echoes and noise, observation) in one
-numba call, drawing each world's noise from its sub-env's generator. For the same seeds and actions it gives
+up (a greenhouse drawn from ``scene_distribution`` too); :func:`_step_worlds` then steps all the worlds
+(drive with exact contact, crop or other contact, compass, track encoders, coverage bins, progress along the
+serpentine and the reward, sonars with their foliage echoes and noise, the memory and the observation) in
+one numba call, drawing each world's noise from its sub-env's generator. For the same seeds and actions it gives
 the single env's numbers bit for bit (``tests/envs/test_coverage_vector.py``), contacts aside as
 :mod:`agri_envs.sim2d.batched` says.
 
@@ -25,7 +26,8 @@ from gymnasium.vector import AutoresetMode
 from agri_envs._vector import BatchedEnv, InfoKey, grown
 from agri_envs.coverage import robot as fito
 from agri_envs.coverage.greenhouse_coverage import GreenhouseCoverageEnv
-from agri_envs.sim2d.batched import compass_read, drive_box, py_hypot, sonar_scan, track_odometry
+from agri_envs.sim2d.batched import compass_read, drive_box, py_hypot, route_advance, sonar_scan, track_odometry
+from agri_envs.sim2d.egomap import egocentric_view, mark_memory
 from agri_envs.sim2d.raycast import footprint_clearance
 
 __all__ = ["GreenhouseCoverageVectorEnv"]
@@ -33,34 +35,36 @@ __all__ = ["GreenhouseCoverageVectorEnv"]
 #: ``info`` keys of a step, in the single env's order: (key, dtype, column of the array of that dtype).
 _INFO: tuple[InfoKey, ...] = (
     ("reward_coverage", float, 0),
-    ("reward_success", float, 1),
-    ("reward_contact", float, 2),
-    ("reward_cross_track", float, 3),
-    ("reward_time", float, 4),
+    ("reward_progress", float, 1),
+    ("reward_success", float, 2),
+    ("reward_contact", float, 3),
+    ("reward_cross_track", float, 4),
+    ("reward_time", float, 5),
     ("is_success", bool, 0),
     ("corridor", int, 0),
-    ("cross_track", float, 5),
-    ("max_cross_track", float, 6),
-    ("coverage", float, 7),
+    ("cross_track", float, 6),
+    ("max_cross_track", float, 7),
+    ("coverage", float, 8),
     ("corridors_covered", int, 1),
-    ("n_corridors", int, 2),
-    ("mean_cross_track", float, 8),
-    ("crop_contacts", int, 3),
-    ("other_contacts", int, 4),
+    ("subgoal_index", int, 2),
+    ("n_corridors", int, 3),
+    ("mean_cross_track", float, 9),
+    ("crop_contacts", int, 4),
+    ("other_contacts", int, 5),
     ("collision", bool, 1),
-    ("clearance", float, 9),
-    ("min_clearance", float, 10),
-    ("x", float, 11),
-    ("y", float, 12),
-    ("yaw", float, 13),
-    ("est_x", float, 14),
-    ("est_y", float, 15),
-    ("compass", float, 16),
-    ("v", float, 17),
-    ("w", float, 18),
-    ("path_length", float, 19),
-    ("episode_time", float, 20),
-    *((f"sonar_{name}", float, 21 + k) for k, name in enumerate(fito.SONAR_NAMES)),
+    ("clearance", float, 10),
+    ("min_clearance", float, 11),
+    ("x", float, 12),
+    ("y", float, 13),
+    ("yaw", float, 14),
+    ("est_x", float, 15),
+    ("est_y", float, 16),
+    ("compass", float, 17),
+    ("v", float, 18),
+    ("w", float, 19),
+    ("path_length", float, 20),
+    ("episode_time", float, 21),
+    *((f"sonar_{name}", float, 22 + k) for k, name in enumerate(fito.SONAR_NAMES)),
 )
 
 
@@ -74,7 +78,7 @@ class _Constants(NamedTuple):
     circumradius: float
     ground_truth: bool
     terminate_on_contact: bool
-    weights: np.ndarray  # coverage, success, contact, cross_track, time
+    weights: np.ndarray  # coverage, progress, success, contact, cross_track, time
     compass_bias: float
     compass_noise: float
     gauge: float
@@ -86,6 +90,7 @@ class _Constants(NamedTuple):
     sonar_max: float
     sonar_noise: float
     slip_prob: float
+    memory_cell: float  # the memory grid's cell size (m)
 
 
 class _State(NamedTuple):
@@ -121,6 +126,15 @@ class _State(NamedTuple):
     first_bin: np.ndarray  # (n, K) index of each corridor's first bin in ``covered``
     covered: np.ndarray  # (n, B) bool
     covered_count: np.ndarray  # (n, K)
+    subgoals: np.ndarray  # (n, G, 2) the covering serpentine's subgoals
+    n_subgoals: np.ndarray  # (n,)
+    subgoal_index: np.ndarray  # (n,) the current subgoal
+    last_to_go: np.ndarray  # (n,) its distance to go at the last step (m)
+    subgoal_radius: np.ndarray  # (n,) m
+    turn_distance: np.ndarray  # (n,) m/rad
+    memory: np.ndarray  # (n, 2, NY, NX) each robot's memory grid (EgoMap.grid)
+    memory_size: np.ndarray  # (n, 2) its rows and columns
+    memory_origin: np.ndarray  # (n, 2) its origin (m)
 
 
 class _Output(NamedTuple):
@@ -130,9 +144,10 @@ class _Output(NamedTuple):
     compass: np.ndarray
     velocity: np.ndarray
     pose_obs: np.ndarray
-    coverage: np.ndarray
+    memory: np.ndarray
     sonar_m: np.ndarray
     hard: np.ndarray  # scratch for the sonars' echoes off solid obstacles
+    sensor_poses: np.ndarray  # scratch: the sonars' estimated poses
     reward: np.ndarray
     terminated: np.ndarray
     truncated: np.ndarray
@@ -230,8 +245,8 @@ def _step_worlds(rngs: Any, actions: np.ndarray, active: np.ndarray, c: _Constan
         x, y = pose[0], pose[1]
         n_corridors = s.n_corridors[i]
         total = s.first_bin[i, n_corridors]
-        before = np.sum(s.covered_count[i, :n_corridors]) / float(total)
         k, cross = _locate(s.lines[i], s.n_points[i], n_corridors, x, y)
+        gained = 0
         if k >= 0:
             x0 = s.lines[i, k, 0, 0]
             x1 = s.lines[i, k, s.n_points[i, k] - 1, 0]
@@ -239,17 +254,27 @@ def _step_worlds(rngs: Any, actions: np.ndarray, active: np.ndarray, c: _Constan
             if not s.covered[i, s.first_bin[i, k] + b]:
                 s.covered[i, s.first_bin[i, k] + b] = True
                 s.covered_count[i, k] += 1
+                gained = 1
             s.max_cross_track[i] = max(s.max_cross_track[i], cross)
+        progress, s.subgoal_index[i], s.last_to_go[i], _, _ = route_advance(
+            s.subgoals[i],
+            s.n_subgoals[i],
+            s.subgoal_index[i],
+            s.last_to_go[i],
+            s.subgoal_radius[i],
+            s.turn_distance[i],
+            pose,
+        )
         covered = np.sum(s.covered_count[i, :n_corridors])
-        coverage = covered / float(total)
-        gained = coverage - before
+        coverage = covered / total
         success = covered == total
         terms = (
-            w[0] * gained * n_corridors,
-            w[1] * (1.0 if success else 0.0),
-            -w[2] * (1.0 if (crop_contact or other_contact) else 0.0),
-            -w[3] * cross,
-            -w[4],
+            w[0] * (gained / total) * n_corridors,
+            w[1] * progress,
+            w[2] * (1.0 if success else 0.0),
+            -w[3] * (1.0 if (crop_contact or other_contact) else 0.0),
+            -w[4] * cross,
+            -w[5],
         )
         reward = 0.0
         for term in terms:
@@ -294,51 +319,63 @@ def _step_worlds(rngs: Any, actions: np.ndarray, active: np.ndarray, c: _Constan
             px, py, ph = pose[0], pose[1], pose[2]
         else:
             px, py, ph = s.estimate[i, 0], s.estimate[i, 1], h
+        # EgoMap.update with the sonars' poses_in_world, then EgoMap.view: the memory in the estimate's frame
+        cs, sn = math.cos(ph), math.sin(ph)
+        m, poses = c.sonar_mounts, o.sensor_poses[i]
+        for j in range(m.shape[0]):
+            poses[j, 0] = px + cs * m[j, 0] - sn * m[j, 1]
+            poses[j, 1] = py + sn * m[j, 0] + cs * m[j, 1]
+            poses[j, 2] = ph + m[j, 2]
+        grid = s.memory[i, :, : s.memory_size[i, 0], : s.memory_size[i, 1]]
+        x0, y0 = s.memory_origin[i, 0], s.memory_origin[i, 1]
+        mark_memory(grid, x0, y0, c.memory_cell, px, py, poses, sonar, c.sonar_max)
+        egocentric_view(grid, x0, y0, c.memory_cell, px, py, ph, o.memory[i])
         for j, value in enumerate(
             (px / c.pose_scale[0], py / c.pose_scale[1], 0.5 + 0.5 * math.sin(ph), 0.5 + 0.5 * math.cos(ph))
         ):
             o.pose_obs[i, j] = min(max(np.float32(value), zero), one)
-        for j in range(n_corridors):
-            o.coverage[i, j] = np.float32(s.covered_count[i, j] / s.n_bins[i, j])
         # GreenhouseCoverageEnv._info
         f = o.info_f[i]
-        f[0], f[1], f[2], f[3], f[4] = terms[0], terms[1], terms[2], terms[3], terms[4]
-        f[5], f[6], f[7] = cross, s.max_cross_track[i], coverage
-        f[8] = s.cross_sum[i] / s.cross_n[i] if s.cross_n[i] else 0.0
-        f[9], f[10] = clearance, s.min_clearance[i]
-        f[11], f[12], f[13] = pose[0], pose[1], pose[2]
-        f[14], f[15], f[16] = s.estimate[i, 0], s.estimate[i, 1], h
-        f[17], f[18], f[19], f[20] = vel[0], vel[1], s.path_length[i], s.steps[i] * c.dt
+        for j in range(6):
+            f[j] = terms[j]
+        f[6], f[7], f[8] = cross, s.max_cross_track[i], coverage
+        f[9] = s.cross_sum[i] / s.cross_n[i] if s.cross_n[i] else 0.0
+        f[10], f[11] = clearance, s.min_clearance[i]
+        f[12], f[13], f[14] = pose[0], pose[1], pose[2]
+        f[15], f[16], f[17] = s.estimate[i, 0], s.estimate[i, 1], h
+        f[18], f[19], f[20], f[21] = vel[0], vel[1], s.path_length[i], s.steps[i] * c.dt
         for j in range(sonar.shape[0]):
-            f[21 + j] = sonar[j]
+            f[22 + j] = sonar[j]
         done = 0
         for j in range(n_corridors):
             done += s.covered_count[i, j] == s.n_bins[i, j]
         o.info_i[i, 0] = k
         o.info_i[i, 1] = done
-        o.info_i[i, 2] = n_corridors
-        o.info_i[i, 3] = s.crop_contacts[i]
-        o.info_i[i, 4] = s.other_contacts[i]
+        o.info_i[i, 2] = s.subgoal_index[i]
+        o.info_i[i, 3] = n_corridors
+        o.info_i[i, 4] = s.crop_contacts[i]
+        o.info_i[i, 5] = s.other_contacts[i]
         o.info_b[i, 0] = success
         o.info_b[i, 1] = s.crop_contacts[i] > 0 or s.other_contacts[i] > 0
 
 
 class GreenhouseCoverageVectorEnv(BatchedEnv):
-    """``num_envs`` GreenhouseCoverage-v0 worlds stepped together: the native vector form of the env.
+    """``num_envs`` GreenhouseCoverage-v1 worlds stepped together: the native vector form of the env.
 
-    Made by ``gym.make_vec("agri_envs/GreenhouseCoverage-v0", num_envs=N, **kwargs)`` (or directly), with every
+    Made by ``gym.make_vec("agri_envs/GreenhouseCoverage-v1", num_envs=N, **kwargs)`` (or directly), with every
     argument of the single env (see :class:`~agri_envs.coverage.greenhouse_coverage.GreenhouseCoverageEnv`), the
     same spaces per sub-env and the same episodes: sub-env ``i`` gives what ``gym.make(id, **kwargs)`` gives for
     the same seed and actions, bit for bit. Episodes are set up by the single env's own ``reset``; the steps
     run in one compiled loop over all sub-envs. Gymnasium's vector API as
     :class:`~agri_envs._vector.BatchedEnv` describes it.
 
-    ``envs`` holds the sub-envs. Their greenhouse and corridors are the episode's; their robot, coverage and
-    counters are the vector env's copy from the episode's start (the steps run on the vector env's arrays).
+    ``envs`` holds the sub-envs. Their greenhouse and corridors are the episode's; their robot, coverage,
+    route, memory and counters are the vector env's copy from the episode's start (the steps run on the
+    vector env's arrays).
 
     Example::
 
-        envs = gym.make_vec("agri_envs/GreenhouseCoverage-v0", num_envs=64, n_rows=6)
+        envs = gym.make_vec("agri_envs/GreenhouseCoverage-v1", num_envs=64, n_rows=6)
         obs, info = envs.reset(seed=0)
         obs, reward, terminated, truncated, info = envs.step(envs.action_space.sample())
 
@@ -384,7 +421,16 @@ class GreenhouseCoverageVectorEnv(BatchedEnv):
             circumradius=spec.circumradius,
             ground_truth=cfg.localization == "ground_truth",
             terminate_on_contact=bool(cfg.terminate_on_contact),
-            weights=np.array([weights.coverage, weights.success, weights.contact, weights.cross_track, weights.time]),
+            weights=np.array(
+                [
+                    weights.coverage,
+                    weights.progress,
+                    weights.success,
+                    weights.contact,
+                    weights.cross_track,
+                    weights.time,
+                ]
+            ),
             compass_bias=float(first.compass.bias),
             compass_noise=float(first.compass.noise_std),
             gauge=float(first.encoders.gauge),
@@ -396,6 +442,7 @@ class GreenhouseCoverageVectorEnv(BatchedEnv):
             sonar_max=float(sonar.max_range),
             sonar_noise=float(sonar.noise_std),
             slip_prob=float(sonar.foliage_slip_prob),
+            memory_cell=float(first.memory.spec.cell),
         )
         n = self.num_envs
         f = np.zeros
@@ -430,6 +477,15 @@ class GreenhouseCoverageVectorEnv(BatchedEnv):
             first_bin=f((n, 1), np.int64),
             covered=f((n, 0), np.bool_),
             covered_count=f((n, 0), np.int64),
+            subgoals=f((n, 0, 2)),
+            n_subgoals=f(n, np.int64),
+            subgoal_index=f(n, np.int64),
+            last_to_go=f(n),
+            subgoal_radius=f(n),
+            turn_distance=f(n),
+            memory=f((n, 2, 0, 0)),
+            memory_size=f((n, 2), np.int64),
+            memory_origin=f((n, 2)),
         )
         obs = self._obs
         self._out = _Output(
@@ -437,9 +493,10 @@ class GreenhouseCoverageVectorEnv(BatchedEnv):
             compass=obs["compass"],
             velocity=obs["velocity"],
             pose_obs=obs["pose"],
-            coverage=obs["coverage"],
+            memory=obs["memory"],
             sonar_m=np.zeros((n, len(first.sonars))),
             hard=np.zeros((n, len(first.sonars))),
+            sensor_poses=np.zeros((n, len(first.sonars), 3)),
             reward=self._reward,
             terminated=self._terminated,
             truncated=self._truncated,
@@ -460,6 +517,7 @@ class GreenhouseCoverageVectorEnv(BatchedEnv):
         primitives = (world.circles, world.capsules, crop[0], crop[1], solid[0], solid[1])
         names = ("circles", "capsules", "crop_circles", "crop_capsules", "solid_circles", "solid_capsules")
         lines = task.corridors
+        route, grid = task.route, env.memory.grid
         n_corridors = len(lines)
         n_points = max(len(line) for line in lines)
         n_bins = [int(b) for b in task.n_bins]
@@ -472,6 +530,8 @@ class GreenhouseCoverageVectorEnv(BatchedEnv):
             "first_bin": (n_corridors + 1,),
             "covered": (sum(n_bins),),
             "covered_count": (n_corridors,),
+            "subgoals": route.targets.shape,
+            "memory": grid.shape,
         }
         grow = {
             name: grown(getattr(s, name), (self.num_envs, *shape))
@@ -493,6 +553,15 @@ class GreenhouseCoverageVectorEnv(BatchedEnv):
             s.covered[i, first[k] : first[k + 1]] = task.covered[k]
             s.covered_count[i, k] = int(task.covered[k].sum())
         s.max_cross_track[i] = task.max_cross_track
+        s.subgoals[i, : len(route.targets)] = route.targets
+        s.n_subgoals[i] = len(route.targets)
+        s.subgoal_index[i] = route.index
+        s.last_to_go[i] = route._last_to_go
+        s.subgoal_radius[i] = route.radius
+        s.turn_distance[i] = route.turn_distance
+        s.memory[i, :, : grid.shape[1], : grid.shape[2]] = grid
+        s.memory_size[i] = grid.shape[1:]
+        s.memory_origin[i] = env.memory.origin
         s.max_substep[i] = world.max_substep
         s.pose[i] = env.robot.pose
         s.vel[i] = (env.robot.v, env.robot.w)
@@ -522,6 +591,9 @@ class GreenhouseCoverageVectorEnv(BatchedEnv):
         env.robot.v, env.robot.w = float(s.vel[i, 0]), float(s.vel[i, 1])
         for k, bins in enumerate(env.task.covered):
             bins[:] = s.covered[i, s.first_bin[i, k] : s.first_bin[i, k + 1]]
+        env.task.route.index = int(s.subgoal_index[i])
+        ny, nx = env.memory.grid.shape[1:]
+        env.memory.grid[:] = s.memory[i, :, :ny, :nx]
         env._steps = int(s.steps[i])
         env._last_sonar = self._out.sonar_m[i].copy()
         env._trail = list(self._trails[i])

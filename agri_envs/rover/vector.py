@@ -28,6 +28,7 @@ from agri_envs.sim2d.batched import (
     lidar_scan,
     pooled,
     py_hypot,
+    route_advance,
     sonar_scan,
     step_people,
     wheel_odometry,
@@ -174,16 +175,6 @@ def _polar(px: float, py: float, pose: np.ndarray, diagonal: float, out: np.ndar
 
 
 @numba.njit(cache=True)
-def _distance_bearing(targets: np.ndarray, index: int, n: int, pose: np.ndarray) -> tuple[float, float]:
-    """``WaypointTask.distance`` and ``bearing`` of the current target (the last once done)."""
-    t = min(index, n - 1)
-    tx, ty = targets[t, 0], targets[t, 1]
-    d = py_hypot(tx - pose[0], ty - pose[1])
-    a = math.atan2(ty - pose[1], tx - pose[0]) - pose[2]
-    return d, math.atan2(math.sin(a), math.cos(a))
-
-
-@numba.njit(cache=True)
 def _step_worlds(rngs: Any, actions: np.ndarray, active: np.ndarray, c: _Constants, s: _State, o: _Output) -> None:
     """``GreenhouseNavEnv.step`` for every ``active`` world: ``frame_skip`` control periods, then the observation.
 
@@ -272,16 +263,12 @@ def _step_worlds(rngs: Any, actions: np.ndarray, active: np.ndarray, c: _Constan
             o.trail[i, periods, 1] = pose[1]
             periods += 1
             # WaypointTask.evaluate
-            index = s.task_index[i]
-            d, alpha = _distance_bearing(targets, index, n_targets, pose)
-            progress = s.last_to_go[i] - (d + c.turn_distance * abs(alpha))
-            reached = False
-            if index < n_targets and d < c.waypoint_radius:
-                index += 1
-                s.task_index[i] = index
-                reached = True
-                d, alpha = _distance_bearing(targets, index, n_targets, pose)
-            s.last_to_go[i] = d + c.turn_distance * abs(alpha)
+            before = s.task_index[i]
+            progress, index, s.last_to_go[i], d, alpha = route_advance(
+                targets, n_targets, before, s.last_to_go[i], c.waypoint_radius, c.turn_distance, pose
+            )
+            s.task_index[i] = index
+            reached = index != before
             success = index >= n_targets
             if c.safety_margin > 0:
                 shortfall = max(0.0, c.safety_margin - clearance) / c.safety_margin

@@ -527,3 +527,34 @@ def pooled(scan: np.ndarray, starts: np.ndarray, scale: float, out: np.ndarray) 
         for k in range(lo + 1, hi):
             best = min(best, scan[k])
         out[j] = np.float32(best / scale)
+
+
+# -- routes -----------------------------------------------------------------------------------------------
+
+
+@numba.njit(cache=True)
+def route_distance_bearing(targets: np.ndarray, index: int, n: int, pose: np.ndarray) -> tuple[float, float]:
+    """``RouteProgress.distance`` and ``bearing`` (:mod:`agri_envs.sim2d.route`) of target ``index`` (or the last)."""
+    t = min(index, n - 1)
+    tx, ty = targets[t, 0], targets[t, 1]
+    d = py_hypot(tx - pose[0], ty - pose[1])
+    a = math.atan2(ty - pose[1], tx - pose[0]) - pose[2]
+    return d, math.atan2(math.sin(a), math.cos(a))
+
+
+@numba.njit(cache=True)
+def route_advance(
+    targets: np.ndarray, n: int, index: int, last_to_go: float, radius: float, turn_distance: float, pose: np.ndarray
+) -> tuple[float, int, float, float, float]:
+    """``RouteProgress.advance`` for a route of ``n`` targets driven to target ``index``.
+
+    Returns:
+        ``(progress, index, to_go, d, alpha)``: the progress, the (new) current target, its distance to go
+        (the next call's ``last_to_go``), and its distance and bearing.
+    """
+    d, alpha = route_distance_bearing(targets, index, n, pose)
+    progress = last_to_go - (d + turn_distance * abs(alpha))
+    if index < n and d < radius:
+        index += 1
+        d, alpha = route_distance_bearing(targets, index, n, pose)
+    return progress, index, d + turn_distance * abs(alpha), d, alpha

@@ -16,8 +16,6 @@ import agri_envs  # noqa: F401
 from agri_envs.coverage.vector import GreenhouseCoverageVectorEnv
 
 ENV_ID = "agri_envs/GreenhouseCoverage-v1"
-if gym.spec(ENV_ID).vector_entry_point is None:  # the twin computes v0's step; v1's memory and progress come next
-    pytest.skip("GreenhouseCoverage-v1 has no batched form yet", allow_module_level=True)
 #: A small greenhouse the steered sub-envs can cover: one row, two corridors of 3 m, 1 m bins.
 SMALL = {"n_rows": 1, "row_length": 3.0, "bin_length": 1.0, "growth": 0.0, "layout_seed": 5}
 
