@@ -11,10 +11,10 @@ from __future__ import annotations
 import dataclasses
 
 import numpy as np
-from scipy import ndimage
 
 from agri_envs.scenes.greenhouse import LayoutParams, generate_layout
 from agri_envs.scenes.office import OfficeFloorParams, generate_office_floor
+from agri_envs.sim2d.distance import euclidean_distance_transform
 from agri_envs.sim2d.geometry import Geometry
 from agri_envs.sim2d.gridmap import OccupancyGrid, grid_to_geometry, load_ros_map, rasterize
 
@@ -51,7 +51,7 @@ def make_chain_map(geometry: Geometry, grid: OccupancyGrid, inflation: float) ->
     obstacle = (grid.data >= 50) | (grid.data < 0)
     if obstacle.all():
         raise ValueError("the map has no free cell")
-    distance = ndimage.distance_transform_edt(~obstacle) * grid.resolution
+    distance = euclidean_distance_transform(~obstacle) * grid.resolution
     # Cells touching the map's border count as next to an obstacle: nothing is known beyond it.
     h, w = obstacle.shape
     rows = (np.arange(h) + 0.5) * grid.resolution

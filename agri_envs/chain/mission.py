@@ -61,8 +61,8 @@ def plan_mission(cmap: ChainMap, cfg: RobotChainConfig, rng: np.random.Generator
     """
     best: tuple | None = None
     for _ in range(START_TRIES):
-        start_cell, goal_cell, path_cells = plan_route(cmap, cfg, rng)
-        positions, ahead = place_chain(cmap, cfg, start_cell, goal_cell)
+        start_cell, goal_cell, path_cells, from_start = plan_route(cmap, cfg, rng)
+        positions, ahead = place_chain(cmap, cfg, start_cell, goal_cell, from_start)
         if best is None or ahead < best[0]:
             best = (ahead, path_cells, positions)
         if ahead == 0 or cfg.start:
@@ -75,8 +75,12 @@ def plan_mission(cmap: ChainMap, cfg: RobotChainConfig, rng: np.random.Generator
 
 def plan_route(
     cmap: ChainMap, cfg: RobotChainConfig, rng: np.random.Generator
-) -> tuple[tuple[int, int], tuple[int, int], list]:
-    """Start and goal cells (given or sampled) and the A* path between them."""
+) -> tuple[tuple[int, int], tuple[int, int], list, np.ndarray | None]:
+    """Start and goal cells (given or sampled) and the A* path between them.
+
+    Also returns the free-floor distance (m) from the start to every cell when it was computed (a sampled
+    goal), else None.
+    """
     free = ~cmap.blocked
     roomy = free & (cmap.wall_distance >= cfg.robot_radius + 0.35)
     candidates = np.argwhere(roomy if roomy.any() else free)
@@ -92,6 +96,7 @@ def plan_route(
     res = cmap.grid.resolution
     for _ in range(200):
         s = given(cfg.start, "start") if cfg.start else tuple(candidates[rng.integers(len(candidates))])
+        dist = None
         if cfg.goal:
             g = given(cfg.goal, "goal")
         else:
@@ -108,16 +113,22 @@ def plan_route(
             g = tuple(ok[rng.integers(len(ok))])
         path = astar(cmap.blocked, s, g)
         if path is not None:
-            return (int(s[0]), int(s[1])), (int(g[0]), int(g[1])), path
+            return (int(s[0]), int(s[1])), (int(g[0]), int(g[1])), path, dist
         if cfg.start and cfg.goal:
             break
     raise ValueError("robot_chain_v0: no A* path between start and goal on the inflated map")
 
 
 def place_chain(
-    cmap: ChainMap, cfg: RobotChainConfig, start: tuple[int, int], goal: tuple[int, int]
+    cmap: ChainMap,
+    cfg: RobotChainConfig,
+    start: tuple[int, int],
+    goal: tuple[int, int],
+    from_start: np.ndarray | None = None,
 ) -> tuple[np.ndarray, int]:
     """Leader at the start; followers ``spacing`` apart along a free path behind it (or packed nearby).
+
+    ``from_start`` is the free-floor distance (m) from the start to every cell, when the caller has it.
 
     Returns:
         The ``(n, 2)`` positions, and how many followers stand ahead of the leader (nearer to the goal
@@ -130,7 +141,8 @@ def place_chain(
     if n == 1:
         return positions, 0
     need = (n - 1) * cfg.spacing
-    from_start = distance_field(cmap.blocked, start) * res
+    if from_start is None:
+        from_start = distance_field(cmap.blocked, start) * res
     to_goal = distance_field(cmap.blocked, goal) * res
 
     def ahead() -> int:
