@@ -303,7 +303,7 @@ class ApoorvaParams:
 
 
 def default_params(config: Any) -> ApoorvaParams:
-    """:class:`ApoorvaParams` for a ``robot_chain_v0`` config: ``d_s`` its spacing, ``Delta`` its max gap.
+    """:class:`ApoorvaParams` for a ``robot_chain_v1`` config: ``d_s`` its spacing, ``Delta`` its max gap.
 
     The robots brake within their acceleration limit, so a robot that stops only once its follower is
     beyond the env's ``max_gap`` overshoots it (up to 1.24 m for 1.2 m seen, chain broken at the leader's
@@ -335,7 +335,7 @@ def force_to_command(
 
 
 class ApoorvaChainPolicy:
-    """The whole chain controller as one multi-agent policy over ``robot_chain_v0`` observations.
+    """The whole chain controller as one multi-agent policy over ``robot_chain_v1`` observations.
 
     ``predict`` takes ``{agent: observation}`` and returns ``({agent: action}, state)``. It reads from each
     observation the robot's sonar, its pose, its neighbours' relative positions and (leader) the ghost;
@@ -344,7 +344,7 @@ class ApoorvaChainPolicy:
     the central system records from the observed poses.
 
     Args:
-        env: The (unwrapped-able) ``robot_chain_v0`` env.
+        env: The (unwrapped-able) ``robot_chain_v1`` env.
         params: Controller gains; default :class:`ApoorvaParams`.
         strip: The elastic strip: ``"trail"`` along the leader's trail (:func:`path_strip_forces`, the
             default, see the module's note on the departure from Alg. 6), ``"line"`` the printed Alg. 6

@@ -1,4 +1,4 @@
-"""Speed of robot_chain_v0 next to VMAS's navigation scenario, and of agri_baselines.astar next to compiled peers.
+"""Speed of robot_chain_v1 next to VMAS's navigation scenario, and of agri_baselines.astar next to compiled peers.
 
 Prints parallel steps/s (every robot moves once per step; random actions; one process pinned to one core;
 median of several runs) for the chain with 4 and 64 robots and for VMAS ``navigation`` (4 agents, 1 env,
@@ -23,7 +23,7 @@ from collections.abc import Callable, Iterator
 import numpy as np
 
 from agri_baselines import astar
-from agri_envs.chain import robot_chain_v0
+from agri_envs.chain import robot_chain_v1
 from agri_envs.sim2d.astar import path_cost
 
 
@@ -43,11 +43,11 @@ def _rate(step: Callable[[int], None], seconds: float, runs: int) -> float:
 
 
 def chain_rate(n_robots: int, seconds: float, runs: int) -> float:
-    """Parallel steps/s of robot_chain_v0 under random actions (no termination on contact)."""
+    """Parallel steps/s of robot_chain_v1 under random actions (no termination on contact)."""
     kwargs: dict[str, object] = {"n_robots": n_robots, "terminate_on_collision": False, "max_cycles": 1_000_000}
     if n_robots > 16:  # room for a long chain
         kwargs.update(office_width=24.0, office_height=16.0, min_goal_distance=2.0)
-    env = robot_chain_v0.parallel_env(**kwargs)
+    env = robot_chain_v1.parallel_env(**kwargs)
     env.reset(seed=0)
     rng = np.random.default_rng(0)
     actions = rng.uniform(-1, 1, (1000, n_robots, 2)).astype(np.float32)
@@ -163,8 +163,8 @@ def main() -> None:
         print(f"VMAS unavailable ({exc}); pip install -e '.[bench]'")
         peer = float("nan")
     print(f"{'env (random actions, one core)':<48}{'steps/s':>10}{'vs VMAS':>9}")
-    print(f"{'robot_chain_v0, 4 robots':<48}{chain4:>10.0f}{chain4 / peer:>8.1f}x")
-    print(f"{'robot_chain_v0, 64 robots':<48}{chain64:>10.0f}{chain64 / peer:>8.1f}x")
+    print(f"{'robot_chain_v1, 4 robots':<48}{chain4:>10.0f}{chain4 / peer:>8.1f}x")
+    print(f"{'robot_chain_v1, 64 robots':<48}{chain64:>10.0f}{chain64 / peer:>8.1f}x")
     print(f"{'VMAS navigation, 4 agents, 1 env, CPU':<48}{peer:>10.0f}{1.0:>8.1f}x")
     print()
     print(f"A* on 1000 x 1000 grids, (0, 0) -> (999, 999), best of {args.runs}: ms, path cost (cells), ours / peer")

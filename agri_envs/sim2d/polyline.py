@@ -71,6 +71,13 @@ class Polyline:
         (ax, ay), (bx, by) = self._pts[k], self._pts[k + 1]
         return ax + t * (bx - ax), ay + t * (by - ay)
 
+    def between(self, s_from: float, s_to: float) -> Polyline:
+        """The part of the path from arc length ``s_from`` to ``s_to`` (clamped; ends interpolated)."""
+        lo = min(max(s_from, 0.0), self.length)
+        hi = min(max(s_to, lo), self.length)
+        inner = self.points[(self.cumulative > lo) & (self.cumulative < hi)]
+        return Polyline(np.vstack([self.at(lo)[None], inner, self.at(hi)[None]]))
+
     def project(self, xy: np.ndarray, s_from: float, s_to: float) -> float:
         """Arc length of the point of the path nearest to ``xy``, searched between ``s_from`` and ``s_to``."""
         c = self._cum

@@ -7,7 +7,7 @@ then sees every agent's step as one transition of the same policy (parameter sha
 cooperative reward each agent receives.
 
 Agents leaving: SuperSuit's Markov vector env needs the same agents throughout an episode (its
-``black_death`` option would feed zero observations to agents that left). ``robot_chain_v0`` never
+``black_death`` option would feed zero observations to agents that left). ``robot_chain_v1`` never
 removes a single agent: every agent terminates or truncates at the same step (the leader's arrival, any
 contact, or ``max_cycles``), so the plain conversion applies and no black-death wrapper is used; the
 vector env resets the whole chain when the episode ends. (SuperSuit's conversion refuses, by an assertion,

@@ -28,7 +28,7 @@ from agri_envs.scenarios import list_scenarios
 ENV_PAGES = (
     ("greenhouse-nav", "agri_envs/GreenhouseNav-v2", ()),
     ("greenhouse-coverage", "agri_envs/GreenhouseCoverage-v0", ()),
-    ("robot-chain", "robot_chain_v0", ()),
+    ("robot-chain", "robot_chain_v1", ()),
     ("grape-harvest", "agri_envs/GrapeHarvest-v1", ("agri_envs/GrapeHarvestReach-v1",)),
 )
 

@@ -15,7 +15,7 @@ from agri_training.learned.parameter_sharing import make_shared_vec_env
 from agri_training.learned.policy import LearnedPolicy
 from agri_training.train import TrainRequest, resolve_config, train
 
-ENV_ID = "robot_chain_v0"
+ENV_ID = "robot_chain_v1"
 # A short chain on a small office floor: the run and its evaluation take seconds.
 TINY_ENV = {"n_robots": 3, "office_width": 8.0, "office_height": 6.0, "min_goal_distance": 3.0, "max_cycles": 40}
 TINY_HP = {
@@ -138,6 +138,6 @@ def test_the_chain_trains_only_a_shared_ppo(tmp_path):
     [{"wrappers": ["FlattenObservation"]}, {"train_wrappers": ["RandomStartWaypoint"]}, {"action_repeat": 4}],
 )
 def test_gymnasium_only_training_keys_are_refused_for_the_chain(overrides, tmp_path):
-    request = TrainRequest("robot_chain_v0", "ppo", tmp_path / "run", overrides=overrides)
+    request = TrainRequest("robot_chain_v1", "ppo", tmp_path / "run", overrides=overrides)
     with pytest.raises(ValueError, match="Gymnasium envs only"):
         resolve_config(request)
