@@ -296,12 +296,14 @@ class RobotChainEnv(ParallelEnv):  # type: ignore[misc]
             self._fixed_map = cmap  # the same map every episode: made once
         return cmap
 
-    def _plan(self, rng: np.random.Generator) -> tuple[ChainMap, Mission]:
+    def _plan(
+        self, rng: np.random.Generator, goal_distance: tuple[float, float] | None
+    ) -> tuple[ChainMap, Mission]:
         """Map and mission of an episode; a generated map without room for the chain is drawn anew."""
         for attempt in range(LAYOUT_TRIES):
             cmap = self._draw_map(rng)
             try:
-                return cmap, plan_mission(cmap, self.config, rng)
+                return cmap, plan_mission(cmap, self.config, rng, goal_distance)
             except ChainDoesNotFit:
                 if self._fixed_map is not None or attempt == LAYOUT_TRIES - 1:
                     raise
@@ -312,16 +314,33 @@ class RobotChainEnv(ParallelEnv):  # type: ignore[misc]
     ) -> tuple[dict[str, np.ndarray], dict[str, dict[str, Any]]]:
         """New map (unless fixed), goal, start, path, chain placement and obstacle schedule.
 
-        ``options`` is accepted for API compatibility and unused (PettingZoo's API test passes some).
+        Args:
+            seed: Seed of the episode's random stream.
+            options: ``{"goal_distance": (lo, hi)}`` draws this episode's leader start between ``lo`` and
+                ``hi`` metres from the goal along the free floor (a training curriculum's short missions)
+                instead of at least ``min_goal_distance``. Other keys are ignored (PettingZoo's API test
+                passes one).
 
         Raises:
-            ValueError: When the chain does not fit behind any start tried (the message says what to change).
+            ValueError: When the chain does not fit behind any start tried (the message says what to change),
+                or for a malformed ``goal_distance``.
         """
+        goal_distance = None
+        if options and "goal_distance" in options:
+            try:
+                lo, hi = (float(v) for v in options["goal_distance"])
+            except (TypeError, ValueError):
+                raise ValueError(
+                    f"reset: options['goal_distance'] must be (lo, hi) in metres, got {options['goal_distance']!r}"
+                ) from None
+            if not (0.0 <= lo <= hi):
+                raise ValueError(f"reset: options['goal_distance'] needs 0 <= lo <= hi, got ({lo}, {hi})")
+            goal_distance = (lo, hi)
         if seed is not None or not hasattr(self, "np_random"):
             self.np_random = np.random.default_rng(seed)
         cfg = self.config
         rng = self.np_random
-        cmap, mission = self._plan(rng)
+        cmap, mission = self._plan(rng, goal_distance)
         self.chain_map = cmap
         xmin, ymin, xmax, ymax = cmap.geometry.bounds
         self._bounds = np.array([xmin, ymin, xmax, ymax])
@@ -335,13 +354,16 @@ class RobotChainEnv(ParallelEnv):  # type: ignore[misc]
         positions = mission.positions
         self.astar_cells = mission.path_cells
         self.astar_length = mission.astar_length
-        if self.world is not None:
-            self.world.close()
-        self.world = World2D(cmap.geometry, n_movers=cfg.n_dynamic_obstacles)
+        yaw = mission.start_yaws()
+        poses = np.column_stack([positions, yaw])
+        if self.world is None:
+            self.world = World2D(cmap.geometry, n_movers=cfg.n_dynamic_obstacles)
+            self.robots = self.world.add_disc_robots(self.spec, poses, cfg.robot_radius)
+        else:  # the same bodies, in the new scene (nothing to do for a fixed map)
+            self.world.replace_scene(cmap.geometry)
+            self.world.place_robots(self.robots, poses)
         for k in range(cfg.n_dynamic_obstacles):
             self.world.place_mover(k, _PARK + 10.0 * k, _PARK, cfg.obstacle_radius)
-        yaw = mission.start_yaws()
-        self.robots = self.world.add_disc_robots(self.spec, np.column_stack([positions, yaw]), cfg.robot_radius)
         self._robot_rows = np.array([r.circle_index for r in self.robots], dtype=np.int64)
         task = ChainTask(
             mission.path,
@@ -353,7 +375,7 @@ class RobotChainEnv(ParallelEnv):  # type: ignore[misc]
             cfg.terminate_on_collision,
             cfg.terminate_on_break,
         )
-        self._poses = np.column_stack([positions, yaw])
+        self._poses = poses
         self._vel = np.zeros((cfg.n_robots, 2))
         self.trails.reset(mission.formation, cfg.spacing)
         arrived = self._to_go()

@@ -9,6 +9,7 @@ blocked for planning.
 from __future__ import annotations
 
 import dataclasses
+import functools
 
 import numpy as np
 
@@ -35,6 +36,11 @@ class ChainMap:
     grid: OccupancyGrid
     blocked: np.ndarray
     wall_distance: np.ndarray
+
+    @functools.cached_property
+    def free_cells(self) -> np.ndarray:
+        """Flat indices (row-major) of the cells a robot centre may occupy (not :attr:`blocked`)."""
+        return np.flatnonzero(~self.blocked.ravel())
 
     def cell(self, xy: np.ndarray) -> tuple[int, int]:
         """``(row, col)`` of the cell holding world point ``xy`` (clamped into the grid)."""

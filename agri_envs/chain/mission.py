@@ -63,7 +63,12 @@ class Mission:
         return yaw
 
 
-def plan_mission(cmap: ChainMap, cfg: RobotChainConfig, rng: np.random.Generator) -> Mission:
+def plan_mission(
+    cmap: ChainMap,
+    cfg: RobotChainConfig,
+    rng: np.random.Generator,
+    goal_distance: tuple[float, float] | None = None,
+) -> Mission:
     """Goal, start, path and the chain's places for one episode.
 
     A goal is drawn on roomy free floor (or given) and its free-floor distance field computed (the reward
@@ -76,11 +81,18 @@ def plan_mission(cmap: ChainMap, cfg: RobotChainConfig, rng: np.random.Generator
     The leader's path is a shortest 8-connected path on the inflated map (what Alg. 1's A* finds), read
     off the goal's field.
 
+    Args:
+        cmap: The episode's map.
+        cfg: The env's config.
+        rng: The episode's random stream.
+        goal_distance: ``(lo, hi)``: the leader starts between ``lo`` and ``hi`` metres from the goal along
+            the free floor, instead of at least ``min_goal_distance`` (a drawn start only).
+
     Raises:
         ChainDoesNotFit: When no goal tried leaves room for the chain (the message says what to change).
         ValueError: For a given start or goal off the free floor, or without a path between them.
     """
-    free = np.flatnonzero(~cmap.blocked.ravel())
+    free = cmap.free_cells
     if len(free) == 0:
         raise ValueError("robot_chain_v1: the inflated map has no free cell for the robots")
     roomy = free[cmap.wall_distance.ravel()[free] >= cfg.robot_radius + 0.35]
@@ -91,7 +103,7 @@ def plan_mission(cmap: ChainMap, cfg: RobotChainConfig, rng: np.random.Generator
     need = (n - 1) * cfg.spacing
     start_given = given_cell(cmap, cfg.start, "start") if cfg.start else None
     goal_given = given_cell(cmap, cfg.goal, "goal") if cfg.goal else None
-    farthest = 0.0
+    farthest = 0.0  # the longest free-floor distance to a goal tried (for the error message)
     for _ in range(GOAL_TRIES):
         if goal_given is not None:
             goal = goal_given
@@ -124,12 +136,12 @@ def plan_mission(cmap: ChainMap, cfg: RobotChainConfig, rng: np.random.Generator
             if goal_given is not None:
                 break
             continue
-        flat = to_goal.ravel()
-        tails = free[flat[free] >= cfg.min_goal_distance + need]
-        tails = tails[np.isfinite(flat[tails])]
-        reachable = flat[free][np.isfinite(flat[free])]
-        farthest = max(farthest, float(reachable.max()) if len(reachable) else 0.0)
+        lo, hi = goal_distance if goal_distance is not None else (cfg.min_goal_distance, np.inf)
+        on_free = to_goal.ravel()[free]
+        reachable = on_free < np.inf
+        tails = free[reachable & (on_free >= lo + need) & (on_free <= hi + need)]
         if len(tails) == 0:
+            farthest = max(farthest, float(on_free[reachable].max()) if reachable.any() else 0.0)
             if goal_given is not None:
                 break
             continue

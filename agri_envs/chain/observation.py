@@ -57,15 +57,16 @@ class Trails:
             spacing: ``d_s`` (m).
         """
         n, cap = self.s.shape
-        for k in range(n):
-            end = (n - 1 - k) * spacing
-            m = min(cap, int(end / TRAIL_STEP) + 1)
-            arcs = end - TRAIL_STEP * np.arange(m)[::-1]  # the last m points, TRAIL_STEP apart, ending at k
-            arcs[0] = max(arcs[0], 0.0)
-            self.xy[k, :m] = [formation.at(a) for a in arcs]
-            self.s[k, :m] = arcs
-            self.head[k] = m - 1
-            self.count[k] = m
+        end = (n - 1 - np.arange(n))[:, None] * spacing
+        # The last `cap` points of each trail, TRAIL_STEP apart, ending at the robot (none before the formation).
+        arcs = end - TRAIL_STEP * np.arange(cap)[::-1][None, :]
+        count = np.minimum(cap, (end[:, 0] / TRAIL_STEP).astype(np.int64) + 1)
+        arcs = np.maximum(arcs, 0.0)
+        self.xy[:] = formation.at_many(arcs.ravel()).reshape(n, cap, 2)
+        self.s[:] = arcs
+        # The points sit at the ring's end; the oldest valid one is `count` back from the head.
+        self.head[:] = cap - 1
+        self.count[:] = count
 
     def record(self, poses: np.ndarray) -> None:
         """Add each robot's position to its trail once it has moved far enough."""

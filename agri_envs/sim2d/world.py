@@ -145,34 +145,69 @@ class World2D:
         self.geometry = geometry
         self.space = pymunk.Space()
         self.space.gravity = (0.0, 0.0)
-        static = self.space.static_body
-        shapes: list[pymunk.Shape] = []
-        for x, y, r in geometry.circles:
-            shapes.append(pymunk.Circle(static, float(r), offset=(float(x), float(y))))
-        for x0, y0, x1, y1, r in geometry.capsules:
-            if r > 0:  # zero-radius capsules are polygon edges; the polygon itself is added below
-                shapes.append(pymunk.Segment(static, (float(x0), float(y0)), (float(x1), float(y1)), float(r)))
-        for poly in geometry.polygons:
-            shapes.append(pymunk.Poly(static, [(float(p[0]), float(p[1])) for p in poly]))
-        self.space.add(*shapes)
-        n_static = len(geometry.circles)
-        #: Every circle the sensors see: static ones, then one slot per mover.
-        self.circles = np.vstack([geometry.circles, np.zeros((n_movers, 3))])
-        self.capsules = np.ascontiguousarray(geometry.capsules)
-        self._mover_slice = slice(n_static, n_static + n_movers)
+        self._static_shapes: list[pymunk.Shape] = []
         self.movers: list[pymunk.Body] = []
-        for i in range(n_movers):
+        for _ in range(n_movers):
             body = pymunk.Body(body_type=pymunk.Body.KINEMATIC)
             shape = pymunk.Circle(body, 0.2)
             self.space.add(body, shape)
             self.movers.append(body)
-            self.circles[n_static + i, 2] = 0.2
         self.robots: list[RobotBody] = []
+        self.circles = np.zeros((0, 3))
+        self._set_scene(geometry, np.column_stack([np.zeros((n_movers, 2)), np.full(n_movers, 0.2)]))
         _LIVE_WORLDS.add(self)
+
+    def _set_scene(self, geometry: Geometry, mover_rows: np.ndarray) -> None:
+        """Static shapes and the sensor arrays for ``geometry``: static circles, then movers, then robots."""
+        self.geometry = geometry
+        static = self.space.static_body
+        shapes: list[pymunk.Shape] = []
+        for x, y, r in geometry.circles.tolist():
+            shapes.append(pymunk.Circle(static, r, offset=(x, y)))
+        for x0, y0, x1, y1, r in geometry.capsules.tolist():
+            if r > 0:  # zero-radius capsules are polygon edges; the polygon itself is added below
+                shapes.append(pymunk.Segment(static, (x0, y0), (x1, y1), r))
+        for poly in geometry.polygons:
+            shapes.append(pymunk.Poly(static, [(float(p[0]), float(p[1])) for p in poly]))
+        if self._static_shapes:
+            self.space.remove(*self._static_shapes)
+        self.space.add(*shapes)
+        self._static_shapes = shapes
+        n_static = len(geometry.circles)
+        robot_rows = self.robot_circles.copy() if len(self.robots) >= 2 else np.zeros((0, 3))
+        #: Every circle the sensors see: static ones, then one slot per mover, then one per robot.
+        self.circles = np.vstack([geometry.circles, mover_rows, robot_rows])
+        self.capsules = np.ascontiguousarray(geometry.capsules)
+        self._mover_slice = slice(n_static, n_static + len(mover_rows))
+        if len(robot_rows):
+            for k, robot in enumerate(self.robots):
+                robot.circle_index = n_static + len(mover_rows) + k
         self._disc_cache: dict[tuple[int, ...], tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
         thin = [float(r) for r in geometry.circles[:, 2]] + [float(r) for r in geometry.capsules[:, 4] if r > 0]
         # Substep length: half the thinnest obstacle's half-thickness, so a substep can never jump over it.
         self.max_substep = max(0.002, 0.5 * min(thin, default=0.1))
+
+    def replace_scene(self, geometry: Geometry) -> None:
+        """Swap the static scene for another, keeping the movers and the robots (their bodies are reused).
+
+        The robots' rows in :attr:`circles` move behind the new static circles; their ``circle_index``
+        follows. Nothing happens when ``geometry`` is the current scene.
+        """
+        if geometry is not self.geometry:
+            self._set_scene(geometry, self.mover_circles.copy())
+
+    def place_robots(self, robots: Sequence[RobotBody], poses: np.ndarray) -> None:
+        """Put robots at new poses, at rest (a new episode), without making new bodies.
+
+        Args:
+            robots: Robots of this world.
+            poses: ``(n, 3)`` poses ``(x, y, yaw)``.
+        """
+        p = np.asarray(poses, dtype=np.float64).reshape(-1, 3)
+        for robot, pose in zip(robots, p, strict=True):
+            robot.pose = pose.copy()
+            robot.v = robot.w = 0.0
+            self._sync(robot, robot.pose)
 
     def close(self) -> None:
         """Free the pymunk objects now (idempotent); the world cannot be used afterwards.

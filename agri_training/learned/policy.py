@@ -23,7 +23,7 @@ import dataclasses
 import importlib
 import json
 import pickle
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -166,11 +166,11 @@ def algorithm_class(name: str) -> Any:
 
 
 def wrap_by_name(
-    env: gym.Env[Any, Any],
+    env: Any,
     wrappers: Sequence[str | Mapping[str, Any]],
-    allowed: Mapping[str, type[gym.Wrapper[Any, Any, Any, Any]]],
+    allowed: Mapping[str, Callable[..., Any]],
     kind: str = "wrapper",
-) -> gym.Env[Any, Any]:
+) -> Any:
     """Wrap ``env`` in wrappers declared by name, innermost first; only names in ``allowed`` are built.
 
     Args:
