@@ -58,7 +58,12 @@ from agri_envs.scenarios import scenario as get_scenario
 from agri_training.core.documents import git_commit
 from agri_training.core.yaml_values import load_yaml
 from agri_training.evaluation.episode import run_episode
-from agri_training.learned.curricula import apply_parallel_train_wrappers, apply_train_wrappers
+from agri_training.learned.curricula import (
+    PARALLEL_TRAIN_WRAPPERS,
+    apply_parallel_train_wrappers,
+    apply_train_wrappers,
+    check_wrapper_names,
+)
 from agri_training.learned.inference import PolicyNetwork
 from agri_training.learned.parameter_sharing import make_shared_vec_env, predict_shared
 from agri_training.learned.policy import (
@@ -221,6 +226,8 @@ def resolve_config(request: TrainRequest) -> dict[str, Any]:
             raise ValueError(f"{request.env_id} trains a parameter-shared PPO: --algo ppo, without --her")
         if hp.get("wrappers"):
             raise ValueError(f"{request.env_id}: wrappers apply to Gymnasium envs only; leave 'wrappers' empty")
+        kind = f"{request.env_id}: training wrapper"
+        check_wrapper_names(hp.get("train_wrappers") or [], PARALLEL_TRAIN_WRAPPERS, kind)
         if int(hp.get("action_repeat", 1)) != 1:
             raise ValueError(f"{request.env_id}: action_repeat applies to Gymnasium envs only; leave it at 1")
     return {

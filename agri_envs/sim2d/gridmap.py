@@ -169,28 +169,9 @@ class OccupancyGrid:
 # --------------------------------------------------------------------------------------------------
 
 
-def _cell_range(lo: float, hi: float, start: float, res: float, n: int) -> tuple[int, int]:
-    """Half-open index range of the cells whose centres ``start + (k + 0.5) * res`` lie in ``[lo, hi]``."""
-    k0 = max(0, math.ceil((lo - start) / res - 0.5))
-    k1 = min(n, math.floor((hi - start) / res - 0.5) + 1)
-    return k0, k1
-
-
-def _segment_distance_sq(px: np.ndarray, py: np.ndarray, ax: float, ay: float, bx: float, by: float) -> np.ndarray:
-    """Squared distance from points to segment ``a-b`` (broadcasting over ``px``, ``py``)."""
-    ex, ey = bx - ax, by - ay
-    l2 = ex * ex + ey * ey
-    dx, dy = px - ax, py - ay
-    if l2 == 0.0:
-        return dx * dx + dy * dy
-    t = np.clip((dx * ex + dy * ey) / l2, 0.0, 1.0)
-    qx, qy = dx - t * ex, dy - t * ey
-    return qx * qx + qy * qy
-
-
 @numba.njit(cache=True)
 def _window(lo: float, hi: float, start: float, res: float, n: int) -> tuple[int, int]:
-    """:func:`_cell_range`, compiled."""
+    """Half-open index range of the cells whose centres ``start + (k + 0.5) * res`` lie in ``[lo, hi]``."""
     k0 = max(0, math.ceil((lo - start) / res - 0.5))
     k1 = min(n, math.floor((hi - start) / res - 0.5) + 1)
     return k0, k1
@@ -266,10 +247,12 @@ def _rasterize_kernel(
                     occ[i, j] = True
 
 
-def _edge_key(ax: float, ay: float, bx: float, by: float) -> tuple[float, ...]:
-    """Order-independent key of a segment, for recognising polygon edges among the capsules."""
-    a, b = (round(ax, 9), round(ay, 9)), (round(bx, 9), round(by, 9))
-    return (*min(a, b), *max(a, b))
+def _edge_keys(segments: np.ndarray) -> np.ndarray:
+    """Order-independent keys ``(k, 4)`` of segments ``(k, 4)`` ``ax, ay, bx, by`` (rounded end points, lower first)."""
+    a = np.round(np.asarray(segments, dtype=np.float64).reshape(-1, 4), 9)
+    swap = (a[:, 0] > a[:, 2]) | ((a[:, 0] == a[:, 2]) & (a[:, 1] > a[:, 3]))
+    a[swap] = a[swap][:, [2, 3, 0, 1]]
+    return a
 
 
 def rasterize(
@@ -318,19 +301,17 @@ def rasterize(
     ys = ymin + (np.arange(height) + 0.5) * res
     occ = np.zeros((height, width), dtype=np.bool_)
     circles = np.asarray(geometry.circles, dtype=np.float64).reshape(-1, 3)
-    polygon_edges = set()
-    for poly in geometry.polygons:
-        v = np.asarray(poly, dtype=np.float64)
-        for a, b in zip(v, np.roll(v, -1, axis=0), strict=True):
-            polygon_edges.add(_edge_key(a[0], a[1], b[0], b[1]))
     capsules = np.asarray(geometry.capsules, dtype=np.float64).reshape(-1, 5).copy()
+    thin = np.flatnonzero(capsules[:, 4] == 0.0)
     keep = np.ones(len(capsules), dtype=bool)
-    for k, (ax, ay, bx, by, r) in enumerate(capsules.tolist()):
-        if r == 0.0:
-            if _edge_key(ax, ay, bx, by) in polygon_edges:
-                keep[k] = False
-            else:
-                capsules[k, 4] = 0.5 * res  # a free-standing thin wall: one cell thick
+    if len(thin):
+        # Zero-radius capsules that are polygon edges are covered by their polygon; the others are
+        # free-standing thin walls, drawn one cell thick.
+        edges = [np.hstack([v, np.roll(v, -1, axis=0)]) for v in map(np.asarray, geometry.polygons)]
+        polygon_edges = set(map(tuple, _edge_keys(np.vstack(edges)).tolist())) if edges else set()
+        is_edge = np.array([key in polygon_edges for key in map(tuple, _edge_keys(capsules[thin, :4]).tolist())])
+        keep[thin[is_edge]] = False
+        capsules[thin[~is_edge], 4] = 0.5 * res
     vertices, starts = [], [0]
     for poly in geometry.polygons:
         v = np.asarray(poly, dtype=np.float64).reshape(-1, 2)

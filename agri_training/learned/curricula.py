@@ -164,6 +164,18 @@ TRAIN_WRAPPERS: dict[str, type[gym.Wrapper[Any, Any, Any, Any]]] = {
 PARALLEL_TRAIN_WRAPPERS: dict[str, type[Any]] = {"ShortMissions": ShortMissions}
 
 
+def check_wrapper_names(wrappers: Sequence[str | Mapping[str, Any]], allowed: Mapping[str, Any], kind: str) -> None:
+    """Refuse declared wrappers whose names are not in ``allowed`` (before any env is made).
+
+    Raises:
+        ValueError: Naming the wrapper and the allowed names.
+    """
+    for item in wrappers:
+        name = item if isinstance(item, str) else next(iter(item), None) if isinstance(item, Mapping) else None
+        if name not in allowed:
+            raise ValueError(f"{kind} {name!r} is not allowed; allowed: {', '.join(allowed)}")
+
+
 def apply_parallel_train_wrappers(env: Any, wrappers: Sequence[str | Mapping[str, Any]]) -> Any:
     """Wrap a parallel env in the declared training wrappers, innermost first (:data:`PARALLEL_TRAIN_WRAPPERS`).
 
