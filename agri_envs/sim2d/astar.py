@@ -179,6 +179,9 @@ def _field_kernel(blocked: np.ndarray, start: int, limit: float, g: np.ndarray) 
     order, with no priority queue. A step costs less than 2, so a cell of bucket ``b`` only ever lands in
     bucket ``b + 1`` or ``b + 2``: three stacks in a ring hold every live bucket. Cells farther than
     ``limit`` are not expanded (their ``g`` may hold a tentative value above ``limit``, or inf).
+
+    The neighbour loop repeats :func:`_astar_kernel`'s on purpose: factored into a shared compiled helper it
+    made this kernel about 2x slower (0.76 -> 1.5 ms on the default office) and A* 20 % slower.
     """
     h_rows, w_cols = blocked.shape
     n = h_rows * w_cols

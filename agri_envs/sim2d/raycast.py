@@ -307,23 +307,9 @@ def sonar_ranges(
         capsules: ``(n_s, 5)`` capsules.
         out: ``(k,)`` output distances (m).
     """
-    circle_rows = np.arange(circles.shape[0])
-    capsule_rows = np.arange(capsules.shape[0])
-    _sonar_body(
-        body_x,
-        body_y,
-        body_yaw,
-        mounts,
-        half_aperture,
-        max_range,
-        circles,
-        capsules,
-        circle_rows,
-        circles.shape[0],
-        capsule_rows,
-        capsules.shape[0],
-        out,
-    )
+    poses = np.empty((1, 3))
+    poses[0, 0], poses[0, 1], poses[0, 2] = body_x, body_y, body_yaw
+    sonar_ranges_many(poses, mounts, half_aperture, max_range, circles, capsules, np.full(1, -1), out.reshape(1, -1))
 
 
 @numba.njit(cache=True)
