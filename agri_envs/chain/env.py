@@ -20,10 +20,11 @@ from agri_envs._actions import checked_agent_actions
 from agri_envs.chain import robot
 from agri_envs.chain._kernels import distances_to_go
 from agri_envs.chain.config import RobotChainConfig
-from agri_envs.chain.maps import ChainMap, greenhouse_map, office_map, ros_map
+from agri_envs.chain.maps import ChainMap, block_disc, greenhouse_map, office_map, ros_map
 from agri_envs.chain.mission import ChainDoesNotFit, Mission, drop_spot, plan_mission
 from agri_envs.chain.observation import ChainObservation, Trails
 from agri_envs.chain.task import ChainTask
+from agri_envs.sim2d.astar import distance_field
 from agri_envs.sim2d.geometry import Kind
 from agri_envs.sim2d.polyline import Polyline
 from agri_envs.sim2d.render import TopDownRenderer
@@ -92,7 +93,7 @@ class RobotChainEnv(ParallelEnv):  # type: ignore[misc]
 
     One cooperative reward, the same for every agent, the sum of these terms (each in ``info``). ``T`` is
     ``max_cycles``; ``D_k`` is robot k's free-floor distance to the goal (the goal's 8-connected distance
-    field on the inflated map) and ``R_k = goal_radius + k * arrival_stretch * spacing`` its arrival
+    field on the inflated map, round the dropped obstacles once they are down) and ``R_k = goal_radius + k * arrival_stretch * spacing`` its arrival
     radius; the potential is ``Phi = -mean_k max(0, D_k - R_k)``, counted as 0 once the episode succeeds.
 
     | term | formula |
@@ -348,6 +349,9 @@ class RobotChainEnv(ParallelEnv):  # type: ignore[misc]
         self._frame = np.array([ox, oy, math.cos(oyaw), math.sin(oyaw), cmap.grid.resolution])
         self._window = int(math.ceil(self._inflation / cmap.grid.resolution)) + 2
         self._to_goal = mission.to_goal
+        self._blocked = cmap.blocked
+        gi, gj = (int(v) for v in mission.path_cells[-1])
+        self._goal_cell = (gi, gj)
         self._goal_xy = mission.path.points[-1].copy()
         finite = mission.to_goal[np.isfinite(mission.to_goal)]
         self._far = float(finite.max()) + 1.0
@@ -455,7 +459,7 @@ class RobotChainEnv(ParallelEnv):  # type: ignore[misc]
             distances_to_go(
                 self._poses,
                 self._to_goal,
-                self.chain_map.blocked,
+                self._blocked,
                 self._frame,
                 self._window,
                 self._far,
@@ -468,11 +472,18 @@ class RobotChainEnv(ParallelEnv):  # type: ignore[misc]
     def _drop_obstacle(self) -> None:
         """Drop the next scheduled obstacle onto the path ahead of the leader (retried each step until it fits)."""
         assert self.world is not None and self.task is not None and self.chain_map is not None
-        spot = drop_spot(self.chain_map, self.config, self.task.path, self.task.ghost.s_leader, self._poses)
+        cfg = self.config
+        spot = drop_spot(self.chain_map, cfg, self.task.path, self.task.ghost.s_leader, self._poses)
         if spot is not None:
-            self.world.place_mover(self._next_drop, float(spot[0]), float(spot[1]), self.config.obstacle_radius)
+            self.world.place_mover(self._next_drop, float(spot[0]), float(spot[1]), cfg.obstacle_radius)
             self._next_drop += 1
             self._n_dropped += 1
+            # The free-floor distance to go now runs round the obstacle (the robots' centres stay a robot
+            # radius from it); the path and the ghost keep the plan made on the static map.
+            blocked = block_disc(self.chain_map, self._blocked, spot, cfg.obstacle_radius + cfg.robot_radius)
+            field = distance_field(blocked, self._goal_cell) * self.chain_map.grid.resolution
+            if np.isfinite(field[self.chain_map.cell(self._poses[0, :2])]):
+                self._blocked, self._to_goal = blocked, field
 
     # -- observations, infos, state -------------------------------------------------------------------
     def _observe(self) -> dict[str, np.ndarray]:

@@ -52,6 +52,25 @@ class ChainMap:
         return self.grid.cell_to_world(np.asarray(cells).reshape(-1, 2))
 
 
+def block_disc(cmap: ChainMap, blocked: np.ndarray, centre: np.ndarray, radius: float) -> np.ndarray:
+    """A copy of ``blocked`` with every cell whose centre lies within ``radius`` of ``centre`` blocked too.
+
+    Args:
+        cmap: The map whose grid ``blocked`` belongs to.
+        blocked: ``(H, W)`` bool.
+        centre: ``(x, y)`` (m).
+        radius: (m).
+    """
+    out = blocked.copy()
+    i0, j0 = cmap.cell(np.asarray(centre, dtype=np.float64) - radius)
+    i1, j1 = cmap.cell(np.asarray(centre, dtype=np.float64) + radius)
+    rows, cols = np.mgrid[i0 : i1 + 1, j0 : j1 + 1]
+    xy = cmap.centres(np.stack([rows.ravel(), cols.ravel()], axis=1))
+    inside = np.hypot(xy[:, 0] - centre[0], xy[:, 1] - centre[1]) <= radius
+    out[rows.ravel()[inside], cols.ravel()[inside]] = True
+    return out
+
+
 def make_chain_map(geometry: Geometry, grid: OccupancyGrid, inflation: float) -> ChainMap:
     """Inflate a scene's grid by ``inflation`` metres (Euclidean distance transform)."""
     obstacle = (grid.data >= 50) | (grid.data < 0)

@@ -301,3 +301,42 @@ def test_trail_slot_matches_an_independent_trail():
             obs["robot_2"][18:20] * 3.0, [c * d[0] + sn * d[1], -sn * d[0] + c * d[1]], atol=1e-5
         )
     assert checked > 20
+
+
+def test_the_distance_to_go_runs_round_a_dropped_obstacle():
+    # The reward's potential is the robots' free-floor distance to the goal beyond their arrival radii; once an
+    # obstacle drops, that distance runs round it. Oracle: A* on the static map with the obstacle's disc
+    # (its radius plus a robot's) blocked, from each robot's cell.
+    from agri_baselines import astar, make_policy
+    from agri_envs.sim2d.astar import path_cost
+
+    env = robot_chain_v1.parallel_env(n_robots=3, n_dynamic_obstacles=1)
+    policy = make_policy("apoorva-chain", env)
+    obs, _ = env.reset(seed=20003)
+    raw = env.unwrapped
+    cmap, cfg = raw.chain_map, raw.config
+    checked = 0
+    while env.agents and checked < 5:
+        actions, _ = policy.predict(obs)
+        obs, _, _, _, infos = env.step(actions)
+        spot = raw.world.mover_circles[0]
+        if spot[0] > 1e5:  # not dropped yet
+            continue
+        rows, cols = np.indices(cmap.blocked.shape)
+        xy = cmap.centres(np.stack([rows.ravel(), cols.ravel()], 1)).reshape(*cmap.blocked.shape, 2)
+        blocked = cmap.blocked | (np.hypot(*(xy - spot[:2]).transpose(2, 0, 1)) <= spot[2] + cfg.robot_radius)
+        cells = [cmap.cell(raw._poses[k, :2]) for k in range(3)]
+        if any(blocked[c] for c in cells):
+            continue
+        goal = cmap.cell(raw.goal)
+        to_go = np.array([path_cost(astar(blocked, c, goal)) * cmap.grid.resolution for c in cells])
+        expected = np.maximum(0.0, to_go - raw.arrival_radii).mean()
+        assert infos["robot_0"]["distance_to_go"] == pytest.approx(expected, abs=1e-6)
+        checked += 1
+    assert checked == 5
+    # Behind the obstacle (as seen from the goal) the way is longer than on the static map.
+    from agri_envs.sim2d.astar import distance_field
+
+    static = distance_field(cmap.blocked, cmap.cell(raw.goal)) * cmap.grid.resolution
+    both = np.isfinite(static) & np.isfinite(raw._to_goal)
+    assert (raw._to_goal[both] - static[both]).max() > 0.1
