@@ -93,8 +93,9 @@ class RobotChainEnv(ParallelEnv):  # type: ignore[misc]
 
     One cooperative reward, the same for every agent, the sum of these terms (each in ``info``). ``T`` is
     ``max_cycles``; ``D_k`` is robot k's free-floor distance to the goal (the goal's 8-connected distance
-    field on the inflated map, round the dropped obstacles once they are down) and ``R_k = goal_radius + k * arrival_stretch * spacing`` its arrival
-    radius; the potential is ``Phi = -mean_k max(0, D_k - R_k)``, counted as 0 once the episode succeeds.
+    field on the inflated map, round the dropped obstacles once they are down) and
+    ``R_k = goal_radius + k * arrival_stretch * spacing`` its arrival radius; the potential is
+    ``Phi = -mean_k max(0, D_k - R_k)``, counted as 0 once the episode succeeds.
 
     | term | formula |
     |---|---|
