@@ -125,14 +125,16 @@ class RobotChainEnv(ParallelEnv):  # type: ignore[misc]
     ## Starting State
 
     The map is generated from the episode seed (``layout_seed=-1``) or from ``layout_seed``. A goal is drawn
-    on free floor at least 0.35 m from obstacles (or given), then a start as far from walls and at least
-    ``min_goal_distance`` from the goal along the free floor (or given). The followers stand behind the
-    leader, ``spacing`` apart along a free path that leads away from the goal, each facing its predecessor,
-    all at rest: the chain is intact. Starts without room for that path, or whose followers would stand
-    nearer to the goal than the leader, are drawn again (10 starts for each of 4 goals; a generated map is
-    drawn anew up to 3 times); when none fits, ``reset`` raises ``ValueError`` saying how much free floor
-    the chain needs. Obstacles drop when the leader has covered random fractions (0.15-0.7) of the path,
-    onto the path 1.2-3 m ahead of it, only where at least a robot's width stays free beside them.
+    on free floor at least 0.35 m from obstacles (or given). The last robot's place is drawn among the cells
+    at least ``min_goal_distance + (n_robots - 1) * spacing`` from the goal along the free floor, and the
+    chain stands on the shortest path from there to the goal, ``spacing`` apart along it, the leader at its
+    head: the followers stand behind the leader on the backward extension of its own path, each farther from
+    the goal than its predecessor, facing it, all at rest: the chain is intact. (With a given ``start`` the
+    leader stands there and the chain behind it along a free path that leads away from the goal.) A goal
+    without such cells is drawn again (4 goals; a generated map is drawn anew up to 3 times); when none
+    fits, ``reset`` raises ``ValueError`` saying how much free floor the chain needs. Obstacles drop when the
+    leader has covered random fractions (0.15-0.7) of the path, onto the path 1.2-3 m ahead of it, only
+    where at least a robot's width stays free beside them.
 
     ## Episode End
 
@@ -170,13 +172,17 @@ class RobotChainEnv(ParallelEnv):  # type: ignore[misc]
     * v1: the paper's task. Success needs every robot at the goal (robot k within
       ``goal_radius + k * arrival_stretch * spacing``), with no contact and no gap above Delta at any step;
       the episode goes on after the leader arrives; a gap above Delta ends it (``terminate_on_break``). The
-      start is always an intact chain behind the leader: no more packed starts, a chain that does not fit
-      raises ``ValueError``. The goal is drawn first, then the start. New observation (29 values):
+      start is always an intact chain standing on the backward extension of the leader's path: no more
+      packed starts, a chain that does not fit raises ``ValueError``. The goal is drawn first, then the
+      chain's place; ``reset(options={"goal_distance": (lo, hi)})`` draws short missions (training
+      curricula). New observation (29 values):
       neighbours' relative velocities, the follower's slot on its predecessor's trail, the goal as a
       direction and a distance; the strip distance and the map-sized goal vector are gone. New reward:
-      progress of every robot toward arriving (free-floor distance), per-episode penalty budgets, a contact
-      or break forfeits the rest of the episode, ordered as stated above. Resets reuse fixed maps and
-      search the free floor with a bucket-queue Dijkstra (about 10x faster).
+      progress of every robot toward arriving (free-floor distance, round dropped obstacles), per-episode
+      penalty budgets, a contact or break forfeits the rest of the episode, ordered as stated above.
+      Resets reuse fixed maps, the robots' bodies and the world, and search the free floor with a
+      bucket-queue Dijkstra (about 10x faster). v0 is gone (no code kept: its task, spaces and reward all
+      changed, and its leaderboard entries with it).
     * v0: initial release (success when the leader arrived with the chain intact at that moment).
 
     ## References
