@@ -104,6 +104,8 @@ def test_bad_arguments_and_actions():
         robot_chain_v1.parallel_env(n_robot=3)
     with pytest.raises(ValueError, match="spacing"):
         robot_chain_v1.parallel_env(spacing=0.2)
+    with pytest.raises(ValueError, match=r"arrival_stretch \* spacing .* max_gap"):
+        robot_chain_v1.parallel_env(arrival_stretch=2.5)  # 1.375 m per robot: wider than an intact chain
     with pytest.raises(ValueError, match="map_yaml"):
         robot_chain_v1.parallel_env(scene="map")
     with pytest.raises(ValueError, match="render_mode"):
