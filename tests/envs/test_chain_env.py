@@ -342,3 +342,34 @@ def test_the_distance_to_go_runs_round_a_dropped_obstacle():
     static = distance_field(cmap.blocked, cmap.cell(raw.goal)) * cmap.grid.resolution
     both = np.isfinite(static) & np.isfinite(raw._to_goal)
     assert (raw._to_goal[both] - static[both]).max() > 0.1
+
+
+def test_distance_to_go_of_a_robot_on_a_blocked_cell():
+    # A robot may stand nearer to a wall than the planning margin, on a cell planning avoids: its distance to
+    # go is the best free cell in reach plus the straight line to it (brute force over every free cell).
+    from agri_envs.chain._kernels import distances_to_go
+
+    rng = np.random.default_rng(0)
+    blocked = rng.random((30, 40)) < 0.3
+    field = np.where(blocked, np.inf, rng.uniform(0.0, 5.0, blocked.shape))
+    res, origin = 0.05, (1.0, -2.0)
+    frame = np.array([origin[0], origin[1], 1.0, 0.0, res])
+    poses = np.column_stack([rng.uniform(1.2, 2.8, 20), rng.uniform(-1.8, -0.7, 20), np.zeros(20)])
+    radii = np.full(20, 0.1)
+    excess = np.empty(20)
+    goal = np.array([2.0, -1.0])
+    arrived = distances_to_go(poses, field, blocked, frame, 3, 99.0, goal, radii, excess)
+    rows, cols = np.nonzero(~blocked)
+    centres = np.column_stack([origin[0] + (cols + 0.5) * res, origin[1] + (rows + 0.5) * res])
+    for k, (x, y, _) in enumerate(poses):
+        i, j = int((y - origin[1]) // res), int((x - origin[0]) // res)
+        if not blocked[i, j]:
+            expected = field[i, j]
+        else:
+            near = (np.abs(rows - i) <= 3) & (np.abs(cols - j) <= 3)
+            d = field[rows[near], cols[near]] + np.hypot(*(centres[near] - [x, y]).T)
+            expected = d.min() if len(d) else 99.0
+        assert excess[k] == pytest.approx(max(0.0, expected - 0.1), abs=1e-12)
+    assert arrived == int(np.sum(np.hypot(*(poses[:, :2] - goal).T) <= 0.1))
+    cells = (((poses[:, 1] - origin[1]) // res).astype(int), ((poses[:, 0] - origin[0]) // res).astype(int))
+    assert blocked[cells].any() and not blocked[cells].all()  # both kinds of cell were tested
