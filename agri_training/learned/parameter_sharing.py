@@ -115,7 +115,7 @@ def _vec_env_class() -> type:
                     raise ValueError("parameter sharing needs every agent to stay until the episode ends")
                 for k, a in enumerate(self.agents):
                     rewards[i * n + k] = rew[a]
-                    info = dict(env_infos[a])
+                    info = env_infos[a]  # a fresh dict every step: the env keeps no reference to it
                     if ended:
                         info["terminal_observation"] = np.asarray(observations[a], dtype=self._obs.dtype)
                         info["TimeLimit.truncated"] = bool(truncs[a] and not terms[a])
