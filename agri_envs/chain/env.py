@@ -371,7 +371,7 @@ class RobotChainEnv(ParallelEnv):  # type: ignore[misc]
             self.world = World2D(cmap.geometry, n_movers=cfg.n_dynamic_obstacles)
             self.robots = self.world.add_disc_robots(self.spec, poses, cfg.robot_radius)
         else:  # the same bodies, in the new scene (nothing to do for a fixed map)
-            self.world.replace_scene(cmap.geometry)
+            self.world.set_scene(cmap.geometry)
             self.world.place_robots(self.robots, poses)
         for k in range(cfg.n_dynamic_obstacles):
             self.world.place_mover(k, _PARK + 10.0 * k, _PARK, cfg.obstacle_radius)

@@ -141,7 +141,7 @@ def test_a_reused_world_equals_a_fresh_one():
     reused.place_mover(1, 9.0, 9.0, 0.2)
     reused.drive_discs(robots, np.full((3, 2), 0.3), 0.1)
     geometry = _other_room()
-    reused.replace_scene(geometry)
+    reused.set_scene(geometry)
     reused.place_robots(robots, poses_b)
     fresh = World2D(geometry, n_movers=2)
     fresh_robots = fresh.add_disc_robots(DISC, poses_b, 0.165)
