@@ -84,7 +84,7 @@ def test_traces_and_reruns_match_the_reference_loop(monkeypatch):
 
 def test_which_policies_run_batched(monkeypatch):
     assert has_batched_form(NAV) and has_batched_form("agri_envs/GreenhouseCoverage-v0")
-    assert not has_batched_form("robot_chain_v0") and not has_batched_form("agri_envs/GrapeHarvest-v1")
+    assert not has_batched_form("robot_chain_v1") and not has_batched_form("agri_envs/GrapeHarvest-v1")
     assert batchable(NAV, "harik-apf") and batchable(NAV, "ppo-greenhouse-nav")
     assert batchable(NAV, str(ZOO_DIR / "ppo-greenhouse-nav"))  # a run folder: a learned policy
     assert not batchable("agri_envs/GrapeHarvest-v1", "luo-apf") and not batchable(NAV, "no-such-policy")
