@@ -66,10 +66,13 @@ from agri_training.core.documents import git_commit
 from agri_training.core.yaml_values import load_yaml
 from agri_training.evaluation.episode import run_episode
 from agri_training.learned.curricula import (
+    PARALLEL_TRAIN_WRAPPERS,
     TRAIN_WRAPPERS,
     VECTOR_TRAIN_WRAPPERS,
+    apply_parallel_train_wrappers,
     apply_train_wrappers,
     apply_vector_train_wrappers,
+    check_wrapper_names,
 )
 from agri_training.learned.inference import PolicyNetwork
 from agri_training.learned.parameter_sharing import make_shared_vec_env, predict_shared
@@ -253,9 +256,14 @@ def resolve_config(request: TrainRequest) -> dict[str, Any]:
     if agri_envs.is_parallel_id(request.env_id):  # one parameter-shared policy for every agent (see parameter_sharing)
         if request.algo != "ppo" or request.her:
             raise ValueError(f"{request.env_id} trains a parameter-shared PPO: --algo ppo, without --her")
-        for key in ("wrappers", "train_wrappers", "train_env_kwargs", "eval_env_kwargs"):
-            if hp.get(key):
-                raise ValueError(f"{request.env_id}: {key} apply to Gymnasium envs only; leave '{key}' empty")
+        if hp.get("wrappers"):
+            raise ValueError(f"{request.env_id}: wrappers apply to Gymnasium envs only; leave 'wrappers' empty")
+        if hp.get("eval_env_kwargs"):  # the periodic evaluation of a parallel env runs env_kwargs alone
+            raise ValueError(
+                f"{request.env_id}: eval_env_kwargs apply to Gymnasium envs only; leave 'eval_env_kwargs' empty"
+            )
+        kind = f"{request.env_id}: training wrapper"
+        check_wrapper_names(hp.get("train_wrappers") or [], PARALLEL_TRAIN_WRAPPERS, kind)
         if int(hp.get("action_repeat", 1)) != 1:
             raise ValueError(f"{request.env_id}: action_repeat applies to Gymnasium envs only; leave it at 1")
         if vec_env == "vector":
@@ -313,22 +321,28 @@ def check_same_spaces(config: Mapping[str, Any]) -> None:
     Raises:
         ValueError: When the observation or action spaces differ.
     """
-    reference = gym.make(config["env_id"], **config["env_kwargs"])
+    env_id = config["env_id"]
+
+    def spaces(env: Any) -> tuple[Any, Any]:
+        if agri_envs.is_parallel_env(env):
+            agent = env.possible_agents[0]
+            return env.observation_space(agent), env.action_space(agent)
+        return env.observation_space, env.action_space
+
+    evaluation = agri_envs.make(env_id, **config["env_kwargs"])
+    reference = spaces(evaluation)
+    evaluation.close()
     for key in ("train_env_kwargs", "eval_env_kwargs"):
         if not config.get(key):
             continue
-        other = gym.make(config["env_id"], **{**config["env_kwargs"], **config[key]})
-        same = (
-            reference.observation_space == other.observation_space and reference.action_space == other.action_space
-        )
+        other = agri_envs.make(env_id, **{**config["env_kwargs"], **config[key]})
+        same = spaces(other) == reference
         other.close()
         if not same:
-            reference.close()
             raise ValueError(
                 f"{key} {config[key]} change the env's spaces; the policy must act in the evaluation env "
                 "(env_kwargs) too"
             )
-    reference.close()
 
 
 def make_eval_env(config: Mapping[str, Any]) -> Any:
@@ -392,7 +406,7 @@ def make_vec_env(config: Mapping[str, Any]) -> Any:
     :class:`~agri_training.learned.vec_env.VectorVecEnv`, with ``VecMonitor`` for the episode statistics (the
     other two wrap each env in ``Monitor``). A multi-agent env (the robot chain) becomes one slot per agent
     of ``n_envs`` copies, all in this process (:func:`agri_training.parameter_sharing.make_shared_vec_env`),
-    with ``VecMonitor``.
+    each copy in its declared training wrappers (``train_wrappers``), with ``VecMonitor``.
     """
     from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv, VecMonitor, VecNormalize
 
@@ -400,8 +414,12 @@ def make_vec_env(config: Mapping[str, Any]) -> Any:
 
     venv: Any
     if agri_envs.is_parallel_id(config["env_id"]):
-        env_id, env_kwargs = config["env_id"], dict(config["env_kwargs"])
-        venv = make_shared_vec_env(lambda: agri_envs.make(env_id, **env_kwargs), config["n_envs"])
+        env_id = config["env_id"]
+        env_kwargs = {**config["env_kwargs"], **config.get("train_env_kwargs", {})}
+        curricula = list(config.get("train_wrappers", []))
+        venv = make_shared_vec_env(
+            lambda: apply_parallel_train_wrappers(agri_envs.make(env_id, **env_kwargs), curricula), config["n_envs"]
+        )
         venv = VecMonitor(venv, info_keywords=("is_success",))
     elif config["vec_env"] == "vector":
         venv = VecMonitor(VectorVecEnv(make_vector_train_env(config)), info_keywords=("is_success",))

@@ -118,7 +118,6 @@ def network_rows(rounds: int) -> list[tuple[str, str, float, float]]:
     rows = []
     for name, env_id, kwargs in (
         ("ppo-greenhouse-nav", NAV, {"localization": "ground_truth"}),
-        ("ppo-chain-office", "robot_chain_v0", {}),
     ):
         if not (ZOO_DIR / name).is_dir():
             continue

@@ -56,17 +56,3 @@ register_policy(
         train_command="agri train --env agri_envs/GreenhouseNav-v2 --algo ppo --seed 0 --out runs/nav-ppo",
     )
 )
-
-register_policy(
-    PolicySpec(
-        name="ppo-chain-office",
-        env_id="robot_chain_v0",
-        entry_point="agri_training.learned.zoo:load_zoo_policy",
-        description="Learned (one PPO policy shared by every robot, agri_training/zoo/ppo-chain-office): the "
-        "office-chain scenario",
-        learned=True,
-        algo="ppo",
-        train_command="agri train --env robot_chain_v0 --scenario office-chain --algo ppo --seed 0 "
-        "--out runs/chain-ppo",
-    )
-)

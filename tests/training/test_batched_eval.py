@@ -83,13 +83,13 @@ def test_traces_and_reruns_match_the_reference_loop(monkeypatch):
 
 
 def test_which_policies_run_batched(monkeypatch):
-    assert has_batched_form(NAV) and not has_batched_form("agri_envs/GrapeHarvest-v1")
-    assert not has_batched_form("robot_chain_v0") and has_batched_form("agri_envs/GreenhouseCoverage-v1")
+    assert has_batched_form(NAV) and has_batched_form("agri_envs/GreenhouseCoverage-v1")
+    assert not has_batched_form("robot_chain_v1") and not has_batched_form("agri_envs/GrapeHarvest-v1")
     assert not batchable("agri_envs/GreenhouseCoverage-v1", "gonzalez-pseudo-reactive")  # it reads the env
     assert batchable(NAV, "harik-apf") and batchable(NAV, "ppo-greenhouse-nav")
     assert batchable(NAV, str(ZOO_DIR / "ppo-greenhouse-nav"))  # a run folder: a learned policy
     assert not batchable("agri_envs/GrapeHarvest-v1", "luo-apf") and not batchable(NAV, "no-such-policy")
-    # registered for this test only: left in the registry, every later suite of NAV in this worker would run it
+    # a registered policy stays for the whole process (the report evaluates every one): registered for this test only
     monkeypatch.setattr(agri_baselines, "_REGISTRY", dict(agri_baselines._REGISTRY))
     register_policy(PolicySpec("test-reads-the-env", NAV, "agri_baselines.harik_apf:make_harik_apf_gt"))
     assert not batchable(NAV, "test-reads-the-env")  # observation_only is opt-in
