@@ -14,6 +14,7 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
+from agri_training.learned.harvest import HarvestLegs
 from agri_training.learned.policy import wrap_by_name
 
 
@@ -91,6 +92,7 @@ class CrashCostRamp(gym.Wrapper[Any, Any, Any, Any]):
 TRAIN_WRAPPERS: dict[str, type[gym.Wrapper[Any, Any, Any, Any]]] = {
     "RandomStartWaypoint": RandomStartWaypoint,
     "CrashCostRamp": CrashCostRamp,
+    "HarvestLegs": HarvestLegs,
 }
 
 
