@@ -150,7 +150,7 @@ def test_legs_follow_the_order_each_is_one_goal_and_the_episode_runs_on():
         np.testing.assert_allclose(obs["desired_goal"], goal.astype(np.float32), atol=1e-6)
         for _ in range(60):
             obs, reward, term, trunc, info = env.step(drive(obs))
-            assert reward == raw.compute_reward(obs["achieved_goal"], obs["desired_goal"], info)  # what HER recomputes
+            assert reward == env.compute_reward(obs["achieved_goal"], obs["desired_goal"], info)  # what HER recomputes
             if term or trunc:
                 break
         assert term and info["is_success"] and not info["collision"]
@@ -181,8 +181,40 @@ def test_a_collision_ends_the_leg_and_the_episode_and_a_slow_leg_is_cut():
         obs, reward, term, trunc, info = crash.step(np.concatenate([move, np.zeros(3)]).astype(np.float32))
         if term or trunc:
             break
-    assert term and info["collision"] and reward < -info["time_limit"]
+    assert term and info["collision"] and reward == -1.0 - 201.0  # the goal term and (max_leg_steps + 1) worst steps
     crash.reset()
     assert crash.unwrapped.elapsed_steps == 0
     with pytest.raises(ValueError, match="max_leg_steps"):
         HarvestLegs(gym.make(ENV_ID), max_leg_steps=0)
+
+
+def test_the_leg_reward_is_her_s_batched_reward_and_the_tolerance_shrinks():
+    env = HarvestLegs(gym.make(ENV_ID, **EE), max_leg_steps=10, tolerance_start=[0.05, 0.5], tolerance_steps=4)
+    np.testing.assert_allclose(env.tolerances, [0.05, 0.5])
+    obs, _ = env.reset(seed=3)
+    achieved, infos = [], []
+    for step in range(6):
+        obs, reward, *_, info = env.step(drive(obs))
+        achieved.append(obs["achieved_goal"])
+        infos.append(info)
+        np.testing.assert_allclose(
+            env.tolerances, [0.01, 0.2] if step >= 3 else [0.05 - 0.01 * (step + 1), 0.5 - 0.075 * (step + 1)]
+        )
+    # HER's call: arrays of goals and an array of info dicts; one goal within 3 cm / 0.3 rad, one far, one crash.
+    a = np.array(achieved[:3], dtype=np.float64)
+    d = a.copy()
+    d[0, :3] += 0.005
+    d[1, :3] += 0.02
+    batch = np.array([{"collision": False}, {"collision": False}, {"collision": True}])
+    np.testing.assert_array_equal(env.compute_reward(a, d, batch), [0.0, -1.0, -11.0])
+    for k in range(3):
+        assert env.compute_reward(a[k], d[k], batch[k]) == env.compute_reward(a, d, batch)[k]
+    dense = HarvestLegs(gym.make(ENV_ID, **EE, reward_type="dense"), max_leg_steps=10)
+    worst = 2.0 + 0.1 * np.pi
+    assert dense.collision_cost == pytest.approx(11 * worst)
+    crash = dense.compute_reward(a[1], d[1], {"collision": True})
+    assert crash == pytest.approx(-0.02 * np.sqrt(3) - 11 * worst, abs=1e-6)
+    with pytest.raises(ValueError, match="tolerance_start"):
+        HarvestLegs(gym.make(ENV_ID), tolerance_start=[0.005, 0.3])
+    with pytest.raises(ValueError, match="tolerance_steps"):
+        HarvestLegs(gym.make(ENV_ID), tolerance_steps=0)
