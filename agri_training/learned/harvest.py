@@ -78,6 +78,8 @@ class HarvestOrder:
         self._boxes = [tuple(t.box_lo.tolist()) for t in targets]
         #: Which clusters have been cut.
         self.harvested = np.zeros(len(targets), dtype=bool)
+        #: Clusters passed over without a cut (training: reached at a looser tolerance than the env's).
+        self.skipped = np.zeros(len(targets), dtype=bool)
         #: The clamp's pose at the episode's start: home, where the harvest ends.
         self.home = np.asarray(observation["achieved_goal"], dtype=np.float64).copy()
 
@@ -100,7 +102,7 @@ class HarvestOrder:
             o = o.copy()
             o[slot] = 0.0
             out["observation"] = o
-        index = next((i for i in self.order if not self.harvested[i]), -1)
+        index = next((i for i in self.order if not (self.harvested[i] or self.skipped[i])), -1)
         out["desired_goal"] = (self.goals[index] if index >= 0 else self.home).astype(np.float32)
         return out, index
 
@@ -126,9 +128,11 @@ class HarvestLegs(gym.Wrapper[dict[str, np.ndarray], np.ndarray, dict[str, np.nd
 
     Tolerance curriculum (``tolerance_start``, ``tolerance_steps``): a leg counts as reached within a
     position and orientation tolerance that shrink linearly from ``tolerance_start`` to the env's over this
-    wrapper's first ``tolerance_steps`` steps. A leg reached at a looser tolerance than the env's does not
-    cut the cluster (the env's rule decides that), so the next leg aims at the same cut from closer by.
-    ``info["is_success"]`` says whether the leg reached its goal.
+    wrapper's first ``tolerance_steps`` steps. A cluster reached at a looser tolerance than the env's stays
+    on the vine (the env's rule decides cuts) with its box, and the next leg goes on to the next cluster of
+    the order (aiming at the same cut again would start the leg inside its tolerance: a free success); home
+    reached that way ends the episode for the learner. ``info["is_success"]`` says whether the leg reached
+    its goal.
 
     Args:
         env: A GrapeHarvest-v1 env.
@@ -172,6 +176,7 @@ class HarvestLegs(gym.Wrapper[dict[str, np.ndarray], np.ndarray, dict[str, np.nd
         self._last: tuple[dict[str, np.ndarray], dict[str, Any]] | None = None
         self._episode_over = True
         self._goal = np.zeros(9)
+        self._goal_index = -1
         self._leg_steps = 0
 
     @property
@@ -211,6 +216,7 @@ class HarvestLegs(gym.Wrapper[dict[str, np.ndarray], np.ndarray, dict[str, np.nd
             self._last = self._order.see(obs)[0], info
         obs, info = self._last
         self._goal = np.asarray(obs["desired_goal"], dtype=np.float64)
+        self._goal_index = self._order.see(obs)[1]
         self._leg_steps = 0
         return obs, dict(info, is_success=False)
 
@@ -224,7 +230,13 @@ class HarvestLegs(gym.Wrapper[dict[str, np.ndarray], np.ndarray, dict[str, np.nd
         reward = float(self.compute_reward(achieved, self._goal, info))
         reached = bool(self.reached(achieved, self._goal)) and not info["collision"]
         self.steps += 1
-        seen, _ = self._order.see(obs)
+        seen, index = self._order.see(obs)
+        if reached and index == self._goal_index:  # reached within the curriculum's tolerance, not the env's
+            if index >= 0:
+                self._order.skipped[index] = True
+                seen, _ = self._order.see(obs)
+            else:
+                self._episode_over = True
         self._last = seen, info
         leg_terminated = reached or bool(terminated)
         leg_truncated = not leg_terminated and (bool(truncated) or self._leg_steps >= self.max_leg_steps)

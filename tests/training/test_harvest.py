@@ -218,3 +218,24 @@ def test_the_leg_reward_is_her_s_batched_reward_and_the_tolerance_shrinks():
         HarvestLegs(gym.make(ENV_ID), tolerance_start=[0.005, 0.3])
     with pytest.raises(ValueError, match="tolerance_steps"):
         HarvestLegs(gym.make(ENV_ID), tolerance_steps=0)
+
+
+def test_a_goal_reached_only_within_the_curriculum_tolerance_is_passed_over():
+    env = HarvestLegs(
+        gym.make(ENV_ID, **EE, min_clusters=2, max_clusters=2, feasible_scenes=True),
+        tolerance_start=[0.04, 3.0],
+        tolerance_steps=10**6,
+    )
+    obs, _ = env.reset(seed=6)
+    raw = env.unwrapped
+    order = harvest_order(raw, obs)
+    goals = [order.goals[i] for i in (*order.order, None) if i is not None] + [raw.home_goal]
+    for leg in range(3):
+        np.testing.assert_allclose(obs["desired_goal"], goals[leg].astype(np.float32), atol=1e-6)
+        for _ in range(40):
+            obs, _, term, trunc, info = env.step(drive(obs))
+            if term or trunc:
+                break
+        assert term and info["is_success"] and raw.task.harvested.sum() == 0  # within 4 cm: nothing cut
+        obs, _ = env.reset()
+    assert raw.elapsed_steps == 0  # home passed over too: a new episode
