@@ -214,6 +214,7 @@ class HarvestLegs(gym.Wrapper[dict[str, np.ndarray], np.ndarray, dict[str, np.nd
             self._order = HarvestOrder(obs, raw.layout, cfg.position_tolerance, cfg.orientation_tolerance)
             self._episode_over = False
             self._last = self._order.see(obs)[0], info
+        assert self._order is not None
         obs, info = self._last
         self._goal = np.asarray(obs["desired_goal"], dtype=np.float64)
         self._goal_index = self._order.see(obs)[1]
