@@ -44,6 +44,7 @@ bench: $(STAMP)
 	$(BIN)/python benchmarks/bench_greenhouse.py
 	$(BIN)/python benchmarks/bench_slam.py
 	$(BIN)/python benchmarks/bench_grape.py
+	$(BIN)/python benchmarks/bench_vector.py
 
 # The documentation site: a page per env family (frame, docstring, every argument from its config class),
 # built by MkDocs in strict mode (a broken link or a missing page fails) into build/site.

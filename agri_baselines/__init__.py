@@ -52,6 +52,9 @@ class PolicySpec:
             entry point is then called with the env and the policy's name).
         algo: The training algorithm of a learned policy (``ppo``, ``sac``, ``td3``, ``tqc``).
         train_command: The ``agri train`` command that reproduces a learned policy.
+        observation_only: Once built, the policy acts on its observations alone: it reads nothing of the
+            env during an episode. The evaluator may then step several of its episodes together in the env's
+            batched form (``gym.make_vec``), whose sub-envs it could not read (learned policies always may).
     """
 
     name: str
@@ -63,6 +66,7 @@ class PolicySpec:
     learned: bool = False
     algo: str = ""
     train_command: str = ""
+    observation_only: bool = False
 
 
 _REGISTRY: dict[str, PolicySpec] = {}
@@ -108,6 +112,7 @@ register_policy(
         env_kwargs={"localization": "ground_truth", "full_scan": True},
         privileged=True,
         description="Harik 2018 APF controller (eqs. 12-14, passive safety stop) on the ground-truth pose",
+        observation_only=True,
     )
 )
 register_policy(
@@ -118,6 +123,7 @@ register_policy(
         env_kwargs={"localization": "none", "full_scan": True},
         privileged=False,
         description="Harik 2018 APF controller on a Hector SLAM pose from the LIDAR alone (no odometry)",
+        observation_only=True,
     )
 )
 register_policy(
@@ -128,6 +134,7 @@ register_policy(
         env_kwargs={"localization": "none", "full_scan": True},
         privileged=False,
         description="harik-apf on plain Hector SLAM, as ROS hector_mapping (no guard against people, no step check)",
+        observation_only=True,
     )
 )
 register_policy(

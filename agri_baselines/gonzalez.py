@@ -35,15 +35,33 @@ class PurePursuit:
     path points. Near the goal the look-ahead point is the goal itself, the speed follows the braking
     distance, and the robot stops within ``goal_tolerance``.
 
+    With ``min_lookahead`` set, the look-ahead is regulated by the curvature of the path ahead (as adaptive
+    and regulated Pure Pursuit do): ``lookahead`` where the next ``lookahead`` metres run straight, shortened
+    to ``curve_ratio`` times the radius of the tightest bend among them, never below ``min_lookahead``.
+    A fixed look-ahead starts turning a full look-ahead before a bend and cuts inside it: with 1 m, the
+    Fitorobot cut every headland turn of its plan by 0.27-0.30 m. Without ``min_lookahead`` the look-ahead
+    is fixed (Coulter's original).
+
     Args:
         path: ``(N, 2)`` path points (m), N >= 2.
-        lookahead: Look-ahead distance (m); the paper's 1 m.
+        lookahead: Look-ahead distance (m); the paper's 1 m. With ``min_lookahead``: on straight paths.
         goal_tolerance: The goal counts as reached within this distance (m).
         search_window: How far ahead of the last closest point the next one is searched (m).
+        min_lookahead: Shortest regulated look-ahead (m), or None for a fixed look-ahead.
+        curve_ratio: Regulated look-ahead per metre of bend radius.
+        curve_scale: Half-length of the chord over which the path's curvature is measured (m): bends
+            shorter than this (the staircase of a path on a grid) do not shorten the look-ahead.
     """
 
     def __init__(
-        self, path: np.ndarray, lookahead: float = 1.0, goal_tolerance: float = 0.15, search_window: float = 2.0
+        self,
+        path: np.ndarray,
+        lookahead: float = 1.0,
+        goal_tolerance: float = 0.15,
+        search_window: float = 2.0,
+        min_lookahead: float | None = None,
+        curve_ratio: float = 0.5,
+        curve_scale: float = 0.3,
     ) -> None:
         pts = np.asarray(path, dtype=np.float64).reshape(-1, 2)
         keep = np.concatenate([[True], np.hypot(*np.diff(pts, axis=0).T) > 1e-9])
@@ -52,12 +70,21 @@ class PurePursuit:
             raise ValueError("PurePursuit: the path needs at least two distinct points")
         if not lookahead > 0 or not goal_tolerance > 0 or not search_window > 0:
             raise ValueError("PurePursuit: lookahead, goal_tolerance and search_window must be > 0 m")
+        if min_lookahead is not None and not 0 < min_lookahead <= lookahead:
+            raise ValueError(f"PurePursuit: min_lookahead must be in (0, lookahead={lookahead}] m, got {min_lookahead}")
+        if not curve_ratio > 0 or not curve_scale > 0:
+            raise ValueError("PurePursuit: curve_ratio and curve_scale must be > 0")
         self.path = pts
         self.s = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(pts, axis=0).T))])
         self.lookahead = lookahead
         self.goal_tolerance = goal_tolerance
         self.search_window = search_window
+        self.min_lookahead = min_lookahead
+        self.curve_ratio = curve_ratio
+        #: Curvature (1/m) at every path point, measured over a chord of +-curve_scale metres.
+        self.curvature = path_curvature(pts, self.s, curve_scale)
         self.progress = 0.0  # arc length of the closest point (m), never decreases
+        self.distance = 0.0  # distance of the robot from that point at the last call of closest() (m)
         self.done = False
 
     @property
@@ -86,12 +113,28 @@ class PurePursuit:
         k = int(np.argmin(dist))
         s = float(self.s[i0 + k] + t[k] * math.sqrt(l2[k]))
         self.progress = max(self.progress, s)
-        return self.progress, float(dist[k])
+        self.distance = float(dist[k])
+        return self.progress, self.distance
+
+    def bend_ahead(self, s: float) -> float:
+        """The largest path curvature (1/m) within ``lookahead`` metres ahead of arc length ``s``."""
+        i0 = max(0, int(np.searchsorted(self.s, s, side="right")) - 1)
+        i1 = int(np.searchsorted(self.s, s + self.lookahead, side="right"))
+        return float(self.curvature[i0 : max(i1, i0 + 1)].max())
+
+    def lookahead_at(self, s: float) -> float:
+        """The look-ahead (m) at arc length ``s``: fixed, or regulated by the bends of the next ``lookahead`` m."""
+        if self.min_lookahead is None:
+            return self.lookahead
+        kappa = self.bend_ahead(s)
+        if kappa <= 0:
+            return self.lookahead
+        return min(self.lookahead, max(self.min_lookahead, self.curve_ratio / kappa))
 
     def lookahead_point(self, x: float, y: float) -> np.ndarray:
-        """The look-ahead point for a robot at ``(x, y)``: ``lookahead`` metres past the closest point."""
+        """The look-ahead point for a robot at ``(x, y)``: the look-ahead past the closest point, along the path."""
         s, _ = self.closest(x, y)
-        return self.point_at(s + self.lookahead)
+        return self.point_at(s + self.lookahead_at(s))
 
     def command(
         self, pose: np.ndarray, max_speed: float, max_turn_rate: float, max_accel: float, turn_in_place: float = 0.3
@@ -135,6 +178,33 @@ class PurePursuit:
         if abs(curvature) * v > max_turn_rate:
             v = max_turn_rate / abs(curvature)
         return v, v * curvature
+
+
+def path_curvature(path: np.ndarray, s: np.ndarray, scale: float) -> np.ndarray:
+    """Unsigned curvature (1/m) at every point of a polyline, from the turn of a chord of +-``scale`` metres.
+
+    At point i the headings of the chords from ``s_i - scale`` to ``s_i`` and from ``s_i`` to
+    ``s_i + scale`` (points interpolated along the path, clamped to its ends) differ by an angle; that
+    angle over the arc length between the chords' midpoints is the curvature. A circle of radius R gives
+    ``1 / R`` for ``scale`` well under R; a corner of angle a gives ``a / scale`` within ``scale`` of it.
+
+    Args:
+        path: ``(N, 2)`` points (m).
+        s: Arc length at each point (m), increasing.
+        scale: Chord half-length (m), > 0.
+    """
+    def at(t: np.ndarray) -> np.ndarray:
+        t = np.clip(t, 0.0, s[-1])
+        return np.column_stack([np.interp(t, s, path[:, 0]), np.interp(t, s, path[:, 1])])
+
+    back, here, ahead = at(s - scale), path, at(s + scale)
+    h0 = np.arctan2(*(here - back).T[::-1])
+    h1 = np.arctan2(*(ahead - here).T[::-1])
+    turn = np.abs(np.arctan2(np.sin(h1 - h0), np.cos(h1 - h0)))
+    span = np.minimum(s, scale) + np.minimum(s[-1] - s, scale)  # chords are shorter at the ends
+    short = np.minimum(np.hypot(*(here - back).T), np.hypot(*(ahead - here).T)) < 1e-9  # at an end: no turn
+    out = np.where(short, 0.0, turn / np.maximum(0.5 * span, 1e-9))
+    return np.asarray(out, dtype=np.float64)
 
 
 # --------------------------------------------------------------------------------------------------

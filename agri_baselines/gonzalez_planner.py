@@ -47,6 +47,9 @@ class CoveragePlannerParams:
         sample_spacing: Spacing of the returned path points (m); the paper samples the path "depending on
             the desired speed".
         smoothing: Half-width of the moving average applied to the skeleton's staircase (m); 0 keeps it.
+        turn_clearance: A headland turn's corner with less room than this around it (m) is rounded: the
+            Fitorobot, 1.5 m long and 0.7 m wide, sweeps 0.83 m around its centre when it turns on the spot.
+        turn_radius: Radius of a rounded corner of a headland turn (m): there the robot turns as it drives.
         max_cells: Grids with more cells than this are max-pooled by the smallest integer factor that
             brings them under it (a work cell is blocked when any of its cells is, so the path stays on free
             cells of the given grid; the corridor runs are then re-centred on the given grid). This keeps a
@@ -59,6 +62,8 @@ class CoveragePlannerParams:
     junction_radius: float = 0.15
     sample_spacing: float = 0.1
     smoothing: float = 0.3
+    turn_clearance: float = 0.9
+    turn_radius: float = 0.8
     max_cells: int = 250_000
 
     def __post_init__(self) -> None:
@@ -67,8 +72,8 @@ class CoveragePlannerParams:
                 raise ValueError(f"CoveragePlannerParams: {name} must be > 0, got {getattr(self, name)}")
         if not 0 < self.direction_tolerance < math.pi / 2:
             raise ValueError("CoveragePlannerParams: direction_tolerance must be in (0, pi/2) rad")
-        if self.smoothing < 0:
-            raise ValueError("CoveragePlannerParams: smoothing must be >= 0 m")
+        if self.smoothing < 0 or self.turn_radius < 0 or self.turn_clearance < 0:
+            raise ValueError("CoveragePlannerParams: smoothing, turn_clearance and turn_radius must be >= 0 m")
         if self.max_cells < 100:
             raise ValueError(f"CoveragePlannerParams: max_cells must be >= 100, got {self.max_cells}")
 
@@ -79,6 +84,9 @@ class CoveragePlan:
 
     Attributes:
         path: ``(N, 2)`` path points (m), from the start through every corridor.
+        part: ``(N,)`` what each path point belongs to: :data:`APPROACH` (from the start to the first
+            corridor), :data:`CORRIDOR` (along a corridor) or :data:`TURN` (across a headland from one corridor
+            to the next).
         skeleton: Boolean grid of the pruned Voronoi diagram (the part the search uses), on the work grid.
         resolution: Cell size of the work grid (m).
         corridors: Per corridor, its two end points ``(2, 2)`` (m) in the order the path drives it.
@@ -86,10 +94,15 @@ class CoveragePlan:
     """
 
     path: np.ndarray
+    part: np.ndarray
     skeleton: np.ndarray
     resolution: float
     corridors: list[np.ndarray]
     row_direction: float
+
+
+#: Values of :attr:`CoveragePlan.part`.
+APPROACH, CORRIDOR, TURN = 0, 1, 2
 
 
 _NEIGHBOURS = ((-1, -1), (-1, 0), (-1, 1), (0, -1), (0, 1), (1, -1), (1, 0), (1, 1))
@@ -212,6 +225,81 @@ def _line_fit(a: np.ndarray, c: np.ndarray) -> tuple[float, float]:
     return slope, mc - slope * ma
 
 
+def _square_turn(
+    start: np.ndarray,
+    link: np.ndarray,
+    row: tuple[float, float],
+    clear: np.ndarray,
+    res: float,
+    room: np.ndarray,
+    params: CoveragePlannerParams,
+) -> np.ndarray:
+    """A headland turn as Fig. 5 draws it: straight out of the corridor, across, straight into the next.
+
+    ``link`` is the diagram's route from the end of one corridor (``start``) to the beginning of the next
+    (its last point). Where the diagram rounds the headland off (a sensory map, whose free space is a band
+    around the first run's trajectory), a robot that follows it leaves the turn at the corridor's mouth
+    still turning. The square turn runs along the rows to the route's farthest reach into the headland,
+    across, and back along the rows. Its corners are sharp (the robot turns on the spot there, then drives
+    straight into the corridor) where the map leaves ``params.turn_clearance`` around them, and rounded to
+    ``params.turn_radius`` (or less where a leg is shorter) where it does not, so that a long robot turns
+    while it drives rather than on the spot beside a wall. It replaces the route when every point of it
+    lies in ``clear`` (the cells at least ``min_clearance`` from an obstacle); otherwise the route is kept.
+
+    Args:
+        start: End of the corridor just driven (m).
+        link: ``(n, 2)`` route to the next corridor (m), excluding ``start``.
+        row: Unit vector along the rows.
+        clear: Cells where the robot's centre may be.
+        res: Cell size (m).
+        room: Distance from every cell to the nearest blocked one (m).
+        params: Planner parameters.
+    """
+    u = np.asarray(row, dtype=np.float64)
+    end = link[-1]
+    along = link @ u
+    a0, a1 = float(start @ u), float(end @ u)
+    outward = 1.0 if along.max() - max(a0, a1) > min(a0, a1) - along.min() else -1.0
+    reach = float(along.max()) if outward > 0 else float(along.min())
+    if outward * (reach - a0) <= res or outward * (reach - a1) <= res:
+        return link  # not a U-turn into a headland
+    c1, c2 = start + (reach - a0) * u, end + (reach - a1) * u
+    legs = [float(np.hypot(*(c1 - start))), float(np.hypot(*(c2 - c1))), float(np.hypot(*(end - c2)))]
+    d1, d2, d3 = ((b - a) / max(n, 1e-9) for a, b, n in ((start, c1, legs[0]), (c1, c2, legs[1]), (c2, end, legs[2])))
+
+    def radius(corner: np.ndarray, before: float, after: float) -> float:
+        i, j = (int(v) for v in np.clip(np.floor(corner[::-1] / res), 0, np.array(room.shape) - 1))
+        return 0.0 if room[i, j] >= params.turn_clearance else min(params.turn_radius, before, after)
+
+    r1, r2 = radius(c1, legs[0], 0.5 * legs[1]), radius(c2, 0.5 * legs[1], legs[2])
+    pieces = [_segment(start, c1 - r1 * d1, res)]
+    if r1 > 0:
+        pieces.append(_arc(c1 - r1 * d1, d1, d2, r1, res))
+    pieces.append(_segment(c1 + r1 * d2, c2 - r2 * d2, res))
+    if r2 > 0:
+        pieces.append(_arc(c2 - r2 * d2, d2, d3, r2, res))
+    pieces.append(_segment(c2 + r2 * d3, end, res))
+    square = np.vstack(pieces)
+    ij = np.floor(square[:, ::-1] / res).astype(np.int64)
+    inside = (ij >= 0).all(axis=1) & (ij[:, 0] < clear.shape[0]) & (ij[:, 1] < clear.shape[1])
+    if not inside.all() or not clear[ij[:, 0], ij[:, 1]].all():
+        return link
+    return square
+
+
+def _segment(a: np.ndarray, b: np.ndarray, res: float) -> np.ndarray:
+    """Points every ``res`` metres or less from ``a`` (excluded) to ``b`` (included)."""
+    n = max(1, int(math.ceil(float(np.hypot(*(b - a))) / res)))
+    return a + np.linspace(0.0, 1.0, n + 1)[1:, None] * (b - a)
+
+
+def _arc(a: np.ndarray, d_in: np.ndarray, d_out: np.ndarray, r: float, res: float) -> np.ndarray:
+    """A quarter circle of radius ``r`` from ``a`` (heading ``d_in``) to heading ``d_out`` (at right angles)."""
+    centre = a + r * d_out
+    t = np.linspace(0.0, math.pi / 2, max(2, int(math.ceil(r * math.pi / 2 / res))) + 1)[1:]
+    return centre - r * np.cos(t)[:, None] * d_out + r * np.sin(t)[:, None] * d_in
+
+
 def _visible(free: np.ndarray, a: np.ndarray, b: np.ndarray) -> bool:
     """Whether the straight segment between cells ``a`` and ``b`` crosses free cells only."""
     n = int(max(abs(b[0] - a[0]), abs(b[1] - a[1]))) * 2 + 2
@@ -221,15 +309,17 @@ def _visible(free: np.ndarray, a: np.ndarray, b: np.ndarray) -> bool:
     return bool(np.all(free[ii, jj]))
 
 
-def _resample(points: np.ndarray, spacing: float) -> np.ndarray:
-    """Points every ``spacing`` metres along a polyline (keeps both ends)."""
+def _resample(points: np.ndarray, spacing: float, labels: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Points every ``spacing`` metres along a polyline (keeps both ends), each with the label of its nearest vertex."""
     seg = np.hypot(*np.diff(points, axis=0).T)
     s = np.concatenate([[0.0], np.cumsum(seg)])
     if s[-1] <= 0:
-        return points[:1].copy()
+        return points[:1].copy(), labels[:1].copy()
     n = max(2, int(math.ceil(s[-1] / spacing)) + 1)
     t = np.linspace(0.0, s[-1], n)
-    return np.column_stack([np.interp(t, s, points[:, 0]), np.interp(t, s, points[:, 1])])
+    k = np.clip(np.searchsorted(s, t), 1, len(s) - 1)
+    nearest = np.where(t - s[k - 1] <= s[k] - t, k - 1, k)
+    return np.column_stack([np.interp(t, s, points[:, 0]), np.interp(t, s, points[:, 1])]), labels[nearest]
 
 
 def _smooth(points: np.ndarray, half_width: int) -> np.ndarray:
@@ -303,7 +393,9 @@ def plan_coverage(
     k = int(math.ceil(r))
     oy, ox = np.mgrid[-k : k + 1, -k : k + 1]
     disk = ox * ox + oy * oy < r * r
-    skel = skeletonize(ndi.binary_erosion(free, structure=disk, border_value=0))
+    clear = ndi.binary_erosion(free, structure=disk, border_value=0)  # where the robot's centre may go
+    room = ndi.distance_transform_edt(np.pad(free, 1)).astype(np.float32)[1:-1, 1:-1] * res  # to the nearest block
+    skel = skeletonize(clear)
     if not skel.any():
         raise ValueError(f"no free corridor is wider than 2 * min_clearance = {2 * p.min_clearance:.2f} m")
     graph, cells = _cell_graph(skel)
@@ -376,6 +468,19 @@ def plan_coverage(
         if resid[k] < tol:
             groups[k].append(int(b))
             group_of[b] = k
+    # A corridor whose diagram is cut into pieces all shorter than min_corridor_length (grown plants with
+    # gaps in both rows: a junction at every gap) is a corridor still when its pieces together are that long.
+    loose = sorted((int(b) for b in short if group_of[b] < 0), key=lambda b: float(across_mean[b]))
+    pending: list[list[int]] = []
+    for b in loose:
+        if pending and abs(across_mean[b] - across_mean[pending[-1][-1]]) < tol:
+            pending[-1].append(b)
+        else:
+            pending.append([b])
+    for g in pending:
+        if float(length[g].sum()) >= p.min_corridor_length:
+            group_of[g] = len(groups)
+            groups.append(g)
     # Index of each skeleton cell in the graph, for the two extreme cells of every corridor.
     index = np.full(main.shape, -1, dtype=np.int64)
     index[cells[:, 0], cells[:, 1]] = np.arange(len(cells))
@@ -420,7 +525,10 @@ def plan_coverage(
             out.append(int(pred[out[-1]]))
         return out[::-1]
 
-    nodes: list[int] = [entry]
+    def centres(nodes: list[int]) -> np.ndarray:
+        return (cells[nodes][:, ::-1] + 0.5) * res
+
+    legs: list[np.ndarray] = [centres([entry])]
     in_corridor: list[bool] = [False]
     driven: list[np.ndarray] = []
     current = entry
@@ -441,17 +549,27 @@ def plan_coverage(
             link, run = route(current, chain[k])[1:], chain[k + 1 :]
         else:
             link, run = route(current, first)[1:], chain[1:]
-        nodes += link + run
-        in_corridor += [False] * len(link) + [True] * len(run)
-        driven.append((cells[[first, last]][:, ::-1] + 0.5) * res)
+        link_xy = centres(link) if link else np.zeros((0, 2))
+        if current != entry and len(link) > 1:
+            link_xy = _square_turn(centres([current])[0], link_xy, (ux, uy), clear, res, room, p)
+        legs += [link_xy, centres(run)]
+        in_corridor += [False] * len(link_xy) + [True] * len(run)
+        driven.append(centres([first, last]))
         current = last
-    xy = (cells[nodes][:, ::-1] + 0.5) * res
+    xy = np.vstack(legs)
     if f > 1:  # back to the given grid's precision along the corridors
         sel = np.asarray(in_corridor)
         xy[sel] = _centre_across(xy[sel], (-uy, ux), fine_occ, fine_res, reach=1.5, max_shift=res)
-    xy = _smooth(xy, int(round(p.smoothing / res)))
-    path = np.vstack([[sx, sy], _resample(xy, p.sample_spacing)])
-    return CoveragePlan(path=path, skeleton=main, resolution=res, corridors=driven, row_direction=row_dir)
+    # The start joins the diagram where the robot stands, often a few centimetres to the side of it: the
+    # smoothing spreads that step over its width instead of asking the robot to step sideways.
+    xy = _smooth(np.vstack([[sx, sy], xy]), int(round(p.smoothing / res)))
+    corridor = np.concatenate([[False], in_corridor])
+    first = int(np.argmax(corridor))
+    part = np.where(corridor, CORRIDOR, np.where(np.arange(len(corridor)) < first, APPROACH, TURN))
+    path, part = _resample(xy, p.sample_spacing, part)
+    return CoveragePlan(
+        path=path, part=part, skeleton=main, resolution=res, corridors=driven, row_direction=row_dir
+    )
 
 
 def coverage_path(occupancy: np.ndarray, resolution: float, start: tuple[float, float] | np.ndarray) -> np.ndarray:

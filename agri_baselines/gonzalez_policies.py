@@ -18,14 +18,30 @@ batch of one, or a single observation.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 from typing import Any
 
 import numpy as np
 
-from agri_baselines.gonzalez import PseudoReactiveController, PseudoReactiveParams, PurePursuit
-from agri_baselines.gonzalez_planner import CoveragePlannerParams, plan_coverage
+from agri_baselines.gonzalez import (
+    LF,
+    LM,
+    LR,
+    RF,
+    RM,
+    RR,
+    PeakFilter,
+    PseudoReactiveController,
+    PseudoReactiveParams,
+    PurePursuit,
+)
+from agri_baselines.gonzalez_planner import CORRIDOR, TURN, CoveragePlan, CoveragePlannerParams, plan_coverage
+
+#: Shortest Pure Pursuit look-ahead before a bend (m): the 1 m of the paper on straight stretches, down to
+#: this in the headland turns, where a fixed 1 m cut the planned turn by 0.27-0.30 m.
+MIN_LOOKAHEAD = 0.4
 
 
 class _CoveragePolicyBase:
@@ -79,14 +95,51 @@ class _CoveragePolicyBase:
 
 
 class _Follower:
-    """A planned path and its Pure Pursuit tracker (the deliberative technique's on-line part)."""
+    """A planned path and its Pure Pursuit tracker (the deliberative technique's on-line part).
 
-    def __init__(self, path: np.ndarray, lookahead: float) -> None:
-        self.path = path
-        self.tracker = PurePursuit(path, lookahead=lookahead)
+    The look-ahead is the paper's 1 m on straight stretches and shorter before bends (see
+    :class:`~agri_baselines.gonzalez.PurePursuit`; ``min_lookahead`` None: fixed). Every command records the
+    cross-track error of the pose it was given against the plan and the part of the plan it was on, for
+    :meth:`tracking`.
+    """
+
+    def __init__(self, plan: CoveragePlan, origin: np.ndarray, lookahead: float, min_lookahead: float | None) -> None:
+        self.path = plan.path + origin
+        self.part = plan.part
+        self.tracker = PurePursuit(self.path, lookahead=lookahead, min_lookahead=min_lookahead)
+        self._s = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(self.path, axis=0).T))])
+        self.errors: dict[int, list[float]] = {CORRIDOR: [], TURN: []}
+
+    def part_at(self, s: float) -> int:
+        """The part of the plan (approach, corridor or turn) at arc length ``s``."""
+        k = int(np.searchsorted(self._s, s, side="right")) - 1
+        return int(self.part[min(len(self.part) - 1, max(0, k))])
 
     def command(self, pose: np.ndarray, spec: Any) -> tuple[float, float]:
-        return self.tracker.command(pose, spec.max_speed, spec.max_turn_rate, spec.max_accel)
+        """Pure Pursuit's ``(v, w)`` for ``pose``; records its cross-track error on the part of the plan it is on."""
+        v, w = self.tracker.command(pose, spec.max_speed, spec.max_turn_rate, spec.max_accel)
+        part = self.part_at(self.tracker.progress)
+        if not self.tracker.done and part in self.errors:
+            self.errors[part].append(self.tracker.distance)
+        return v, w
+
+    def tracking(self) -> dict[str, float | None]:
+        """Cross-track error against the plan (m), max and mean over the steps in the corridors and in the turns.
+
+        Measured on the pose the tracker was given: the true pose of ``gonzalez-deliberative``, the (corrected)
+        odometry of ``gonzalez-hybrid``. A turn is the stretch of the plan across a headland from one corridor
+        to the next; the approach from the start to the first corridor is neither.
+        """
+        out: dict[str, float | None] = {}
+        for name, part in (("corridors", CORRIDOR), ("turns", TURN)):
+            e = self.errors[part]
+            out[f"cross_track_{name}_max"] = float(max(e)) if e else None
+            out[f"cross_track_{name}_mean"] = float(np.mean(e)) if e else None
+        return out
+
+
+#: The keys of :meth:`_Follower.tracking`, None in a run without a plan.
+TRACKING_KEYS = tuple(f"cross_track_{n}_{s}" for n in ("corridors", "turns") for s in ("max", "mean"))
 
 
 class GonzalezDeliberativePolicy(_CoveragePolicyBase):
@@ -94,7 +147,9 @@ class GonzalezDeliberativePolicy(_CoveragePolicyBase):
 
     Args:
         env: A GreenhouseCoverage env made with ``localization="ground_truth"``.
-        lookahead: Pure Pursuit look-ahead (m), the paper's 1 m.
+        lookahead: Pure Pursuit look-ahead on straight stretches (m), the paper's 1 m.
+        min_lookahead: Shortest look-ahead before a bend (m); None keeps ``lookahead`` everywhere (the
+            paper's fixed look-ahead, which cuts the headland turns by about 0.3 m).
         resolution: Map resolution (m/cell).
         planner: Planner parameters.
     """
@@ -103,6 +158,7 @@ class GonzalezDeliberativePolicy(_CoveragePolicyBase):
         self,
         env: Any,
         lookahead: float = 1.0,
+        min_lookahead: float | None = MIN_LOOKAHEAD,
         resolution: float = 0.05,
         planner: CoveragePlannerParams | None = None,
     ) -> None:
@@ -110,6 +166,7 @@ class GonzalezDeliberativePolicy(_CoveragePolicyBase):
         if env.unwrapped.config.localization != "ground_truth":
             raise ValueError("gonzalez-deliberative needs gym.make(..., localization='ground_truth')")
         self.lookahead = lookahead
+        self.min_lookahead = min_lookahead
         self.resolution = resolution
         self.planner = planner or CoveragePlannerParams()
         self.follower: _Follower | None = None
@@ -123,17 +180,21 @@ class GonzalezDeliberativePolicy(_CoveragePolicyBase):
             t0 = time.perf_counter()
             plan = plan_coverage(occ, res, pose[:2] - np.asarray(origin), self.planner)
             self.plan_time = time.perf_counter() - t0
-            self.follower = _Follower(plan.path + np.asarray(origin), self.lookahead)
+            self.follower = _Follower(plan, np.asarray(origin), self.lookahead, self.min_lookahead)
         return self.to_action(*self.follower.command(pose, self.spec))
 
     def episode_metrics(self, index: int = 0) -> dict[str, Any]:
-        """``plan_time_ms``, ``planned_length`` (m) and the ``planned_path`` (m, every 0.2 m) of the episode."""
+        """The episode's plan: ``plan_time_ms``, ``planned_length`` (m), ``planned_path`` (m, every 0.2 m).
+
+        Also the cross-track error against the plan in the corridors and turns (m, :meth:`_Follower.tracking`).
+        """
         if self.follower is None:
             return {}
         path = self.follower.path
         return {
             "plan_time_ms": 1e3 * self.plan_time,
             "planned_length": self.follower.tracker.length,
+            **self.follower.tracking(),
             "planned_path": path[:: max(1, int(round(0.2 / 0.1)))].round(3).tolist(),
         }
 
@@ -181,71 +242,149 @@ class GonzalezPseudoReactivePolicy(_CoveragePolicyBase):
 class GonzalezHybridPolicy(GonzalezPseudoReactivePolicy):
     """``gonzalez-hybrid`` (Fig. 2): pseudo-reactive first, then deliberative on the sensory map, no true map.
 
+    The first run in a greenhouse is pseudo-reactive and builds the sensory map (eq. 2) in its odometry frame.
+    Later runs plan on that map (:func:`~agri_baselines.gonzalez_planner.plan_coverage`) and follow the plan
+    with Pure Pursuit on the odometry, which starts at the robot's pose as the first run's did. The two runs'
+    odometry drifts differently (each encoder's scale error is the run's own), so the plan's corridors lie
+    some centimetres beside the corridors this run's odometry sees. Along the corridors of the plan the
+    robot therefore corrects its odometry sideways by what its lateral sonars measure (this project's
+    addition; the paper tracks on the odometry alone and names a Kalman filter as future work): the offset
+    from the corridor's middle that each lateral pair of sonars reads (eq. 1-filtered, both seeing a row)
+    against the offset from the plan's corridor line that the corrected odometry predicts, blended in with
+    gain ``lateral_gain`` per step.
+
     Args:
         env: A GreenhouseCoverage env made with ``localization="odometry"``; a fixed ``layout_seed`` makes
-            every episode after the first a later run in the same greenhouse.
-        params: Pseudo-reactive gains.
-        lookahead: Pure Pursuit look-ahead (m).
+            every episode after the first a later run in the same greenhouse (a campaign).
+        params: Pseudo-reactive gains (``side_valid`` also gates the lateral correction).
+        lookahead: Pure Pursuit look-ahead on straight stretches (m).
         end_overshoot: The planned path is extended this far straight on past its end, where the map is free
             (m): the first run's map ends where that run's coverage did, and this run's odometry differs
             from the first run's by the encoders' scale errors.
+        lateral_gain: Share of the sonar-measured lateral error corrected per step (0: odometry alone).
+        lateral_gate: Larger disagreements between the sonars and the odometry are ignored (m): a leaf or an
+            echo slipping into the foliage, not drift.
     """
 
     def __init__(
-        self, env: Any, params: PseudoReactiveParams | None = None, lookahead: float = 1.0, end_overshoot: float = 0.6
+        self,
+        env: Any,
+        params: PseudoReactiveParams | None = None,
+        lookahead: float = 1.0,
+        end_overshoot: float = 0.6,
+        lateral_gain: float = 0.05,
+        lateral_gate: float = 0.3,
     ) -> None:
         super().__init__(env, params)
         self.lookahead = lookahead
         self.end_overshoot = end_overshoot
+        self.lateral_gain = lateral_gain
+        self.lateral_gate = lateral_gate
         self.known_map: tuple[np.ndarray, tuple[float, float]] | None = None
         self.follower: _Follower | None = None
         self.mode = "pseudo-reactive"
         self.runs = 0
+        self.correction = np.zeros(2)  # added to the odometry position on a later run (m)
+        self.filters = [PeakFilter(self.params.filter_n, self.params.filter_eps) for _ in range(len(self.mounts))]
 
     def act(self, obs: dict[str, np.ndarray], start: bool) -> np.ndarray:
         """First run: pseudo-reactive (building the map). Later runs: plan on the map and follow."""
         pose, sonar, heading = self.decode(obs)
         if start:
-            same_greenhouse = self.env.unwrapped.config.layout_seed >= 0
-            if self.runs > 0 and same_greenhouse and self.known_map is None and len(self.controller.map.points):
-                self.known_map = self.controller.map.occupancy()
-            if not same_greenhouse:
+            self._start_run(pose)
+        if self.follower is None:
+            return self.to_action(*self.controller.command(sonar, heading, pose[0], pose[1], self.dt))
+        filtered = [f(v) for f, v in zip(self.filters, sonar, strict=True)]
+        corrected = pose.copy()
+        corrected[:2] += self.correction
+        self._correct_sideways(corrected, np.array(filtered))
+        corrected[:2] = pose[:2] + self.correction
+        return self.to_action(*self.follower.command(corrected, self.spec))
+
+    def _start_run(self, pose: np.ndarray) -> None:
+        same_greenhouse = self.env.unwrapped.config.layout_seed >= 0
+        if self.runs > 0 and same_greenhouse and self.known_map is None and len(self.controller.map.points):
+            self.known_map = self.controller.map.occupancy()
+        if not same_greenhouse:
+            self.known_map = None
+        self.runs += 1
+        self.follower = None
+        self.mode = "pseudo-reactive"
+        self.correction = np.zeros(2)
+        for f in self.filters:
+            f.reset()
+        if self.known_map is not None:
+            occ, origin = self.known_map
+            try:
+                plan = plan_coverage(occ, 0.05, pose[:2] - np.asarray(origin))
+                plan = _extend_end(plan, occ, 0.05, self.end_overshoot)
+                self.follower = _Follower(plan, np.asarray(origin), self.lookahead, MIN_LOOKAHEAD)
+                self.mode = "deliberative"
+            except ValueError:  # the map does not allow a plan: drive this run pseudo-reactively
                 self.known_map = None
-            self.runs += 1
-            self.follower = None
-            self.mode = "pseudo-reactive"
-            if self.known_map is not None:
-                occ, origin = self.known_map
-                try:
-                    plan = plan_coverage(occ, 0.05, pose[:2] - np.asarray(origin))
-                    path = _extend_end(plan.path, occ, 0.05, self.end_overshoot)
-                    self.follower = _Follower(path + np.asarray(origin), self.lookahead)
-                    self.mode = "deliberative"
-                except ValueError:  # the map does not allow a plan: drive this run pseudo-reactively
-                    self.known_map = None
-            if self.follower is None:
-                self.controller.reset()
-        if self.follower is not None:
-            return self.to_action(*self.follower.command(pose, self.spec))
-        return self.to_action(*self.controller.command(sonar, heading, pose[0], pose[1], self.dt))
+        if self.follower is None:
+            self.controller.reset()
+
+    def _correct_sideways(self, pose: np.ndarray, filtered: np.ndarray) -> None:
+        """Along a corridor of the plan: pull the odometry sideways toward what the lateral sonars measure.
+
+        Each lateral pair (front, middle, rear) whose two sonars both see a row (eq. 1-filtered, no peak)
+        measures the offset of its own position from the corridor's middle; the plan's corridor line there
+        predicts it from the corrected odometry. The mean disagreement is blended into the correction.
+        """
+        assert self.follower is not None
+        tracker = self.follower.tracker
+        errors = []
+        c, s = math.cos(pose[2]), math.sin(pose[2])
+        for left, right in ((LF, RF), (LM, RM), (LR, RR)):
+            if not all(
+                len(self.filters[k].window) == self.filters[k].n
+                and not self.filters[k].last_was_peak
+                and filtered[k] < self.params.side_valid
+                for k in (left, right)
+            ):
+                continue
+            along = float(self.mounts[left, 0])  # the pair's position ahead of the robot's centre (m)
+            at = pose[:2] + along * np.array([c, s])
+            arc = tracker.progress + along
+            if self.follower.part_at(arc) != CORRIDOR:
+                continue
+            here, ahead = tracker.point_at(arc), tracker.point_at(arc + 0.2)
+            tangent = (ahead - here) / max(float(np.hypot(*(ahead - here))), 1e-9)
+            normal = np.array([-tangent[1], tangent[0]])  # to the left of the plan
+            predicted = float(np.dot(at - here, normal))
+            # the left sonar reading short: the pair is left of the middle (the mounts are symmetric)
+            tilt = math.cos(pose[2] - math.atan2(tangent[1], tangent[0]))
+            measured = 0.5 * (filtered[right] - filtered[left]) * tilt
+            if abs(measured - predicted) <= self.lateral_gate:
+                errors.append((measured - predicted) * normal)
+        if errors:
+            self.correction += self.lateral_gain * np.mean(errors, axis=0)
 
     def episode_metrics(self, index: int = 0) -> dict[str, Any]:
-        """The run's mode (``hybrid_deliberative`` 1 or 0), plus the pseudo-reactive run's data or the plan."""
+        """The run's mode (``hybrid_deliberative`` 1 or 0), plus the pseudo-reactive run's data or the plan.
+
+        A later run adds the cross-track error against its plan (on the corrected odometry, m) and
+        ``lateral_correction``, the odometry's sideways correction at the end of the run (m).
+        """
         if self.follower is None:
-            return {"hybrid_deliberative": 0, **super().episode_metrics(index)}
+            return {"hybrid_deliberative": 0, **dict.fromkeys(TRACKING_KEYS), **super().episode_metrics(index)}
         return {
             "hybrid_deliberative": 1,
             "planned_length": self.follower.tracker.length,
+            **self.follower.tracking(),
+            "lateral_correction": float(np.hypot(*self.correction)),
             "planned_path": self.follower.path[::2].round(3).tolist(),
         }
 
 
-def _extend_end(path: np.ndarray, occ: np.ndarray, res: float, length: float) -> np.ndarray:
-    """``path`` continued straight on past its last point, up to ``length`` metres over free cells."""
+def _extend_end(plan: CoveragePlan, occ: np.ndarray, res: float, length: float) -> CoveragePlan:
+    """The plan continued straight on past its last point, up to ``length`` metres over free cells."""
+    path = plan.path
     seg = path[-1] - path[max(0, len(path) - 10)]
     norm = float(np.hypot(*seg))
     if length <= 0 or norm < 1e-9:
-        return path
+        return plan
     u = seg / norm
     extra = []
     for t in np.arange(res, length + 1e-9, res):
@@ -254,7 +393,10 @@ def _extend_end(path: np.ndarray, occ: np.ndarray, res: float, length: float) ->
         if not (0 <= i < occ.shape[0] and 0 <= j < occ.shape[1]) or occ[i, j]:
             break
         extra.append(q)
-    return np.vstack([path, *extra]) if extra else path
+    if not extra:
+        return plan
+    part = np.concatenate([plan.part, np.full(len(extra), plan.part[-1])])
+    return dataclasses.replace(plan, path=np.vstack([path, *extra]), part=part)
 
 
 def _thin(points: np.ndarray, cell: float) -> np.ndarray:
@@ -276,5 +418,9 @@ def make_gonzalez_pseudo_reactive(env: Any) -> GonzalezPseudoReactivePolicy:
 
 
 def make_gonzalez_hybrid(env: Any) -> GonzalezHybridPolicy:
-    """``gonzalez-hybrid``. Env: ``localization="odometry"`` (and a fixed ``layout_seed`` for later runs)."""
+    """``gonzalez-hybrid``. Env: ``localization="odometry"``; its later runs need a campaign in one world.
+
+    ``agri evaluate --campaign-runs R`` (or a suite's ``campaign``) drives R runs in one greenhouse with one
+    policy; evaluated episode by episode, every run is a first run.
+    """
     return GonzalezHybridPolicy(env)

@@ -24,6 +24,7 @@ import dataclasses
 import math
 from typing import Any
 
+import numba
 import numpy as np
 
 
@@ -83,6 +84,73 @@ class RobotGeometry:
     control_period: float
 
 
+def scan_zones_reference(
+    ranges: np.ndarray,
+    cos: np.ndarray,
+    sin: np.ndarray,
+    mount_x: float,
+    mount_y: float,
+    no_echo: float,
+    half_length: float,
+    half_width: float,
+    front_margin: float,
+    side_lookahead: float,
+) -> tuple[float, float, float]:
+    """:func:`scan_zones` in numpy: the statement of what it computes (and the reference its test compares with)."""
+    valid = ranges < no_echo
+    px = mount_x + ranges * cos
+    py = mount_y + ranges * sin
+    front_zone = valid & (px > half_length) & (np.abs(py) < half_width + front_margin)
+    front = float(np.min(px[front_zone] - half_length)) if np.any(front_zone) else math.inf
+    side_zone = valid & (px > -half_length) & (px < half_length + side_lookahead)
+    left_pts = py[side_zone & (py > half_width)]
+    right_pts = py[side_zone & (py < -half_width)]
+    left = float(np.min(left_pts) - half_width) if left_pts.size else math.inf
+    right = float(np.min(-right_pts) - half_width) if right_pts.size else math.inf
+    return front, left, right
+
+
+@numba.njit(cache=True)
+def scan_zones(
+    ranges: np.ndarray,
+    cos: np.ndarray,
+    sin: np.ndarray,
+    mount_x: float,
+    mount_y: float,
+    no_echo: float,
+    half_length: float,
+    half_width: float,
+    front_margin: float,
+    side_lookahead: float,
+) -> tuple[float, float, float]:
+    """The LIDAR's gaps ahead of and beside the footprint: ``(front, left, right)`` in metres, ``inf`` for none.
+
+    Beam ``k`` ends at ``(mount_x + r cos_k, mount_y + r sin_k)`` in the robot frame (beams at ``no_echo`` or
+    beyond saw nothing). Front: ahead of the front edge, within ``front_margin`` of the sides; left and right:
+    beside the body, from its rear edge to ``side_lookahead`` ahead of its front edge. The same operations as
+    :func:`scan_zones_reference` (numpy), compiled; minima are exact whatever their order.
+    """
+    front = math.inf
+    left = math.inf
+    right = math.inf
+    front_width = half_width + front_margin
+    side_end = half_length + side_lookahead
+    for k in range(ranges.shape[0]):
+        r = ranges[k]
+        if not r < no_echo:
+            continue
+        px = mount_x + r * cos[k]
+        py = mount_y + r * sin[k]
+        if px > half_length and abs(py) < front_width:
+            front = min(front, px - half_length)
+        if px > -half_length and px < side_end:
+            if py > half_width:
+                left = min(left, py)
+            elif py < -half_width:
+                right = min(right, -py)
+    return front, left - half_width, right - half_width
+
+
 class HarikApfController:
     """Eqs. 12-14 plus the passive safety stop, for one robot (keeps the safety state between calls)."""
 
@@ -120,17 +188,18 @@ class HarikApfController:
             between each side and obstacles alongside the robot (``inf`` when none).
         """
         rb = self.robot
-        valid = ranges < rb.lidar_max_range - 1e-6
-        px = self._mount[0] + ranges * self._cos
-        py = self._mount[1] + ranges * self._sin
-        half_l, half_w = 0.5 * rb.length, 0.5 * rb.width
-        front_zone = valid & (px > half_l) & (np.abs(py) < half_w + self.p.front_margin)
-        front = float(np.min(px[front_zone] - half_l)) if np.any(front_zone) else math.inf
-        side_zone = valid & (px > -half_l) & (px < half_l + self.p.side_lookahead)
-        left_pts = py[side_zone & (py > half_w)]
-        right_pts = py[side_zone & (py < -half_w)]
-        left = float(np.min(left_pts) - half_w) if left_pts.size else math.inf
-        right = float(np.min(-right_pts) - half_w) if right_pts.size else math.inf
+        front, left, right = scan_zones(
+            np.asarray(ranges, dtype=np.float64),
+            self._cos,
+            self._sin,
+            float(self._mount[0]),
+            float(self._mount[1]),
+            rb.lidar_max_range - 1e-6,
+            0.5 * rb.length,
+            0.5 * rb.width,
+            self.p.front_margin,
+            self.p.side_lookahead,
+        )
         for i in self._left_sonars:
             left = min(left, float(sonar[i]) if sonar[i] < rb.sonar_max_range - 1e-6 else math.inf)
         for i in self._right_sonars:
@@ -418,11 +487,12 @@ def make_harik_apf_slam(env: Any, localization_margin: float = 0.1, slam_config:
 
 
 def make_harik_apf_hector_plain(env: Any) -> HarikApfSlamPolicy:
-    """``harik-apf-hector-plain``: ``harik-apf`` on plain Hector SLAM, without our two safeguards.
+    """``harik-apf-hector-plain``: ``harik-apf`` on plain Hector SLAM, without our three safeguards.
 
-    No free-space guard against moving people and no cost check of Gauss-Newton steps, as in ROS
-    ``hector_mapping`` (see :mod:`baselines.hector_slam`).
+    No free-space guard against moving people, no cost check of Gauss-Newton steps and no constant-velocity
+    prediction of the match's start, as in ROS ``hector_mapping`` (see :mod:`baselines.hector_slam`).
     """
     from agri_baselines.hector_slam import HectorSlamConfig
 
-    return make_harik_apf_slam(env, slam_config=HectorSlamConfig(free_space_guard=None, max_step_halvings=0))
+    plain = HectorSlamConfig(free_space_guard=None, max_step_halvings=0, constant_velocity=False)
+    return make_harik_apf_slam(env, slam_config=plain)

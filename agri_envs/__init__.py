@@ -17,11 +17,13 @@ Package map: ``sim2d`` (the shared 2D engine), ``scenes`` (scene generators shar
 
 from __future__ import annotations
 
+import copy
+import dataclasses
 import importlib
 from typing import Any
 
 import gymnasium as gym
-from gymnasium.envs.registration import WrapperSpec, register, registry
+from gymnasium.envs.registration import EnvSpec, WrapperSpec, register, registry
 
 from agri_envs.arm.presets import REACH_PRESET  # pure data: no pybullet
 
@@ -48,6 +50,24 @@ PARALLEL_ENVS: dict[str, str] = {
 # ---------------------------------------------------------------- Gymnasium envs
 
 
+class _SpecWithVectorForm(EnvSpec):
+    """A spec whose single env needs a wrapper (``gym.make``) and that has a native vector env (``gym.make_vec``).
+
+    Gymnasium's ``make_vec`` refuses a ``vector_entry_point`` beside ``additional_wrappers``, which it could not
+    apply to a vector env. GreenhouseNav's one additional wrapper, ``SyncTimeLimit``, tells a single env about
+    ``gym.make(..., max_episode_steps=N)``; its vector env takes ``max_episode_steps`` itself and needs no wrapper.
+    ``make_vec`` works on a deep copy of the spec, and the copy leaves the wrappers out. (So
+    ``gym.make_vec(..., vectorization_mode="sync")`` with an explicit ``max_episode_steps`` would build sub-envs
+    that truncate through ``TimeLimit`` alone, their crash penalty and ``info`` sized to the mission: build such
+    sub-envs with ``gym.make``, or use the native vector env.)
+    """
+
+    def __deepcopy__(self, memo: dict[int, Any]) -> EnvSpec:
+        fields = {f.name: copy.deepcopy(getattr(self, f.name), memo) for f in dataclasses.fields(EnvSpec) if f.init}
+        fields["additional_wrappers"] = ()
+        return EnvSpec(**fields)
+
+
 def register_envs() -> None:
     """Register all agri_envs ids with Gymnasium (idempotent)."""
     if "agri_envs/GreenhouseNav-v2" not in registry:
@@ -59,6 +79,11 @@ def register_envs() -> None:
             additional_wrappers=(
                 WrapperSpec("SyncTimeLimit", "agri_envs.rover.greenhouse_nav:SyncTimeLimit", kwargs={}),
             ),
+            vector_entry_point="agri_envs.rover.vector:GreenhouseNavVectorEnv",
+        )
+        spec = registry["agri_envs/GreenhouseNav-v2"]
+        registry[spec.id] = _SpecWithVectorForm(
+            **{f.name: getattr(spec, f.name) for f in dataclasses.fields(EnvSpec) if f.init}
         )
     # GrapeHarvest truncates itself at a time limit that follows the scene (its info["time_limit"]).
     if "agri_envs/GrapeHarvest-v1" not in registry:
@@ -73,6 +98,7 @@ def register_envs() -> None:
         register(
             id="agri_envs/GreenhouseCoverage-v0",
             entry_point="agri_envs.coverage.greenhouse_coverage:GreenhouseCoverageEnv",
+            vector_entry_point="agri_envs.coverage.vector:GreenhouseCoverageVectorEnv",
         )
 
 

@@ -251,7 +251,9 @@ register_scenario(
         "same-greenhouse",
         {"layout_seed": 1},
         "González Fig. 2: the same greenhouse every run, so the hybrid architecture's first (pseudo-reactive) "
-        "run builds the sensory map that its later (deliberative) runs plan on.",
+        "run builds the sensory map that its later (deliberative) runs plan on. The runs need one policy: "
+        "evaluate in campaigns (agri evaluate --campaign-runs R; suite coverage-campaign), else every episode "
+        "is a fresh policy's first run.",
         default_episodes=10,
     )
 )

@@ -12,6 +12,12 @@ still compute differently (glibc and OpenBLAS pick other code there).
 The pins are set only by this entry point and by the test suite (``tests/conftest.py``), never on
 ``import agri_envs``: a library does not change its user's process. A script that must reproduce entries
 exactly sets the same variables (:data:`NUMERIC_PINS`) before it imports numpy.
+
+The entry point also bounds how long torch's idle OpenMP threads spin before they sleep
+(:data:`THREAD_SETTINGS`). A training whose gradient updates use both cores (``update_threads: 2``) shares
+them with whatever else runs; with libgomp's default wait, a thread that waits at a parallel region for a
+peer the OS has descheduled keeps spinning, and PPO's updates on GreenhouseNav ran 20-30 times slower than
+on one thread while one other process ran (``benchmarks/bench_update_threads.py``).
 """
 
 from __future__ import annotations
@@ -28,6 +34,17 @@ NUMERIC_PINS = {
 }
 
 
+#: Environment variables for torch's OpenMP threads (read when torch is imported): an idle thread spins for
+#: 10,000 iterations, then sleeps.
+THREAD_SETTINGS = {"GOMP_SPINCOUNT": "10000"}
+
+
+def settle_idle_threads(environ: MutableMapping[str, str] = os.environ) -> None:
+    """Set :data:`THREAD_SETTINGS` where unset (call before torch is imported; afterwards it has no effect)."""
+    for key, value in THREAD_SETTINGS.items():
+        environ.setdefault(key, value)
+
+
 def pin_numeric_kernels(environ: MutableMapping[str, str] = os.environ) -> None:
     """Set :data:`NUMERIC_PINS` where unset (call before numpy is imported; afterwards it has no effect).
 
@@ -41,8 +58,9 @@ def pin_numeric_kernels(environ: MutableMapping[str, str] = os.environ) -> None:
 
 
 def main() -> int:
-    """Pin the kernels, then run ``agri`` with the command line's arguments."""
+    """Pin the kernels and settle torch's idle threads, then run ``agri`` with the command line's arguments."""
     pin_numeric_kernels()
+    settle_idle_threads()
     from agri_training.cli import main as cli_main  # after the pins: this imports numpy
 
     return cli_main()

@@ -16,6 +16,7 @@ from agri_baselines import list_policies, policy_spec
 from agri_envs.scenarios import list_scenarios
 from agri_training import leaderboard as lb
 from agri_training.core.yaml_values import load_yaml
+from agri_training.evaluation.batched import BATCH_SIZE
 from agri_training.evaluation.evaluate import EvalRequest, evaluate, format_summary
 from agri_training.evaluation.parallel import EpisodeError
 from agri_training.evaluation.video import ClipRequest, record
@@ -49,8 +50,9 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
         scenario=args.scenario,
         env_kwargs=parse_env_kwargs(args.env_kwargs or []),
         record_traces=args.traces,
+        campaign_runs=args.campaign_runs,
     )
-    result = evaluate(request, progress=not args.quiet, workers=args.workers, ray=args.ray)
+    result = evaluate(request, progress=not args.quiet, workers=args.workers, ray=args.ray, batch=args.batch)
     out = Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text(json.dumps(result, indent=1))
@@ -234,9 +236,13 @@ def _cmd_leaderboard(args: argparse.Namespace) -> int:
                 ref = lb.policy_reference(args.policy)
                 env_id = policy_spec(args.policy).env_id
                 chosen = [s for s in chosen if s.env_id == env_id] if names == ["all"] else chosen
+            if names == ["all"]:  # a suite that names its policies runs only those
+                chosen = [s for s in chosen if s.policies is None or ref["name"] in s.policies]
             pairs = [(s, ref) for s in chosen]
         command = "agri leaderboard " + " ".join(sys.argv[2:] if len(sys.argv) > 2 else [])
-        entries, seconds = lb.timed(lb.evaluate_entries, pairs, args.workers, not args.quiet, command, args.ray)
+        entries, seconds = lb.timed(
+            lb.evaluate_entries, pairs, args.workers, not args.quiet, command, args.ray, batch=args.batch
+        )
         for entry in entries:
             print(f"wrote {lb.write_entry(entry, entries_dir)}")
         lb.write_markdown(md, entries_dir, suites_dir)
@@ -250,7 +256,7 @@ def _cmd_leaderboard(args: argparse.Namespace) -> int:
         if len(entries) != len(wanted):
             raise ValueError(f"not an entry under {entries_dir}: {sorted(wanted)}")
     problems, seconds = lb.timed(
-        lb.verify_entries, entries, suites_dir, args.workers, args.rtol, not args.quiet, args.ray
+        lb.verify_entries, entries, suites_dir, args.workers, args.rtol, not args.quiet, args.ray, args.batch
     )
     if not args.no_markdown and not lb.leaderboard_is_current(md, entries_dir, suites_dir):
         problems.append(f"{md} is stale: run `agri leaderboard render` and commit it")
@@ -310,6 +316,19 @@ def add_scale_arguments(parser: argparse.ArgumentParser) -> None:
     )
 
 
+def add_batch_argument(parser: argparse.ArgumentParser) -> None:
+    """Add ``--batch N``: most episodes stepped together in an env's batched form (1: the reference loop only)."""
+    parser.add_argument(
+        "--batch",
+        type=_workers,
+        default=BATCH_SIZE,
+        metavar="N",
+        help=f"step up to N episodes together in the env's batched form where it has one and the policy acts on "
+        f"its observations alone (default {BATCH_SIZE}); 1 runs every episode in the single-env loop. The "
+        "records are the same",
+    )
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of ``agri``."""
     parser = argparse.ArgumentParser(prog="agri", description=__doc__)
@@ -331,10 +350,20 @@ def build_parser() -> argparse.ArgumentParser:
         help="seed of the first episode; episode i runs seed S+i (default 0; held-out suites use 100000 and up)",
     )
     ev.add_argument("--env-kwargs", nargs="*", metavar="KEY=VALUE", help="extra env arguments")
-    ev.add_argument("--traces", type=int, default=1, help="episodes that record per-step traces")
+    ev.add_argument("--traces", type=int, default=1, help="episodes (campaigns) that record per-step traces")
+    ev.add_argument(
+        "--campaign-runs",
+        type=int,
+        default=1,
+        metavar="R",
+        help="drive the episodes in campaigns of R consecutive seeds, each in one world (layout_seed = its first "
+        "seed) by one policy that keeps what it learned between runs (e.g. gonzalez-hybrid's sensory map); "
+        "R must divide --episodes (default 1: a fresh policy per episode)",
+    )
     ev.add_argument("--out", required=True, help="output JSON file")
     ev.add_argument("--quiet", action="store_true", help="no progress bar or progress lines (the summary still prints)")
     add_scale_arguments(ev)
+    add_batch_argument(ev)
     ev.set_defaults(func=_cmd_evaluate)
     rc = sub.add_parser("record", help="record a policy's episode headless as a GIF or MP4 clip")
     _add_clip_arguments(rc, out_required=True)
@@ -427,10 +456,12 @@ def build_parser() -> argparse.ArgumentParser:
     su.add_argument("--all", action="store_true", help="every registered baseline on every suite of its env")
     su.add_argument("--env", default=None, help="with --all: only this env id")
     add_scale_arguments(su)
+    add_batch_argument(su)
     su.add_argument("--quiet", action="store_true")
     ve = lbsub.add_parser("verify", help="re-evaluate entries on their pinned seeds; fail on any difference")
     ve.add_argument("entries_named", nargs="*", metavar="ENTRY", help="entry JSON files (default: all)")
     add_scale_arguments(ve)
+    add_batch_argument(ve)
     ve.add_argument("--rtol", type=float, default=0.0, help="relative tolerance for floats (default 0: exact)")
     ve.add_argument("--no-markdown", action="store_true", help="do not check that LEADERBOARD.md is current")
     ve.add_argument("--quiet", action="store_true")

@@ -13,15 +13,15 @@ every point runs with every seed. Each run writes the same run directory as a si
 the single ``agri train`` command that reproduces it. The sweep writes ``OUT/sweep.json`` (everything),
 ``OUT/summary.md`` and ``OUT/summary.csv`` (one row per run).
 
-Resources are explicit: a run gets one CPU (one worker process, or a Ray task with ``num_cpus=1``) and
-trains with ``torch_threads: 1`` (``torch.set_num_threads(1)``) in one process (``vec_env: subproc`` is
-refused). Local workers fork from a server that has imported torch (with ``torch._dynamo``, which the
-optimizers load on their first step), stable-baselines3 and the envs once, and each keeps its imports and
-loaded numba kernels for its next runs (every run seeds everything afresh: ``tests/training/test_sweep.py`` checks that
-a run's learning curve does not depend on where it ran). Every run's configuration is resolved before the first
-run starts, so a bad grid value fails at once with a ``ValueError`` that names it. A run that raises is
-recorded with its seed, grid point and exception (and ``OUT/<run>/error.txt`` with the traceback); the other
-runs go on.
+Resources are explicit: a run gets one CPU (one worker process, or a Ray task with ``num_cpus=1``) and trains
+with ``torch_threads: 1`` and ``update_threads: 1`` (``torch.set_num_threads(1)``) in one process
+(``vec_env: subproc`` is refused). Local workers fork from a server that has imported torch (with
+``torch._dynamo``, which the optimizers load on their first step), stable-baselines3 and the envs once, and
+each keeps its imports and loaded numba kernels for its next runs (every run seeds everything afresh:
+``tests/training/test_sweep.py`` checks that a run's learning curve does not depend on where it ran). Every
+run's configuration is resolved before the first run starts, so a bad grid value fails at once with a
+``ValueError`` that names it. A run that raises is recorded with its seed, grid point and exception (and
+``OUT/<run>/error.txt`` with the traceback); the other runs go on.
 
 The summary reports, per run, the final periodic evaluation (the last row of ``curve.csv``: success rate and
 mean return over the ``eval_episodes`` fixed evaluation seeds), and per grid point the mean over its seeds
@@ -55,8 +55,9 @@ from agri_training.core.yaml_values import load_yaml
 from agri_training.learned.policy import CONFIG_FILE
 from agri_training.train import HELD_OUT_SEED, HYPERPARAM_KEYS, TrainRequest, resolve_config, train
 
-#: Hyperparameters a sweep or a search may vary (``torch_threads`` is pinned to 1, ``scenarios`` is structure).
-VARIABLE_KEYS = tuple(k for k in HYPERPARAM_KEYS if k not in ("torch_threads", "scenarios"))
+#: Hyperparameters a sweep or a search may vary (``torch_threads`` and ``update_threads`` are pinned to 1,
+#: ``scenarios`` is structure).
+VARIABLE_KEYS = tuple(k for k in HYPERPARAM_KEYS if k not in ("torch_threads", "update_threads", "scenarios"))
 SUMMARY_MD, SUMMARY_CSV, SWEEP_JSON, ERROR_FILE = "summary.md", "summary.csv", "sweep.json", "error.txt"
 
 
@@ -274,7 +275,7 @@ def plan_sweep(request: SweepRequest) -> list[SweepRun]:
     out = Path(request.out).resolve()
     runs = []
     for point, label in zip(points, labels, strict=True):
-        overrides = merge(merge(request.overrides, nested(point)), {"torch_threads": 1})
+        overrides = merge(merge(request.overrides, nested(point)), {"torch_threads": 1, "update_threads": 1})
         for seed in request.seeds:
             name = _safe(f"{label}-seed{seed}" if point else f"seed{seed}")
             run = TrainRequest(
@@ -294,10 +295,10 @@ def plan_sweep(request: SweepRequest) -> list[SweepRun]:
                 config = resolve_config(run)
             except (ValueError, TypeError) as exc:
                 raise ValueError(f"sweep run with {where}: {exc}") from None
-            if config["vec_env"] != "dummy":
+            if config["vec_env"] == "subproc":
                 raise ValueError(
-                    f"sweep run with {where}: vec_env {config['vec_env']!r} starts n_envs processes per run; "
-                    "a sweep gives each run one CPU, use vec_env: dummy"
+                    f"sweep run with {where}: vec_env 'subproc' starts n_envs processes per run; "
+                    "a sweep gives each run one CPU, use vec_env: dummy or vector"
                 )
             if (run.out / CONFIG_FILE).exists():
                 raise ValueError(f"{run.out} already holds a run; pass another --out")

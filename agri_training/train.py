@@ -10,7 +10,8 @@ evaluated. The keys:
 | ``n_timesteps`` | training steps when ``--timesteps`` is not given |
 | ``policy`` | SB3 policy name (``MlpPolicy``, ``MultiInputPolicy``) |
 | ``n_envs`` | parallel envs |
-| ``vec_env`` | ``dummy`` (one process) or ``subproc`` (one process per env) |
+| ``vec_env`` | ``dummy`` (one process), ``subproc`` (one process per env) or ``vector`` (one process: the |
+| | env's batched form where it registers one, else its single envs; see :func:`make_vector_train_env`) |
 | ``env_kwargs`` | ``gym.make`` arguments (after the scenario's) |
 | ``train_env_kwargs`` | ``gym.make`` arguments of the training envs only, over ``env_kwargs`` |
 | ``wrappers`` | observation wrappers by name, innermost first (see ``learned.WRAPPERS``) |
@@ -23,6 +24,8 @@ evaluated. The keys:
 | ``eval_freq``, ``eval_episodes``, ``eval_seed`` | periodic evaluation every N steps on seeds S.. S+n-1 |
 | ``checkpoint_freq`` | weights-only checkpoint every N steps (0: none) |
 | ``torch_threads`` | torch CPU threads (1 beside env workers) |
+| ``update_threads`` | torch CPU threads of the gradient updates, at most (null: ``torch_threads``); PPO's |
+| | rollout and updates alternate, so each update uses up to this many of the cores idle when it starts |
 
 A run directory holds ``policy.pt`` (the final weights, a ``state_dict``), ``normalize.json`` (the
 observation statistics), ``config.yaml`` (the resolved config), ``meta.json`` (exact command, package
@@ -36,6 +39,7 @@ from __future__ import annotations
 import copy
 import csv
 import dataclasses
+import functools
 import json
 import os
 import platform
@@ -52,13 +56,14 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 import yaml
+from gymnasium.vector import AutoresetMode
 
 import agri_envs
 from agri_envs.scenarios import scenario as get_scenario
 from agri_training.core.documents import git_commit
 from agri_training.core.yaml_values import load_yaml
 from agri_training.evaluation.episode import run_episode
-from agri_training.learned.curricula import apply_train_wrappers
+from agri_training.learned.curricula import apply_train_wrappers, apply_vector_train_wrappers
 from agri_training.learned.inference import PolicyNetwork
 from agri_training.learned.parameter_sharing import make_shared_vec_env, predict_shared
 from agri_training.learned.policy import (
@@ -77,6 +82,7 @@ from agri_training.learned.policy import (
     resolve_algo_kwargs,
     resolve_policy_kwargs,
 )
+from agri_training.learned.vector import apply_vector_wrappers, make_sync_vector_env
 
 HYPERPARAMS_DIR = Path(__file__).parent / "hyperparams"
 #: Seeds from here on are reserved for held-out evaluation suites; training never uses them.
@@ -100,8 +106,10 @@ HYPERPARAM_KEYS = (
     "eval_seed",
     "checkpoint_freq",
     "torch_threads",
+    "update_threads",
     "scenarios",
 )
+VEC_ENVS = ("dummy", "subproc", "vector")
 _PACKAGES = ("agri-envs", "gymnasium", "stable-baselines3", "sb3-contrib", "torch", "numpy", "pymunk", "pybullet")
 
 
@@ -212,8 +220,12 @@ def resolve_config(request: TrainRequest) -> dict[str, Any]:
             f"eval seeds must lie in [0, {HELD_OUT_SEED}), got {eval_seed}..{eval_seed + eval_episodes - 1}"
         )
     vec_env = hp.get("vec_env", "dummy")
-    if vec_env not in ("dummy", "subproc"):
-        raise ValueError(f"vec_env must be 'dummy' or 'subproc', got {vec_env!r}")
+    if vec_env not in VEC_ENVS:
+        raise ValueError(f"vec_env must be one of {', '.join(VEC_ENVS)}, got {vec_env!r}")
+    torch_threads = int(hp.get("torch_threads", 1))
+    update_threads = int(hp["update_threads"]) if hp.get("update_threads") is not None else torch_threads
+    if torch_threads < 1 or update_threads < 1:
+        raise ValueError(f"torch_threads and update_threads must be >= 1, got {torch_threads} and {update_threads}")
     algo_kwargs = dict(hp.get("algo_kwargs", {}) or {})
     her = dict(hp.get("her", {}) or {}) if request.her else None
     if agri_envs.is_parallel_id(request.env_id):  # one parameter-shared policy for every agent (see parameter_sharing)
@@ -224,6 +236,8 @@ def resolve_config(request: TrainRequest) -> dict[str, Any]:
                 raise ValueError(f"{request.env_id}: {key} apply to Gymnasium envs only; leave '{key}' empty")
         if int(hp.get("action_repeat", 1)) != 1:
             raise ValueError(f"{request.env_id}: action_repeat applies to Gymnasium envs only; leave it at 1")
+        if vec_env == "vector":
+            raise ValueError(f"{request.env_id}: vec_env 'vector' applies to Gymnasium envs only; use dummy")
     return {
         "env_id": request.env_id,
         "scenario": request.scenario,
@@ -246,7 +260,8 @@ def resolve_config(request: TrainRequest) -> dict[str, Any]:
         "eval_episodes": eval_episodes,
         "eval_seed": eval_seed,
         "checkpoint_freq": int(hp.get("checkpoint_freq", 0)),
-        "torch_threads": int(hp.get("torch_threads", 1)),
+        "torch_threads": torch_threads,
+        "update_threads": update_threads,
         "hyperparams_source": hp["hyperparams_source"],
         # Labelled like the baselines: a policy fed the ground-truth pose uses what a real robot lacks.
         "privileged": env_kwargs.get("localization") == "ground_truth",
@@ -310,20 +325,52 @@ def make_repeating(env_id: str, env_kwargs: Mapping[str, Any], repeat: int) -> g
     return ActionRepeat(env, repeat)
 
 
-def make_vec_env(config: Mapping[str, Any]) -> Any:
-    """The training VecEnv: ``n_envs`` copies (Dummy or Subproc), then ``VecNormalize`` if declared.
+def make_vector_train_env(config: Mapping[str, Any], batched: bool = True) -> Any:
+    """The training envs as one Gymnasium vector env in the adapter's contract, wrapped as the config declares.
 
-    A multi-agent env (the robot chain) becomes one slot per agent of ``n_envs`` copies, all in this
-    process (:func:`agri_training.parameter_sharing.make_shared_vec_env`), with ``VecMonitor`` for the
-    episode statistics.
+    The env's own batched form (``gym.make_vec`` through its ``vector_entry_point``, ``DISABLED`` autoreset,
+    ``frame_skip`` for ``action_repeat``) where it registers one and ``batched`` is true; else its single envs
+    (:func:`make_repeating`) in :func:`~agri_training.learned.vector.make_sync_vector_env`. Then the vector
+    forms of the curricula and of the observation wrappers, innermost first, as around each single env.
+
+    Raises:
+        ValueError: When ``env_kwargs`` sets ``frame_skip`` (``action_repeat`` is the one setting).
+    """
+    env_id, n_envs, repeat = config["env_id"], int(config["n_envs"]), int(config.get("action_repeat", 1))
+    env_kwargs = {**config["env_kwargs"], **config.get("train_env_kwargs", {})}
+    if batched and gym.spec(env_id).vector_entry_point is not None:
+        if "frame_skip" in env_kwargs:
+            raise ValueError("set action_repeat, not env_kwargs.frame_skip: evaluation holds actions by action_repeat")
+        kwargs: dict[str, Any] = {**env_kwargs, "autoreset_mode": AutoresetMode.DISABLED}
+        if repeat > 1:
+            kwargs["frame_skip"] = repeat
+        venv = gym.make_vec(env_id, num_envs=n_envs, vectorization_mode="vector_entry_point", **kwargs)
+    else:
+        venv = make_sync_vector_env([functools.partial(make_repeating, env_id, env_kwargs, repeat)] * n_envs)
+    venv = apply_vector_train_wrappers(venv, list(config.get("train_wrappers", [])))
+    return apply_vector_wrappers(venv, list(config["wrappers"]))
+
+
+def make_vec_env(config: Mapping[str, Any]) -> Any:
+    """The training VecEnv: ``n_envs`` copies (Dummy, Subproc or one vector env), then ``VecNormalize`` if declared.
+
+    ``vec_env: vector`` drives :func:`make_vector_train_env` through
+    :class:`~agri_training.learned.vec_env.VectorVecEnv`, with ``VecMonitor`` for the episode statistics (the
+    other two wrap each env in ``Monitor``). A multi-agent env (the robot chain) becomes one slot per agent
+    of ``n_envs`` copies, all in this process (:func:`agri_training.parameter_sharing.make_shared_vec_env`),
+    with ``VecMonitor``.
     """
     from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv, VecMonitor, VecNormalize
+
+    from agri_training.learned.vec_env import VectorVecEnv
 
     venv: Any
     if agri_envs.is_parallel_id(config["env_id"]):
         env_id, env_kwargs = config["env_id"], dict(config["env_kwargs"])
         venv = make_shared_vec_env(lambda: agri_envs.make(env_id, **env_kwargs), config["n_envs"])
         venv = VecMonitor(venv, info_keywords=("is_success",))
+    elif config["vec_env"] == "vector":
+        venv = VecMonitor(VectorVecEnv(make_vector_train_env(config)), info_keywords=("is_success",))
     else:
         fns = [_env_factory(config, i) for i in range(config["n_envs"])]
         venv = SubprocVecEnv(fns, start_method="forkserver") if config["vec_env"] == "subproc" else DummyVecEnv(fns)
@@ -334,6 +381,46 @@ def make_vec_env(config: Mapping[str, Any]) -> Any:
             norm["gamma"] = config["algo_kwargs"]["gamma"]
         venv = VecNormalize(venv, **norm)
     return venv
+
+
+def idle_cores(loadavg: Path = Path("/proc/loadavg")) -> int:
+    """This process's cores that nothing else runs on now: its cores less the other runnable threads, at least 1.
+
+    Reads the kernel's count of runnable threads (Linux's ``/proc/loadavg``; the caller is one of them);
+    where that is not available, all of the process's cores.
+    """
+    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1
+    try:
+        runnable = int(loadavg.read_text().split()[3].split("/")[0])
+    except (OSError, ValueError, IndexError):
+        return cores
+    return max(1, cores - (runnable - 1))
+
+
+def with_update_threads(cls: Any, threads: int, idle: Callable[[], int] = idle_cores) -> Any:
+    """``cls`` (an SB3 algorithm) whose gradient updates (``train``) run on up to ``threads`` torch threads.
+
+    The rollout keeps the threads set before (a batch of a few dozen observations gains nothing from more);
+    the updates, which alternate with it, use the cores it leaves idle: each update takes as many threads as
+    cores are idle when it starts (``idle()``), at most ``threads``. A thread more than the free cores does
+    not help, it hurts: its peers wait for it at every parallel region while the OS runs another process on
+    its core (``benchmarks/bench_update_threads.py``). The count goes to the logger as ``train/update_threads``.
+    """
+    import torch
+
+    class UpdateThreads(cls):  # type: ignore[misc,valid-type]
+        def train(self, *args: Any, **kwargs: Any) -> Any:
+            before = torch.get_num_threads()
+            now = max(1, min(threads, idle()))
+            torch.set_num_threads(now)
+            self.logger.record("train/update_threads", now)
+            try:
+                return super().train(*args, **kwargs)
+            finally:
+                torch.set_num_threads(before)
+
+    UpdateThreads.__name__ = UpdateThreads.__qualname__ = cls.__name__
+    return UpdateThreads
 
 
 class _LivePolicy:
@@ -555,6 +642,8 @@ def train(
     (run_dir / CONFIG_FILE).write_text(yaml.safe_dump(config, sort_keys=False))
     torch.set_num_threads(config["torch_threads"])
     cls = algorithm_class(config["algo"])
+    if config.get("update_threads", config["torch_threads"]) != config["torch_threads"]:
+        cls = with_update_threads(cls, config["update_threads"])
     venv = make_vec_env(config)
     algo_kwargs = resolve_algo_kwargs(config["algo_kwargs"])
     if config["her"] is not None:
@@ -594,6 +683,7 @@ def train(
     config = {**config, "timesteps_planned": planned}
     callback = _make_callback(config, run_dir, request.progress, on_eval)
     load_before = os.getloadavg()
+    commit = git_commit()  # the code that trains, even if the tree changes while it does
     t0 = time.perf_counter()
     started = time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())
     stopped_early = False
@@ -617,7 +707,7 @@ def train(
             "timesteps_rounding": f"whole rollouts of {why} = {unit} steps",
             "timesteps_done": int(model.num_timesteps),
             "stopped_early": stopped_early,
-            "git_commit": git_commit(),
+            "git_commit": commit,
             "packages": package_versions(),
             "cpu_count": os.cpu_count(),
             "load_average_start": [round(x, 2) for x in load_before],

@@ -205,7 +205,7 @@ class TuneRequest:
             timesteps=self.timesteps,
             scenario=self.scenario,
             her=self.her,
-            overrides=merge(merge(self.overrides, nested(point)), {"torch_threads": 1}),
+            overrides=merge(merge(self.overrides, nested(point)), {"torch_threads": 1, "update_threads": 1}),
             hyperparams_file=None if self.hyperparams_file is None else Path(self.hyperparams_file).resolve(),
             progress=False,
         )
@@ -271,8 +271,10 @@ def run_tune(
         config = resolve_config(request.trial_request(example, out / TRIALS_DIR / "check"))
     except (ValueError, TypeError) as exc:
         raise ValueError(f"the search space's first point does not resolve: {exc}") from None
-    if config["vec_env"] != "dummy":
-        raise ValueError("vec_env 'subproc' starts n_envs processes per trial; a trial gets one CPU: use dummy")
+    if config["vec_env"] == "subproc":
+        raise ValueError(
+            "vec_env 'subproc' starts n_envs processes per trial; a trial gets one CPU: use dummy or vector"
+        )
     searcher = _searcher(request)
     import_ray()
     from ray import tune

@@ -13,7 +13,7 @@ from agri_envs.coverage import robot as fito
 from agri_envs.coverage.config import GreenhouseCoverageConfig
 from agri_envs.coverage.task import CoverageTask
 from agri_envs.scenes.greenhouse import generate_layout
-from agri_envs.scenes.layout import Layout
+from agri_envs.scenes.layout import Layout, LayoutCache
 from agri_envs.sim2d.geometry import Kind
 from agri_envs.sim2d.gridmap import rasterize
 from agri_envs.sim2d.odometry import Compass, TrackOdometry
@@ -158,6 +158,10 @@ class GreenhouseCoverageEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
 
         env = gym.make("agri_envs/GreenhouseCoverage-v0", n_rows=6, row_bend=0.1, vegetation_echo_prob=0.3)
 
+    Batched: ``gym.make_vec("agri_envs/GreenhouseCoverage-v0", num_envs=64, **kwargs)`` steps 64 of these worlds
+    in one compiled loop (:class:`~agri_envs.coverage.vector.GreenhouseCoverageVectorEnv`), each sub-env's
+    episodes bit for bit this env's for the same seed and actions.
+
     ## Baselines
 
     ``gonzalez-deliberative`` (Voronoi diagram, corridor-covering search, Pure Pursuit; privileged: the true
@@ -166,7 +170,8 @@ class GreenhouseCoverageEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
 
     ## Version History
 
-    * v0: initial release.
+    * v0: initial release. Later, without a version change: the batched form (``gym.make_vec``) and resets
+      that reuse the pymunk world.
 
     ## References
 
@@ -242,6 +247,7 @@ class GreenhouseCoverageEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
         self.action_space = spaces.Box(-1.0, 1.0, (2,), np.float32)
         self.layout: Layout | None = None
         self.world: World2D | None = None
+        self._scenes = LayoutCache()  # greenhouses of fixed layout seeds
         self._trail: list[tuple[float, float]] = []
 
     # -- episode set-up --------------------------------------------------------------------------------
@@ -253,17 +259,25 @@ class GreenhouseCoverageEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
         cfg = self.config.with_options(options, ("growth", "layout_seed"))
         super().reset(seed=seed)
         rng = self.np_random
-        layout_rng = rng if cfg.layout_seed < 0 else np.random.default_rng(cfg.layout_seed)
-        self.layout = generate_layout(cfg.layout_params(), layout_rng)
+        params = cfg.layout_params()
+        if cfg.layout_seed < 0:
+            self.layout = generate_layout(params, rng)
+        else:  # the same greenhouse every time: built once
+            seed = cfg.layout_seed
+            self.layout = self._scenes.get((params, seed), lambda: generate_layout(params, np.random.default_rng(seed)))
         geo = self.layout.geometry
-        self.world = World2D(geo, n_movers=0)
         crop_c = np.isin(geo.circle_kinds, _CROP)
         crop_s = np.isin(geo.capsule_kinds, _CROP)
         self._solid = (np.ascontiguousarray(geo.circles[~crop_c]), np.ascontiguousarray(geo.capsules[~crop_s]))
         self._crop = (np.ascontiguousarray(geo.circles[crop_c]), np.ascontiguousarray(geo.capsules[crop_s]))
         first = self.layout.corridors[0]
         start = np.array([first[0, 0] - 1.0, first[0, 1], 0.0]) + rng.uniform([-0.03, -0.03, -0.02], [0.03, 0.03, 0.02])
-        self.robot = self.world.add_robot(self.robot_spec, start)
+        if self.world is None:  # the first episode (or the first after close()) builds the world ...
+            self.world = World2D(geo, n_movers=0)
+            self.robot = self.world.add_robot(self.robot_spec, start)
+        else:  # ... later ones move what is in it
+            self.world.set_scene(geo)
+            self.world.place_robot(self.robot, start)
         self.task = CoverageTask(self.layout.corridors, cfg.bin_length, cfg.weights())
         self.encoders.draw_scale(rng)
         self.encoders.reset(start)

@@ -104,9 +104,12 @@ class CoverageTask:
             "reward_cross_track": -w.cross_track * cross,
             "reward_time": -w.time,
         }
+        reward = 0.0
+        for value in terms.values():  # added left to right, as the batched env adds them (not sum()'s algorithm)
+            reward += value
         return {
             **terms,
-            "reward": float(sum(terms.values())),
+            "reward": reward,
             "is_success": success,
             "corridor": k,
             "cross_track": cross,

@@ -12,6 +12,7 @@ from agri_envs.rover import robot as rover
 from agri_envs.rover.task import RewardWeights
 from agri_envs.scenes.greenhouse import LayoutParams
 from agri_envs.scenes.office import CorridorParams
+from agri_envs.scenes.rosmap import map_waypoints
 
 LOCALIZATION_MODES = ("ground_truth", "odometry", "none")
 
@@ -27,7 +28,12 @@ class GreenhouseNavConfig(StrictConfig):
         choices=("greenhouse", "corridor", "map"),
     )
     map_yaml: str = param("", "ROS map_server map to load (scene='map')", valid="YAML path, e.g. EXAMPLE_MAP")
-    waypoints: tuple = param((), "loop of waypoints in the map frame (scene='map')", unit="m", valid=">= 2 (x, y)")
+    waypoints: tuple = param(
+        (),
+        "loop of waypoints in the map frame (scene='map'; () takes the map YAML's)",
+        unit="m",
+        valid=">= 2 (x, y)",
+    )
     n_rows: int = param(3, "rows of plants", low=1, high=12)
     row_length: float = param(6.0, "length of each row", unit="m", low=2.0, high=40.0)
     corridor_width: float = param(
@@ -102,6 +108,13 @@ class GreenhouseNavConfig(StrictConfig):
     )
     render_width: int = param(800, "width of rendered frames", unit="px", low=100, high=4000)
 
+    def map_mission(self) -> np.ndarray:
+        """The waypoints of ``scene='map'``: ``waypoints``, or the map YAML's own when none are given."""
+        if self.waypoints:
+            return np.asarray(self.waypoints, dtype=np.float64)
+        own = map_waypoints(self.map_yaml)
+        return np.zeros((0, 2)) if own is None else own
+
     def validate(self) -> None:
         """Check the scene arguments fit together and corridors stay passable at this growth."""
         if self.scene == "map":
@@ -110,7 +123,12 @@ class GreenhouseNavConfig(StrictConfig):
                     f"GreenhouseNavConfig: scene='map' needs map_yaml, an existing ROS map YAML file "
                     f"(got {self.map_yaml!r}); e.g. map_yaml=str(agri_envs.scenes.EXAMPLE_MAP)."
                 )
-            pts = np.asarray(self.waypoints, dtype=np.float64)
+            if not self.waypoints and map_waypoints(self.map_yaml) is None:
+                raise ValueError(
+                    f"GreenhouseNavConfig: scene='map' needs waypoints as >= 2 (x, y) pairs, or a map YAML that "
+                    f"names its own under 'waypoints' (as EXAMPLE_MAP does); {self.map_yaml!r} has none."
+                )
+            pts = self.map_mission()
             if pts.ndim != 2 or pts.shape[1] != 2 or len(pts) < 2 or not np.all(np.isfinite(pts)):
                 raise ValueError(
                     f"GreenhouseNavConfig: scene='map' needs waypoints as >= 2 (x, y) pairs, got {self.waypoints!r}."

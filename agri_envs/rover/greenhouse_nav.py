@@ -12,9 +12,9 @@ from gymnasium import spaces
 from agri_envs.rover import robot as rover
 from agri_envs.rover.config import GreenhouseNavConfig
 from agri_envs.rover.task import WaypointTask, mission_time_limit
-from agri_envs.scenes.greenhouse import generate_layout
-from agri_envs.scenes.layout import Layout
-from agri_envs.scenes.office import generate_office_corridor
+from agri_envs.scenes.greenhouse import LayoutParams, generate_layout
+from agri_envs.scenes.layout import Layout, LayoutCache
+from agri_envs.scenes.office import CorridorParams, generate_office_corridor
 from agri_envs.scenes.rosmap import layout_from_map, map_geometry
 from agri_envs.sim2d.crowd import Crowd, CrowdSpec
 from agri_envs.sim2d.geometry import Kind
@@ -158,7 +158,7 @@ class GreenhouseNavEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
     |---|---|---|---|---|
     | ``scene`` | 'greenhouse' |  | one of 'greenhouse', 'corridor', 'map' | kind of scene |
     | ``map_yaml`` | '' |  | YAML path, e.g. EXAMPLE_MAP | ROS map_server map to load (scene='map') |
-    | ``waypoints`` | () | m | >= 2 (x, y) | loop of waypoints in the map frame (scene='map') |
+    | ``waypoints`` | () | m | >= 2 (x, y) | loop of waypoints in the map frame (scene='map'; () takes the map YAML's) |
     | ``n_rows`` | 3 |  | in [1, 12] | rows of plants |
     | ``row_length`` | 6 | m | in [2.0, 40.0] | length of each row |
     | ``corridor_width`` | 1.2 | m | in [0.8, 3.0] | free width between rows (and between outer rows and walls) |
@@ -207,6 +207,10 @@ class GreenhouseNavEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
 
         env = gym.make("agri_envs/GreenhouseNav-v2", n_rows=4, growth=0.6, n_people=3, full_scan=True)
 
+    Batched: ``gym.make_vec("agri_envs/GreenhouseNav-v2", num_envs=64, **kwargs)`` steps 64 of these worlds in one
+    compiled loop (:class:`~agri_envs.rover.vector.GreenhouseNavVectorEnv`), each sub-env's episodes bit for bit
+    this env's for the same seed and actions, with Gymnasium's autoreset modes and per-sub-env reset options.
+
     ## Baselines
 
     ``harik-apf-gt``: the paper's APF controller (eqs. 12-14) on the ground-truth pose (privileged).
@@ -228,7 +232,7 @@ class GreenhouseNavEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
       the waypoint as distance to go; new observation
       ``next_waypoint`` (the route is known, so a driver can line up for the next leg). With v1's
       penalties PPO learned to stand still. Later, without a version change (the default is unchanged):
-      the ``frame_skip`` argument.
+      the ``frame_skip`` argument; the batched form (``gym.make_vec``) and resets that reuse the pymunk world.
 
     ## References
 
@@ -309,6 +313,7 @@ class GreenhouseNavEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
         self.max_episode_steps = 0
         self.time_limit_source = ""
         self._trail: list[tuple[float, float]] = []
+        self._scenes = LayoutCache()  # scenes that never change: fixed layout seeds, the map
 
     # -- episode set-up --------------------------------------------------------------------------------
     def reset(
@@ -324,21 +329,21 @@ class GreenhouseNavEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
         # Checked before anything of the env changes, so a bad option leaves the env as it was.
         cfg = self.config.with_options(overrides, ("growth", "n_trees", "layout_seed", "start_waypoint"))
         super().reset(seed=seed)
-        layout_rng = self.np_random if cfg.layout_seed < 0 else np.random.default_rng(cfg.layout_seed)
-        if cfg.scene == "greenhouse":
-            layout = generate_layout(cfg.layout_params(), layout_rng)
-        elif cfg.scene == "corridor":
-            layout = generate_office_corridor(cfg.office_params(), layout_rng)
-        else:
-            layout = layout_from_map(self._map_geometry, np.asarray(cfg.waypoints))
+        layout = self._scene(cfg)
         targets = np.tile(layout.targets, (cfg.mission_cycles, 1))
         if not 0 <= start_waypoint < len(targets):  # checked before the env's scene is replaced
             raise ValueError(f"reset option start_waypoint must be in [0, {len(targets) - 1}], got {start_waypoint}")
         self.layout = layout
-        self.world = World2D(layout.geometry, n_movers=cfg.n_people)
         start_pose = self._arrival_pose(targets, int(start_waypoint))
         start = start_pose + self.np_random.uniform([-0.05, -0.05, -0.1], [0.05, 0.05, 0.1])
-        self.robot = self.world.add_robot(self.robot_spec, start)
+        if self.world is None or len(self.world.movers) != cfg.n_people:  # the first episode builds the world ...
+            if self.world is not None:
+                self.world.close()
+            self.world = World2D(layout.geometry, n_movers=cfg.n_people)
+            self.robot = self.world.add_robot(self.robot_spec, start)
+        else:  # ... later ones move what is in it
+            self.world.set_scene(layout.geometry)
+            self.world.place_robot(self.robot, start)
         self.crowd = Crowd(self.world, self.layout.routes, CrowdSpec(tease_prob=cfg.people_tease_prob), cfg.n_people)
         self.crowd.reset(self.np_random, start)
         self.max_episode_steps, self.time_limit_source = self._time_limit(start_pose, targets[start_waypoint:])
@@ -421,6 +426,21 @@ class GreenhouseNavEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
         self._min_clearance = min(self._min_clearance, clearance)
         self._trail.append((float(robot.pose[0]), float(robot.pose[1])))
         return self.task.evaluate(robot.pose, collided, clearance, travelled), clearance
+
+    def _scene(self, cfg: GreenhouseNavConfig) -> Layout:
+        """The episode's scene: drawn from the episode's generator, or the one a fixed seed (or the map) gives."""
+        if cfg.scene == "map":
+            return self._scenes.get("map", lambda: layout_from_map(self._map_geometry, cfg.map_mission()))
+        if cfg.scene == "greenhouse":
+            params: LayoutParams | CorridorParams = cfg.layout_params()
+            generate: Any = generate_layout
+        else:
+            params, generate = cfg.office_params(), generate_office_corridor
+        if cfg.layout_seed < 0:
+            return generate(params, self.np_random)
+        return self._scenes.get(
+            (params, cfg.layout_seed), lambda: generate(params, np.random.default_rng(cfg.layout_seed))
+        )
 
     def _arrival_pose(self, targets: np.ndarray, k: int) -> np.ndarray:
         """Where the mission starts: the layout's start for ``k = 0``, else waypoint ``k - 1`` as reached.

@@ -197,9 +197,12 @@ class WaypointTask:
             "reward_clearance": -w.clearance * min(1.0, shortfall) * travelled,
             "reward_time": -w.time * float(step),
         }
+        reward = 0.0
+        for value in terms.values():  # added left to right, as the batched env adds them (not sum()'s algorithm)
+            reward += value
         return {
             **terms,
-            "reward": float(sum(terms.values())),
+            "reward": reward,
             "is_success": success,
             "collision": collided,
             "waypoint_reached": reached,

@@ -8,7 +8,7 @@ none imports an env, so rover, coverage and chain all draw their worlds from her
 * :mod:`~agri_envs.scenes.office`: Harik's office corridor (:class:`CorridorParams`) and Apoorva's office
   floor of rooms (:class:`OfficeFloorParams`).
 * :mod:`~agri_envs.scenes.rosmap`: scenes from a ROS ``map_server`` map (:data:`EXAMPLE_MAP` ships with
-  the package).
+  the package, with its loop of :data:`EXAMPLE_WAYPOINTS`).
 """
 
 from __future__ import annotations
@@ -16,10 +16,11 @@ from __future__ import annotations
 from agri_envs.scenes.greenhouse import LayoutParams, generate_layout
 from agri_envs.scenes.layout import Layout
 from agri_envs.scenes.office import CorridorParams, OfficeFloorParams, generate_office_corridor, generate_office_floor
-from agri_envs.scenes.rosmap import EXAMPLE_MAP, layout_from_map, map_geometry
+from agri_envs.scenes.rosmap import EXAMPLE_MAP, EXAMPLE_WAYPOINTS, layout_from_map, map_geometry, map_waypoints
 
 __all__ = [
     "EXAMPLE_MAP",
+    "EXAMPLE_WAYPOINTS",
     "CorridorParams",
     "Layout",
     "LayoutParams",
@@ -29,4 +30,5 @@ __all__ = [
     "generate_office_floor",
     "layout_from_map",
     "map_geometry",
+    "map_waypoints",
 ]

@@ -16,6 +16,7 @@ from __future__ import annotations
 import dataclasses
 import math
 
+import numba
 import numpy as np
 
 from agri_envs.scenes.layout import WALL_THICKNESS, Layout, start_facing
@@ -27,6 +28,7 @@ PLANT_RADIUS = (0.06, 0.14)
 LEAF_REACH = 0.18
 LEAF_RADIUS = 0.015
 TREE_RADIUS = (0.18, 0.28)
+_PLANT, _TREE = int(Kind.PLANT), int(Kind.TREE)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -167,19 +169,27 @@ class RowShapes:
 
     def row_y(self, r: int, x: np.ndarray | float) -> np.ndarray:
         """Y of row ``r``'s centre line at ``x`` (m)."""
+        return self.rows_y(x)[r]
+
+    def rows_y(self, x: np.ndarray | float) -> np.ndarray:
+        """``(n_rows, *x.shape)``: y of every row's centre line at ``x`` (m)."""
         xm = 0.5 * (self.x0 + self.x1)
         half = 0.5 * (self.x1 - self.x0)
         xa = np.asarray(x, dtype=np.float64)
-        return self.centre[r] + self.slope[r] * (xa - xm) + self.bend[r] * (1.0 - np.abs(xa - xm) / half)
+        along = xa - xm
+        kink = 1.0 - np.abs(along) / half
+        shape = (-1,) + (1,) * xa.ndim
+        return self.centre.reshape(shape) + self.slope.reshape(shape) * along + self.bend.reshape(shape) * kink
 
     def corridor_lines(self) -> tuple[np.ndarray, ...]:
         """Centre line of every corridor: midway between the plants of its two rows (or a row and a wall)."""
         xs = np.array([self.x0, 0.5 * (self.x0 + self.x1), self.x1])
+        ys = self.rows_y(xs)
         n = len(self.centre)
         lines = []
         for k in range(n + 1):
-            lo = self.row_y(k - 1, xs) + self.half_extent if k > 0 else np.zeros(3)
-            hi = self.row_y(k, xs) - self.half_extent if k < n else np.full(3, self.height)
+            lo = ys[k - 1] + self.half_extent if k > 0 else np.zeros(3)
+            hi = ys[k] - self.half_extent if k < n else np.full(3, self.height)
             lines.append(np.column_stack([xs, 0.5 * (lo + hi)]))
         return tuple(lines)
 
@@ -216,6 +226,64 @@ def row_shapes(p: LayoutParams, rng: np.random.Generator) -> RowShapes:
         half_extent=PLANT_RADIUS[0] + p.growth * (PLANT_RADIUS[1] - PLANT_RADIUS[0]),
         height=height,
     )
+
+
+@numba.njit(cache=True)
+def _grow_plants(
+    rng: np.random.Generator,
+    xs: np.ndarray,
+    ys: np.ndarray,
+    is_tree: np.ndarray,
+    jitter: float,
+    plant_r: float,
+    tree_r: float,
+    growth: float,
+    plants: np.ndarray,
+    kinds: np.ndarray,
+    leaves: np.ndarray,
+) -> int:
+    """Jitter each plant (or tree) at its slot and grow its leaves, drawing from ``rng`` slot by slot.
+
+    Args:
+        rng: Source of the jitter and leaves (NumPy's own stream: numba draws it exactly).
+        xs: ``(n,)`` nominal x of each slot (m).
+        ys: ``(n,)`` nominal y of each slot (m).
+        is_tree: ``(n,)`` whether the slot holds a tree (no leaves) instead of a plant.
+        jitter: Half-width of the uniform position jitter (m).
+        plant_r: Plant radius (m).
+        tree_r: Tree radius (m).
+        growth: Season in [0, 1]: the chance that a leaf grows on each side, and its length.
+        plants: ``(n, 3)`` output circles ``x, y, r``.
+        kinds: ``(n,)`` output :class:`Kind` of each circle.
+        leaves: ``(2n, 5)`` output leaf capsules.
+
+    Returns:
+        The number of leaves written.
+    """
+    n_leaves = 0
+    for k in range(xs.shape[0]):
+        px = xs[k] + rng.uniform(-jitter, jitter)
+        py = ys[k] + rng.uniform(-jitter, jitter)
+        plants[k, 0] = px
+        plants[k, 1] = py
+        if is_tree[k]:
+            plants[k, 2] = tree_r
+            kinds[k] = _TREE
+            continue
+        plants[k, 2] = plant_r
+        kinds[k] = _PLANT
+        # Leaves: the older the plant, the more (and longer) leaves reach out sideways.
+        for side in (-1.0, 1.0):
+            if rng.random() < growth:
+                angle = side * math.pi / 2 + rng.uniform(-0.6, 0.6)
+                reach = plant_r + growth * LEAF_REACH * rng.uniform(0.5, 1.0)
+                leaves[n_leaves, 0] = px
+                leaves[n_leaves, 1] = py
+                leaves[n_leaves, 2] = px + reach * math.cos(angle)
+                leaves[n_leaves, 3] = py + reach * math.sin(angle)
+                leaves[n_leaves, 4] = LEAF_RADIUS
+                n_leaves += 1
+    return n_leaves
 
 
 def generate_layout(p: LayoutParams, rng: np.random.Generator) -> Layout:
@@ -256,33 +324,36 @@ def generate_layout(p: LayoutParams, rng: np.random.Generator) -> Layout:
     plant_r = PLANT_RADIUS[0] + g * (PLANT_RADIUS[1] - PLANT_RADIUS[0])
     tree_r = TREE_RADIUS[0] + g * (TREE_RADIUS[1] - TREE_RADIUS[0])
     n_plants = max(1, int(math.floor(p.row_length / p.plant_spacing)))
-    slots = [(row, j) for row in range(p.n_rows) for j in range(n_plants)]
-    tree_slots = set()
+    tree_slot = np.zeros((p.n_rows, n_plants), dtype=np.bool_)
     if p.n_trees > 0:
-        picks = rng.choice(len(slots), size=min(p.n_trees, len(slots)), replace=False)
-        tree_slots = {slots[int(i)] for i in picks}
+        picks = rng.choice(p.n_rows * n_plants, size=min(p.n_trees, p.n_rows * n_plants), replace=False)
+        tree_slot.ravel()[picks] = True
+    xs = x0 + (np.arange(n_plants) + 0.5) * (p.row_length / n_plants)
+    # A post stands where a plant would be too close to it.
+    planted = np.abs(post_xs[None, :] - xs[:, None]).min(axis=1) >= plant_r + p.post_radius + 0.02
+    xs = xs[planted]
+    ys = shapes.rows_y(xs).ravel()
+    plants = np.empty((len(ys), 3))
+    kinds = np.empty(len(ys), dtype=np.int64)
+    leaves = np.empty((2 * len(ys), 5))
+    n_leaves = _grow_plants(
+        rng,
+        np.tile(xs, p.n_rows),
+        ys,
+        tree_slot[:, planted].ravel(),
+        p.plant_jitter,
+        plant_r,
+        tree_r,
+        g,
+        plants,
+        kinds,
+        leaves,
+    )
+    post_ys = shapes.rows_y(post_xs)
     for row in range(p.n_rows):
-        for x in post_xs:
-            b.circle(x, float(shapes.row_y(row, x)), p.post_radius, Kind.POST)
-        for j in range(n_plants):
-            x = x0 + (j + 0.5) * (p.row_length / n_plants)
-            if np.min(np.abs(post_xs - x)) < plant_r + p.post_radius + 0.02:
-                continue  # the post stands here
-            y = float(shapes.row_y(row, x))
-            px = x + rng.uniform(-p.plant_jitter, p.plant_jitter)
-            py = y + rng.uniform(-p.plant_jitter, p.plant_jitter)
-            if (row, j) in tree_slots:
-                b.circle(px, py, tree_r, Kind.TREE)
-                continue
-            b.circle(px, py, plant_r, Kind.PLANT)
-            # Leaves: the older the plant, the more (and longer) leaves reach out sideways.
-            for side in (-1.0, 1.0):
-                if rng.random() < g:
-                    angle = side * math.pi / 2 + rng.uniform(-0.6, 0.6)
-                    reach = plant_r + g * LEAF_REACH * rng.uniform(0.5, 1.0)
-                    b.capsule(
-                        px, py, px + reach * math.cos(angle), py + reach * math.sin(angle), LEAF_RADIUS, Kind.LEAF
-                    )
+        b.circles(np.column_stack([post_xs, post_ys[row], np.full(len(post_xs), p.post_radius)]), Kind.POST)
+        b.circles(plants[row * len(xs) : (row + 1) * len(xs)], kinds[row * len(xs) : (row + 1) * len(xs)])
+    b.capsules(leaves[:n_leaves], Kind.LEAF)
     geometry = b.build((-WALL_THICKNESS, -WALL_THICKNESS, w + WALL_THICKNESS, h + WALL_THICKNESS))
     corridors = shapes.corridor_lines()
     shaped = p.row_incline > 0 or p.row_bend > 0 or p.corridor_width_jitter > 0

@@ -9,6 +9,7 @@ People never walk into a robot; a robot that drives into a person has collided.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 
 import numpy as np
@@ -31,9 +32,17 @@ class RouteGraph:
     edges: np.ndarray
 
     def neighbours(self, i: int) -> list[int]:
-        """Nodes connected to node ``i``."""
-        out = [int(b) for a, b in self.edges if a == i] + [int(a) for a, b in self.edges if b == i]
-        return sorted(out)
+        """Nodes connected to node ``i``, in increasing order."""
+        return list(self.adjacency[i])
+
+    @functools.cached_property
+    def adjacency(self) -> tuple[tuple[int, ...], ...]:
+        """The sorted neighbours of every node (computed once per graph)."""
+        out: list[list[int]] = [[] for _ in range(len(self.nodes))]
+        for a, b in self.edges.tolist():
+            out[a].append(b)
+            out[b].append(a)
+        return tuple(tuple(sorted(n)) for n in out)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -67,7 +76,7 @@ class Crowd:
         self.graph = graph
         self.spec = spec
         self.n = n
-        self._adj = [graph.neighbours(i) for i in range(len(graph.nodes))]
+        self._adj = graph.adjacency
         self.pos = np.zeros((n, 2))
         self.prev_node = np.zeros(n, dtype=np.int64)
         self.next_node = np.zeros(n, dtype=np.int64)

@@ -66,13 +66,20 @@ class Geometry:
         )
 
 
+def _kinds(kinds: np.ndarray | Kind, n: int) -> list[int]:
+    """``n`` kinds as ints: one per row, or the same one repeated."""
+    if isinstance(kinds, np.ndarray):
+        return kinds.astype(np.int64).tolist()
+    return [int(kinds)] * n
+
+
 class GeometryBuilder:
     """Collects primitives one by one and packs them into a :class:`Geometry`."""
 
     def __init__(self) -> None:
-        self._circles: list[tuple[float, float, float]] = []
+        self._circles: list[tuple[float, ...]] = []
         self._circle_kinds: list[int] = []
-        self._capsules: list[tuple[float, float, float, float, float]] = []
+        self._capsules: list[tuple[float, ...]] = []
         self._capsule_kinds: list[int] = []
         self._polygons: list[np.ndarray] = []
         self._polygon_kinds: list[int] = []
@@ -90,6 +97,22 @@ class GeometryBuilder:
             raise ValueError(f"capsule radius must be >= 0, got {r}")
         self._capsules.append((float(x0), float(y0), float(x1), float(y1), float(r)))
         self._capsule_kinds.append(int(kind))
+
+    def circles(self, rows: np.ndarray, kinds: np.ndarray | Kind) -> None:
+        """Add many circles at once: ``rows`` ``(n, 3)`` ``x, y, r`` (m), with one kind or one kind per row."""
+        rows = np.asarray(rows, dtype=np.float64).reshape(-1, 3)
+        if np.any(rows[:, 2] <= 0):
+            raise ValueError(f"circle radius must be positive, got {rows[:, 2].min()}")
+        self._circles.extend(map(tuple, rows.tolist()))
+        self._circle_kinds.extend(_kinds(kinds, len(rows)))
+
+    def capsules(self, rows: np.ndarray, kinds: np.ndarray | Kind) -> None:
+        """Add many capsules at once: ``rows`` ``(n, 5)`` ``x0, y0, x1, y1, r`` (m), with one kind or one per row."""
+        rows = np.asarray(rows, dtype=np.float64).reshape(-1, 5)
+        if np.any(rows[:, 4] < 0):
+            raise ValueError(f"capsule radius must be >= 0, got {rows[:, 4].min()}")
+        self._capsules.extend(map(tuple, rows.tolist()))
+        self._capsule_kinds.extend(_kinds(kinds, len(rows)))
 
     def polygon(self, vertices: np.ndarray, kind: Kind) -> None:
         """Add a convex polygon (vertices ``(k, 2)``); its edges become zero-radius capsules for sensing."""

@@ -26,14 +26,7 @@ def _wrap(a: float) -> float:
 @numba.njit(cache=True, inline="always")
 def _ray_circle(lx: float, ly: float, r: float, ux: float, uy: float) -> float:
     """Distance along the unit ray ``(ux, uy)`` from the origin to a circle at ``(lx, ly)``; inf if missed."""
-    b = lx * ux + ly * uy
-    disc = b * b - (lx * lx + ly * ly - r * r)
-    if disc < 0.0:
-        return math.inf
-    t = b - math.sqrt(disc)
-    if t <= 0.0:
-        return math.inf
-    return t
+    return _ray_disc(lx, ly, lx * lx + ly * ly - r * r, ux, uy)
 
 
 @numba.njit(cache=True, inline="always")
@@ -41,12 +34,31 @@ def _ray_segment(ax: float, ay: float, bx: float, by: float, ux: float, uy: floa
     """Distance along the unit ray from the origin to segment ``a-b``; inf if missed or parallel."""
     ex = bx - ax
     ey = by - ay
+    return _ray_line(ax, ay, ex, ey, ax * ey - ay * ex, ux, uy)
+
+
+@numba.njit(cache=True, inline="always")
+def _ray_line(ax: float, ay: float, ex: float, ey: float, cross: float, ux: float, uy: float) -> float:
+    """:func:`_ray_segment` from ``a`` along ``e = b - a`` with ``cross = ax * ey - ay * ex`` computed beforehand."""
     denom = ux * ey - uy * ex
     if abs(denom) < 1e-15:
         return math.inf
-    t = (ax * ey - ay * ex) / denom
+    t = cross / denom
     s = (ax * uy - ay * ux) / denom
     if t <= 0.0 or s < 0.0 or s > 1.0:
+        return math.inf
+    return t
+
+
+@numba.njit(cache=True, inline="always")
+def _ray_disc(lx: float, ly: float, c: float, ux: float, uy: float) -> float:
+    """:func:`_ray_circle` of a circle at ``(lx, ly)`` with ``c = lx * lx + ly * ly - r * r`` computed beforehand."""
+    b = lx * ux + ly * uy
+    disc = b * b - c
+    if disc < 0.0:
+        return math.inf
+    t = b - math.sqrt(disc)
+    if t <= 0.0:
         return math.inf
     return t
 
@@ -145,12 +157,16 @@ def cast_scan(
             continue
         hw = math.asin(r / d)
         th = math.atan2(ly, lx)
+        c = lx * lx + ly * ly - r * r  # _ray_circle's beam-independent part
+        nearest = d - r - 1e-9  # no hit on this circle is nearer (the margin covers rounding)
         for s in range(3):
             shift = (s - 1) * _TWO_PI
             k0 = max(0, int(math.ceil((th + shift - hw - angle0) / dangle)))
             k1 = min(n - 1, int(math.floor((th + shift + hw - angle0) / dangle)))
             for k in range(k0, k1 + 1):
-                t = _ray_circle(lx, ly, r, beam_ux[k], beam_uy[k])
+                if out[k] <= nearest:
+                    continue
+                t = _ray_disc(lx, ly, c, beam_ux[k], beam_uy[k])
                 if t < out[k]:
                     out[k] = t
     for i in range(capsules.shape[0]):
@@ -168,12 +184,42 @@ def cast_scan(
             hw = math.asin(min(1.0, r / dmin))
             lo -= hw
             hi += hw
+        # _ray_capsule's beam-independent parts, computed once per capsule (the same numbers, so the same hits):
+        # its pieces are two segments (the sides, or the segment itself when r = 0) and the two end discs.
+        if r == 0.0:
+            sides = 1
+            p1x, p1y, q1x, q1y = ax, ay, bx, by
+            p2x, p2y, q2x, q2y = ax, ay, bx, by
+        else:
+            ex = bx - ax
+            ey = by - ay
+            length = math.sqrt(ex * ex + ey * ey)
+            sides = 2 if length > 0.0 else 0
+            nx = -ey / length * r if length > 0.0 else 0.0
+            ny = ex / length * r if length > 0.0 else 0.0
+            p1x, p1y, q1x, q1y = ax + nx, ay + ny, bx + nx, by + ny
+            p2x, p2y, q2x, q2y = ax - nx, ay - ny, bx - nx, by - ny
+        e1x, e1y, e2x, e2y = q1x - p1x, q1y - p1y, q2x - p2x, q2y - p2y
+        c1 = p1x * e1y - p1y * e1x
+        c2 = p2x * e2y - p2y * e2x
+        ca = ax * ax + ay * ay - r * r
+        cb = bx * bx + by * by - r * r
+        nearest = dmin - r - 1e-9  # no hit on this capsule is nearer (the margin covers rounding)
         for s in range(3):
             shift = (s - 1) * _TWO_PI
             k0 = max(0, int(math.ceil((lo + shift - angle0) / dangle)))
             k1 = min(n - 1, int(math.floor((hi + shift - angle0) / dangle)))
             for k in range(k0, k1 + 1):
-                t = _ray_capsule(ax, ay, bx, by, r, beam_ux[k], beam_uy[k])
+                if out[k] <= nearest:
+                    continue
+                ux = beam_ux[k]
+                uy = beam_uy[k]
+                t = _ray_line(p1x, p1y, e1x, e1y, c1, ux, uy) if sides >= 1 else math.inf
+                if sides == 2:
+                    t = min(t, _ray_line(p2x, p2y, e2x, e2y, c2, ux, uy))
+                if r > 0.0:
+                    t = min(t, _ray_disc(ax, ay, ca, ux, uy))
+                    t = min(t, _ray_disc(bx, by, cb, ux, uy))
                 if t < out[k]:
                     out[k] = t
     for k in range(n):

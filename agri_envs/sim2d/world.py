@@ -6,6 +6,11 @@ unicycles. Robot motion never tunnels: a step that could reach an obstacle (the 
 so) is split into substeps shorter than half the thinnest obstacle, and pymunk's shape query stops the
 robot at the last pose before contact.
 
+A world outlives its episodes: :meth:`World2D.set_scene` swaps the static scene and
+:meth:`World2D.place_robot` moves a robot to its new start, so an env's reset keeps its pymunk space,
+bodies and movers; the scene's static pymunk shapes are built only around the places where a contact query
+needs them (a query only ever tests the shapes whose bounding boxes meet the robot's).
+
 The world also keeps flat arrays of every circle and capsule (static ones followed by the moving ones)
 for the numba sensor kernels. Every robot is an obstacle to every other robot: each one owns a row of
 :attr:`World2D.circles` (a round robot its disc, a rectangular one its circumscribed circle, a
@@ -28,26 +33,13 @@ import numba
 import numpy as np
 import pymunk
 
+from agri_envs.sim2d.batched import limited_velocity, sweep
 from agri_envs.sim2d.diff_drive import DiffDriveSpec, limit_velocity, unicycle_arc
 from agri_envs.sim2d.geometry import Geometry
 from agri_envs.sim2d.raycast import disc_clearance, footprint_clearance
 
 # Pymunk collision categories: robots do not sense or hit themselves through these filters.
 _ROBOT_GROUP_BASE = 1000
-
-
-@numba.njit(cache=True)
-def _arc(x: float, y: float, th: float, v: float, w: float, dt: float) -> tuple[float, float, float]:
-    """:func:`~agri_envs.sim2d.diff_drive.unicycle_arc` on scalars."""
-    if abs(w) < 1e-9:
-        return x + v * dt * math.cos(th), y + v * dt * math.sin(th), th
-    th1 = th + w * dt
-    k = v / w
-    return (
-        x + k * (math.sin(th1) - math.sin(th)),
-        y - k * (math.cos(th1) - math.cos(th)),
-        math.atan2(math.sin(th1), math.cos(th1)),
-    )
 
 
 @numba.njit(cache=True)
@@ -66,45 +58,29 @@ def _drive_discs(
 ) -> None:
     """:meth:`World2D.drive` for many disc robots in turn (each sees the others where they already are)."""
     for k in range(poses.shape[0]):
-        vmax, vrev, wmax, acc, wacc = limits[k, 0], limits[k, 1], limits[k, 2], limits[k, 3], limits[k, 4]
-        v_cmd = min(vmax, max(-vrev, cmd[k, 0]))
-        w_cmd = min(wmax, max(-wmax, cmd[k, 1]))
-        dv = acc * dt
-        dw = wacc * dt
-        v = vel[k, 0] + min(dv, max(-dv, v_cmd - vel[k, 0]))
-        w = vel[k, 1] + min(dw, max(-dw, w_cmd - vel[k, 1]))
-        x, y, th = poses[k, 0], poses[k, 1], poses[k, 2]
-        r = radius[k]
-        skip = rows[k]
-        reach = abs(v) * dt
-        clear = disc_clearance(x, y, r, circles, capsules, skip)
-        hit = False
-        if clear > reach + 1e-6:
-            x, y, th = _arc(x, y, th, v, w, dt)
-        else:
-            n_sub = max(1, math.ceil(reach / max_substep))
-            h = dt / n_sub
-            inside = clear <= 0.0
-            for _ in range(n_sub):
-                cx, cy, cth = _arc(x, y, th, v, w, h)
-                new_clear = disc_clearance(cx, cy, r, circles, capsules, skip)
-                if new_clear <= 0.0:
-                    if not inside or new_clear <= clear:
-                        hit = True
-                        break
-                    clear = new_clear
-                else:
-                    inside = False
-                x, y, th = cx, cy, cth
+        v, w = limited_velocity(vel[k, 0], vel[k, 1], cmd[k, 0], cmd[k, 1], limits[k], dt)
+        x, y, th, hit = sweep(
+            poses[k, 0],
+            poses[k, 1],
+            poses[k, 2],
+            v,
+            w,
+            dt,
+            abs(v) * dt,
+            max_substep,
+            radius[k],
+            0.0,
+            0.0,
+            circles,
+            capsules,
+            rows[k],
+        )
         poses[k, 0], poses[k, 1], poses[k, 2] = x, y, th
-        if hit:
-            vel[k, 0], vel[k, 1] = 0.0, 0.0
-        else:
-            vel[k, 0], vel[k, 1] = v, w
+        vel[k, 0], vel[k, 1] = (0.0, 0.0) if hit else (v, w)
         contact[k] = hit
-        if skip >= 0:
-            circles[skip, 0] = x
-            circles[skip, 1] = y
+        if rows[k] >= 0:
+            circles[rows[k], 0] = x
+            circles[rows[k], 1] = y
 
 
 @dataclasses.dataclass
@@ -142,37 +118,87 @@ class World2D:
     """
 
     def __init__(self, geometry: Geometry, n_movers: int = 0) -> None:
-        self.geometry = geometry
         self.space = pymunk.Space()
         self.space.gravity = (0.0, 0.0)
-        static = self.space.static_body
-        shapes: list[pymunk.Shape] = []
-        for x, y, r in geometry.circles:
-            shapes.append(pymunk.Circle(static, float(r), offset=(float(x), float(y))))
-        for x0, y0, x1, y1, r in geometry.capsules:
-            if r > 0:  # zero-radius capsules are polygon edges; the polygon itself is added below
-                shapes.append(pymunk.Segment(static, (float(x0), float(y0)), (float(x1), float(y1)), float(r)))
-        for poly in geometry.polygons:
-            shapes.append(pymunk.Poly(static, [(float(p[0]), float(p[1])) for p in poly]))
-        self.space.add(*shapes)
-        n_static = len(geometry.circles)
-        #: Every circle the sensors see: static ones, then one slot per mover.
-        self.circles = np.vstack([geometry.circles, np.zeros((n_movers, 3))])
-        self.capsules = np.ascontiguousarray(geometry.capsules)
-        self._mover_slice = slice(n_static, n_static + n_movers)
         self.movers: list[pymunk.Body] = []
-        for i in range(n_movers):
+        for _ in range(n_movers):
             body = pymunk.Body(body_type=pymunk.Body.KINEMATIC)
             shape = pymunk.Circle(body, 0.2)
             self.space.add(body, shape)
             self.movers.append(body)
-            self.circles[n_static + i, 2] = 0.2
         self.robots: list[RobotBody] = []
         _LIVE_WORLDS.add(self)
         self._disc_cache: dict[tuple[int, ...], tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
-        thin = [float(r) for r in geometry.circles[:, 2]] + [float(r) for r in geometry.capsules[:, 4] if r > 0]
+        # The scene's static pymunk shapes are built only where a contact query needs them (see _touches).
+        self.geometry: Geometry | None = None
+        self._static_shapes: list[pymunk.Shape] = []
+        #: Every circle the sensors see: static ones, then one slot per mover (then one per robot, see add_robot).
+        self.circles = np.zeros((n_movers, 3))
+        self.circles[:, 2] = 0.2
+        self._mover_slice = slice(0, n_movers)
+        self.set_scene(geometry)
+
+    def set_scene(self, geometry: Geometry) -> None:
+        """Replace the static scene, keeping the movers, the robots and the pymunk space (a new episode).
+
+        Building pymunk shapes costs far more than a reset may, and most of a scene never comes near a
+        robot: the static shapes are built only where a contact query needs them (:meth:`_touches`), so
+        a new scene only drops the shapes the last one built. The movers' and robots' rows of
+        :attr:`circles` keep their values; robots keep their poses until moved (:meth:`place_robot`).
+
+        Args:
+            geometry: The new static scene (the current one again: nothing changes).
+        """
+        if geometry is self.geometry:
+            return
+        self.geometry = geometry
+        n_static = len(geometry.circles)
+        moving = self.circles[self._mover_slice.start :]  # movers, then robots
+        shift = n_static - self._mover_slice.start
+        self.circles = np.vstack([geometry.circles, moving])
+        self._mover_slice = slice(n_static, n_static + len(self.movers))
+        for robot in self.robots:
+            if robot.circle_index >= 0:
+                robot.circle_index += shift
+        self._disc_cache.clear()
+        self.capsules = np.ascontiguousarray(geometry.capsules)
+        radii = np.concatenate([geometry.circles[:, 2], geometry.capsules[:, 4][geometry.capsules[:, 4] > 0]])
         # Substep length: half the thinnest obstacle's half-thickness, so a substep can never jump over it.
-        self.max_substep = max(0.002, 0.5 * min(thin, default=0.1))
+        self.max_substep = max(0.002, 0.5 * (float(radii.min()) if len(radii) else 0.1))
+        if self._static_shapes:
+            self.space.remove(*self._static_shapes)
+            self._static_shapes = []
+        self._static_bbs = static_bounding_boxes(geometry)
+        self._static_built = np.zeros(len(self._static_bbs), dtype=np.bool_)
+
+    def _build_static_near(self, x: float, y: float, reach: float) -> None:
+        """Add to the space every static shape of the scene whose bounding box meets the square ``(x, y) +- reach``.
+
+        A shape query only tests the shapes whose bounding boxes overlap the query shape's, so a space
+        holding every shape near the query answers exactly as one holding the whole scene.
+        """
+        assert self.geometry is not None
+        todo = _unbuilt_overlapping(self._static_bbs, self._static_built, x - reach, y - reach, x + reach, y + reach)
+        if len(todo) == 0:
+            return
+        geometry = self.geometry
+        static = self.space.static_body
+        n_circles = len(geometry.circles)
+        segments = np.flatnonzero(geometry.capsules[:, 4] > 0)  # r = 0: the edges of polygons, added as polygons
+        shapes: list[pymunk.Shape] = []
+        for k in todo.tolist():
+            if k < n_circles:
+                x0, y0, r = geometry.circles[k].tolist()
+                shapes.append(pymunk.Circle(static, r, offset=(x0, y0)))
+            elif k < n_circles + len(segments):
+                x0, y0, x1, y1, r = geometry.capsules[segments[k - n_circles]].tolist()
+                shapes.append(pymunk.Segment(static, (x0, y0), (x1, y1), r))
+            else:
+                poly = geometry.polygons[k - n_circles - len(segments)]
+                shapes.append(pymunk.Poly(static, [(float(p[0]), float(p[1])) for p in poly]))
+        self.space.add(*shapes)
+        self._static_shapes.extend(shapes)
+        self._static_built[todo] = True
 
     def close(self) -> None:
         """Free the pymunk objects now (idempotent); the world cannot be used afterwards.
@@ -265,6 +291,13 @@ class World2D:
         self._sync(robot, robot.pose)
         return robot
 
+    def place_robot(self, robot: RobotBody, pose: np.ndarray) -> None:
+        """Put a robot of this world at ``pose``, standing still (a new episode)."""
+        robot.pose = np.array(pose, dtype=np.float64)
+        robot.v = 0.0
+        robot.w = 0.0
+        self._sync(robot, robot.pose)
+
     def _sync(self, robot: RobotBody, pose: np.ndarray) -> None:
         robot.body.position = (float(pose[0]), float(pose[1]))
         robot.body.angle = float(pose[2])
@@ -298,6 +331,8 @@ class World2D:
     def _touches(self, robot: RobotBody, pose: np.ndarray) -> bool:
         if robot.radius > 0:  # a disc's clearance is exact: no need to ask pymunk
             return self.clearance(robot, pose) <= 0.0
+        # The robot's bounding box lies within its circumradius of the pose (the margin covers rounding).
+        self._build_static_near(float(pose[0]), float(pose[1]), robot.spec.circumradius + 1e-6)
         self._sync(robot, pose)
         return bool(self.space.shape_query(robot.shape))
 
@@ -410,6 +445,38 @@ class World2D:
         robot.v, robot.w = (0.0, 0.0) if contact else (v, w)
         self._sync(robot, pose)
         return contact
+
+
+def static_bounding_boxes(geometry: Geometry) -> np.ndarray:
+    """``(n, 4)`` ``xmin, ymin, xmax, ymax`` of every static pymunk shape of a scene, in the order they are numbered.
+
+    Circles first, then the capsules of positive radius (pymunk segments), then the polygons; the
+    zero-radius capsules are polygon edges and have no shape of their own. Each box is computed the way
+    pymunk (Chipmunk) computes the shape's own.
+    """
+    c = geometry.circles
+    boxes = [np.column_stack([c[:, 0] - c[:, 2], c[:, 1] - c[:, 2], c[:, 0] + c[:, 2], c[:, 1] + c[:, 2]])]
+    s = geometry.capsules[geometry.capsules[:, 4] > 0]
+    lo_x, hi_x = np.minimum(s[:, 0], s[:, 2]), np.maximum(s[:, 0], s[:, 2])
+    lo_y, hi_y = np.minimum(s[:, 1], s[:, 3]), np.maximum(s[:, 1], s[:, 3])
+    boxes.append(np.column_stack([lo_x - s[:, 4], lo_y - s[:, 4], hi_x + s[:, 4], hi_y + s[:, 4]]))
+    if geometry.polygons:
+        boxes.append(np.array([[*p.min(axis=0), *p.max(axis=0)] for p in geometry.polygons]))
+    return np.ascontiguousarray(np.vstack(boxes).reshape(-1, 4))
+
+
+@numba.njit(cache=True)
+def _unbuilt_overlapping(
+    boxes: np.ndarray, built: np.ndarray, xmin: float, ymin: float, xmax: float, ymax: float
+) -> np.ndarray:
+    """Indices of the boxes not yet ``built`` that meet the box ``xmin .. xmax, ymin .. ymax`` (touching counts)."""
+    out = np.empty(boxes.shape[0], dtype=np.int64)
+    n = 0
+    for i in range(boxes.shape[0]):
+        if not built[i] and boxes[i, 0] <= xmax and xmin <= boxes[i, 2] and boxes[i, 1] <= ymax and ymin <= boxes[i, 3]:
+            out[n] = i
+            n += 1
+    return out[:n]
 
 
 #: Worlds not closed yet, closed by the exit hook below before the interpreter wipes module globals.

@@ -38,7 +38,8 @@ class EvaluationDocument(TypedDict, total=False):
     """The result of evaluating a policy on one env (one level of a scenario, or all levels pooled).
 
     A scenario that sweeps an argument has ``sweep`` and ``levels`` (one document per value) instead of
-    ``episodes`` and ``traces``; ``summary`` is then pooled over the levels.
+    ``episodes`` and ``traces``; ``summary`` is then pooled over the levels. An evaluation in campaigns has
+    ``campaign_runs`` (runs per campaign; the records carry ``campaign_run`` and ``layout_seed``).
     """
 
     env_id: str
@@ -56,6 +57,7 @@ class EvaluationDocument(TypedDict, total=False):
     traces: list[TraceDocument]
     sweep: dict[str, Any]
     levels: list[EvaluationDocument]
+    campaign_runs: int
 
 
 #: Per-episode keys that measure the computer, not the policy (wall-clock and planning times): they are

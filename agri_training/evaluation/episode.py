@@ -1,9 +1,11 @@
 """One episode of any policy on any env of the package, Gymnasium or PettingZoo, as one record.
 
-:func:`run_episode` is the only episode loop: evaluation, the leaderboard, the report and training's
-periodic evaluation all call it. The two env kinds differ only in what an adapter hides: a Gymnasium env
-steps one agent; a PettingZoo parallel env (the robot chain) steps per-agent dicts, its policy takes and
+:func:`run_episode` is the episode loop and the reference: evaluation, the leaderboard, the report and
+training's periodic evaluation call it. The two env kinds differ only in what an adapter hides: a Gymnasium
+env steps one agent; a PettingZoo parallel env (the robot chain) steps per-agent dicts, its policy takes and
 returns such dicts, and the team's metrics come from the first agent's ``info`` (every agent carries them).
+What an episode keeps and records is :class:`EpisodeBook`'s, which the batched loop of
+:mod:`agri_training.evaluation.batched` (several episodes stepped together in an env's batched form) shares.
 
 The record holds the seed, the return, the steps, whether the episode was truncated, ``is_success``, the
 wall time, and the env's ``metadata["episode_metric_keys"]`` from the final ``info``; a policy may add its
@@ -95,6 +97,86 @@ class _Team:
                 trace["obstacles"] = movers[np.abs(movers[:, 0]) < 1e5].tolist()
 
 
+class EpisodeBook:
+    """What the episode loop keeps of one episode, fed step by step; its output (record and trace) at the end.
+
+    :func:`run_episode` drives one env with it; the batched loop (:mod:`.batched`) drives one per sub-env of a
+    vector env, so both produce their records and traces in one place. A driver is what the loop sees of the
+    env: its latest ``info`` (a mapping), ``done``, ``truncated``, ``trace_step(trace)`` and ``finish(record,
+    trace)`` (:class:`_SingleAgent`, :class:`_Team`).
+
+    Args:
+        policy: SB3's ``predict`` (per-agent dicts in and out on a parallel env).
+        seed: The episode's reset seed.
+        trace_keys: ``info`` keys to record at every step, or None.
+        metric_keys: The env's ``metadata["episode_metric_keys"]``.
+        single: A single-agent env (policies that localize themselves are scored only there).
+    """
+
+    def __init__(
+        self, policy: Any, seed: int, trace_keys: tuple[str, ...] | None, metric_keys: tuple[str, ...], single: bool
+    ) -> None:
+        self.policy = policy
+        self.seed = seed
+        self.metric_keys = metric_keys
+        self.single = single
+        self.trace: dict[str, list[Any]] = {k: [] for k in trace_keys} if trace_keys else {}
+        self.localizes = False
+        self.truth: list[tuple[float, float, float]] = []
+        self.estimate: list[np.ndarray] = []
+        self.state: Any = None
+        self.first = True
+        self.total = 0.0
+        self.steps = 0
+
+    def started(self, driver: Any) -> None:
+        """After the reset: the first trace row; whether the policy's own pose estimate is scored."""
+        driver.trace_step(self.trace)
+        self.localizes = self.single and hasattr(self.policy, "pose_estimate") and "x" in driver.info
+
+    def act(self, observation: Any, info: Mapping[str, Any]) -> Any:
+        """The policy's action for ``observation`` (``info``: the env's latest, paired with the pose estimate)."""
+        action, self.state = self.policy.predict(
+            observation, state=self.state, episode_start=np.array([self.first]), deterministic=True
+        )
+        self.first = False
+        if self.localizes:  # the estimate for this observation, paired with the true pose it was taken at
+            self.truth.append((info["x"], info["y"], info["yaw"]))
+            self.estimate.append(np.asarray(self.policy.pose_estimate(0), dtype=np.float64))
+        return action
+
+    def stepped(self, reward: float, driver: Any) -> None:
+        """After a step: its reward, and a trace row."""
+        self.total += reward
+        self.steps += 1
+        driver.trace_step(self.trace)
+
+    def output(self, driver: Any, wall_time_s: float) -> EpisodeOutput:
+        """The episode's record (and trace), from the driver's final ``info``."""
+        record: dict[str, Any] = {
+            "seed": self.seed,
+            "return": self.total,
+            "steps": self.steps,
+            "truncated": driver.truncated,
+            "is_success": bool(driver.info.get("is_success", False)),
+            "wall_time_s": wall_time_s,
+        }
+        for key in self.metric_keys:
+            record[key] = driver.info.get(key)
+        if self.single and hasattr(self.policy, "episode_metrics"):
+            record.update(self.policy.episode_metrics(0))
+        trace = self.trace
+        driver.finish(record, trace)
+        if self.localizes and self.truth:
+            world_est = start_frame_to_world(np.array(self.truth[0]), np.array(self.estimate))
+            record.update(localization_errors(np.array(self.truth), world_est))
+            if trace:
+                trace.update(
+                    slam_x=world_est[:, 0].tolist(), slam_y=world_est[:, 1].tolist(), slam_yaw=world_est[:, 2].tolist()
+                )
+        return {"record": jsonable(record), "trace": jsonable(trace) if trace else None}
+
+
 def run_episode(
     env: Any,
     policy: Any,
@@ -114,50 +196,18 @@ def run_episode(
             frame there); returning True ends the episode early.
     """
     driver: _SingleAgent | _Team = _Team(env) if agri_envs.is_parallel_env(env) else _SingleAgent(env)
+    metric_keys = tuple(env.unwrapped.metadata.get("episode_metric_keys", ()))
+    book = EpisodeBook(policy, seed, trace_keys, metric_keys, isinstance(driver, _SingleAgent))
     obs = driver.reset(seed)
-    single = isinstance(driver, _SingleAgent)
-    trace: dict[str, list[Any]] = {k: [] for k in trace_keys} if trace_keys else {}
-    driver.trace_step(trace)
-    localizes = single and hasattr(policy, "pose_estimate") and "x" in driver.info
-    truth: list[tuple[float, float, float]] = []
-    estimate: list[np.ndarray] = []
-    state, start, total, steps = None, True, 0.0, 0
+    book.started(driver)
     t0 = time.perf_counter()
     stop = on_step(0) if on_step is not None else False
-    while not (steps and driver.done) and not stop:
-        action, state = policy.predict(obs, state=state, episode_start=np.array([start]), deterministic=True)
-        start = False
-        if localizes:  # the estimate for this observation, paired with the true pose it was taken at
-            info = driver.info
-            truth.append((info["x"], info["y"], info["yaw"]))
-            estimate.append(np.asarray(policy.pose_estimate(0), dtype=np.float64))
-        obs, reward = driver.step(action)
-        total += reward
-        steps += 1
-        driver.trace_step(trace)
+    while not (book.steps and driver.done) and not stop:
+        obs, reward = driver.step(book.act(obs, driver.info))
+        book.stepped(reward, driver)
         if on_step is not None:
-            stop = bool(on_step(steps))
-    record: dict[str, Any] = {
-        "seed": seed,
-        "return": total,
-        "steps": steps,
-        "truncated": driver.truncated,
-        "is_success": bool(driver.info.get("is_success", False)),
-        "wall_time_s": time.perf_counter() - t0,
-    }
-    for key in env.unwrapped.metadata.get("episode_metric_keys", ()):
-        record[key] = driver.info.get(key)
-    if single and hasattr(policy, "episode_metrics"):
-        record.update(policy.episode_metrics(0))
-    driver.finish(record, trace)
-    if localizes and truth:
-        world_est = start_frame_to_world(np.array(truth[0]), np.array(estimate))
-        record.update(localization_errors(np.array(truth), world_est))
-        if trace:
-            trace.update(
-                slam_x=world_est[:, 0].tolist(), slam_y=world_est[:, 1].tolist(), slam_yaw=world_est[:, 2].tolist()
-            )
-    return {"record": jsonable(record), "trace": jsonable(trace) if trace else None}
+            stop = bool(on_step(book.steps))
+    return book.output(driver, time.perf_counter() - t0)
 
 
 def start_frame_to_world(start: np.ndarray, poses: np.ndarray) -> np.ndarray:

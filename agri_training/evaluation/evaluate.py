@@ -10,7 +10,7 @@ from __future__ import annotations
 import dataclasses
 import sys
 import time
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from typing import Any, cast
 
 import numpy as np
@@ -27,6 +27,7 @@ from agri_training.core.documents import (
 )
 from agri_training.core.progress import Progress
 from agri_training.core.stats import format_interval, iqm, rate_interval, stratified_bootstrap_ci
+from agri_training.evaluation.batched import BATCH_SIZE, batchable
 from agri_training.evaluation.parallel import EpisodeJob, run_episodes
 from agri_training.evaluation.policies import EvalRequest, resolve_env_kwargs
 
@@ -48,7 +49,26 @@ def summarize(episodes: list[EpisodeRecord], strata: list[str] | None = None) ->
         ``episodes``, ``success_rate`` (+ ``_ci``), ``collision_rate`` (+ ``_ci``), ``mean_KEY`` and
         ``iqm_KEY`` (+ ``_ci``) for every numeric key, and the shortcuts ``mean_time``,
         ``mean_time_successful``, ``ate_rmse`` and ``min_clearance`` (the worst episode's) where they apply.
+        Episodes of campaigns (records with ``campaign_run``) add the same keys over the first runs only,
+        prefixed ``first_run_``, and over the later runs, prefixed ``later_runs_`` (e.g.
+        ``later_runs_mean_episode_time``). The runs of one campaign share a world, so their intervals,
+        which treat the episodes as independent, are somewhat too narrow.
     """
+    summary = _summarize(episodes, strata)
+    if any("campaign_run" in e for e in episodes):
+        for part, later in (("first_run", False), ("later_runs", True)):
+            pick = [i for i, e in enumerate(episodes) if bool(e.get("campaign_run")) == later]
+            if pick:
+                sub = _summarize([episodes[i] for i in pick], None if strata is None else [strata[i] for i in pick])
+                summary.update({f"{part}_{k}": v for k, v in sub.items()})
+    return summary
+
+
+#: Record keys that are not metrics: never summarised.
+_NOT_METRICS = frozenset({"seed", "is_success", "collision", "truncated", "campaign_run", "layout_seed"})
+
+
+def _summarize(episodes: list[EpisodeRecord], strata: list[str] | None) -> dict[str, Any]:
     summary: dict[str, Any] = {"episodes": len(episodes)}
     if not episodes:
         return summary
@@ -59,9 +79,10 @@ def summarize(episodes: list[EpisodeRecord], strata: list[str] | None = None) ->
         col = [bool(e["collision"]) for e in episodes]
         summary["collision_rate"] = float(np.mean(col))
         summary["collision_rate_ci"] = rate_interval(col)
-    skip = {"seed", "is_success", "collision", "truncated"}
-    for key, value in episodes[0].items():
-        if key in skip or isinstance(value, bool) or not isinstance(value, (int, float)):
+    keys = dict.fromkeys(k for e in episodes for k in e)  # in order; a key may be None in some episodes
+    for key in keys:
+        values = [e.get(key) for e in episodes]
+        if key in _NOT_METRICS or not any(_is_number(v) for v in values) or any(isinstance(v, bool) for v in values):
             continue
         vals = np.array([e[key] if e.get(key) is not None else np.nan for e in episodes], dtype=float)
         finite = np.any(np.isfinite(vals))
@@ -79,6 +100,10 @@ def summarize(episodes: list[EpisodeRecord], strata: list[str] | None = None) ->
         clearances = [e["min_clearance"] for e in episodes if e.get("min_clearance") is not None]
         summary["min_clearance"] = float(np.min(clearances)) if clearances else None
     return summary
+
+
+def _is_number(value: Any) -> bool:
+    return isinstance(value, (int, float)) and not isinstance(value, bool)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -115,7 +140,7 @@ class _Level:
     jobs: list[EpisodeJob]
 
 
-def _plan(requests: list[EvalRequest]) -> list[_Level]:
+def _plan(requests: list[EvalRequest], batch: int) -> list[_Level]:
     levels = []
     for r, request in enumerate(requests):
         if request.episodes < 1:
@@ -126,24 +151,72 @@ def _plan(requests: list[EvalRequest]) -> list[_Level]:
         )
         for k, (label, base) in enumerate(bases):
             kwargs, privileged = resolve_env_kwargs(request, base)
-            jobs = [
-                EpisodeJob(request.env_id, kwargs, request.policy, request.seed + i, i < request.record_traces)
-                for i in range(request.episodes)
-            ]
+            jobs = episode_jobs(request, kwargs, batch)
             levels.append(_Level(r, k, request, label or request.label, kwargs, privileged, jobs))
     return levels
 
 
+def episode_jobs(request: EvalRequest, kwargs: Mapping[str, Any], batch: int = 1) -> list[EpisodeJob]:
+    """The jobs of one level: one per episode or batch of episodes, or one per campaign of ``campaign_runs``.
+
+    Campaign c runs seeds ``seed + c * runs ..`` in the world of ``layout_seed = seed + c * runs`` (its first
+    seed), unless the arguments already fix ``layout_seed`` (then every campaign drives that one world).
+    With ``batch > 1``, a policy that :func:`~agri_training.evaluation.batched.batchable` allows on an env with
+    a batched form runs its episodes in batches of at most ``batch`` consecutive seeds, as equal in size as
+    can be (the episodes that record traces apart from the others).
+
+    Raises:
+        ValueError: For ``batch < 1``.
+    """
+    if isinstance(batch, bool) or not isinstance(batch, int) or batch < 1:
+        raise ValueError(f"batch must be an int >= 1, got {batch!r}")
+    runs = request.campaign_runs
+    if runs == 1 and batch > 1 and batchable(request.env_id, request.policy):
+        traced = min(request.record_traces, request.episodes)
+        return [
+            EpisodeJob(request.env_id, kwargs, request.policy, request.seed + first, first < traced, batch=size)
+            for first, size in _batches(0, traced, batch) + _batches(traced, request.episodes, batch)
+        ]
+    if runs == 1:
+        return [
+            EpisodeJob(request.env_id, kwargs, request.policy, request.seed + i, i < request.record_traces)
+            for i in range(request.episodes)
+        ]
+    jobs = []
+    for c in range(request.episodes // runs):
+        first = request.seed + c * runs
+        fixed = dict(kwargs)
+        if int(fixed.get("layout_seed", -1)) < 0:
+            fixed["layout_seed"] = first
+        jobs.append(EpisodeJob(request.env_id, fixed, request.policy, first, c < request.record_traces, runs))
+    return jobs
+
+
+def _batches(start: int, stop: int, most: int) -> list[tuple[int, int]]:
+    """``(first, size)`` of the fewest runs of at most ``most`` indices covering ``[start, stop)``, sizes within 1."""
+    count = stop - start
+    if count <= 0:
+        return []
+    n = -(-count // most)
+    sizes = [count // n + (1 if k < count % n else 0) for k in range(n)]
+    firsts = [start + sum(sizes[:k]) for k in range(n)]
+    return list(zip(firsts, sizes, strict=True))
+
+
 def evaluate(
-    request: EvalRequest, progress: bool = True, workers: int | None = 1, ray: str | None = None
+    request: EvalRequest,
+    progress: bool = True,
+    workers: int | None = 1,
+    ray: str | None = None,
+    batch: int = BATCH_SIZE,
 ) -> EvaluationDocument:
     """Run the request and return the result document.
 
     For a scenario that sweeps an argument the document holds one result per value under ``levels`` (and
-    the ``summary`` of all levels pooled); otherwise it is a single result. ``workers`` and ``ray`` choose
-    where the episodes run (see :func:`evaluate_many`); the document is the same wherever they run.
+    the ``summary`` of all levels pooled); otherwise it is a single result. ``workers``, ``ray`` and ``batch``
+    choose where and how the episodes run (see :func:`evaluate_many`); the document is the same whichever.
     """
-    return evaluate_many([request], progress, workers, ray)[0]
+    return evaluate_many([request], progress, workers, ray, batch=batch)[0]
 
 
 def evaluate_many(
@@ -152,6 +225,8 @@ def evaluate_many(
     workers: int | None = 1,
     ray: str | None = None,
     on_episode: Callable[[EpisodeProgress], None] | None = None,
+    batch: int = BATCH_SIZE,
+    costs: Sequence[Sequence[float] | None] | None = None,
 ) -> list[EvaluationDocument]:
     """Evaluate several requests in one run of episodes, and return one result document per request.
 
@@ -167,14 +242,21 @@ def evaluate_many(
         ray: Run the episodes as Ray tasks: ``"local"``, ``"auto"`` or a cluster address.
         on_episode: Called after each finished episode (in completion order) with an
             :class:`EpisodeProgress`.
+        batch: Most episodes stepped together in the env's batched form, where the env has one and the
+            policy acts on its observations alone (:mod:`agri_training.evaluation.batched`); 1 runs every
+            episode in the reference loop. The records are the same.
+        costs: Per request, the expected cost of each of its episodes (levels one after the other; any unit,
+            e.g. the seconds a committed entry took), or None. The jobs then start longest first, so that
+            the workers finish together; results do not depend on the order.
 
     Raises:
         ValueError: For bad arguments (unknown scenario, policy, env argument, ``workers < 1``).
         agri_training.parallel.EpisodeError: When an episode raises; it names the seed and the exception.
     """
-    levels = _plan(requests)
+    levels = _plan(requests, batch)
     jobs = [job for level in levels for job in level.jobs]
-    where = [(level, i) for level in levels for i in range(len(level.jobs))]
+    priority = _job_costs(levels, costs) if costs is not None else None
+    where = [(level, i) for level in levels for i in range(level.request.episodes)]
     display = _OrderedDisplay(where, progress)
     t0 = time.perf_counter()
     done = 0
@@ -192,14 +274,14 @@ def evaluate_many(
             )
 
     try:
-        outs = run_episodes(jobs, workers=workers, ray=ray, on_result=on_result)
+        outs = run_episodes(jobs, workers=workers, ray=ray, on_result=on_result, priority=priority)
     finally:
         display.close()
     docs: list[list[EvaluationDocument]] = [[] for _ in requests]
     start = 0
     for level in levels:
-        level_outs = outs[start : start + len(level.jobs)]
-        start += len(level.jobs)
+        level_outs = outs[start : start + level.request.episodes]
+        start += level.request.episodes
         docs[level.request_index].append(_level_doc(level, level_outs))
     results: list[EvaluationDocument] = []
     for request, level_docs in zip(requests, docs, strict=True):
@@ -217,6 +299,21 @@ def evaluate_many(
     return results
 
 
+def _job_costs(levels: list[_Level], costs: Sequence[Sequence[float] | None]) -> list[float]:
+    """Each job's expected cost: the sum of its episodes' (0 where a request has none)."""
+    if len(costs) != len({level.request_index for level in levels}):
+        raise ValueError(f"costs: one entry per request expected, got {len(costs)}")
+    out = []
+    offset = {r: 0 for r in range(len(costs))}
+    for level in levels:
+        per_episode = costs[level.request_index]
+        for job in level.jobs:
+            start = offset[level.request_index]
+            offset[level.request_index] += job.episodes
+            out.append(float(sum(per_episode[start : start + job.episodes])) if per_episode is not None else 0.0)
+    return out
+
+
 def evaluate_level(
     request: EvalRequest,
     base: Mapping[str, Any] | None,
@@ -224,18 +321,15 @@ def evaluate_level(
     label: str | None = None,
     workers: int | None = 1,
     ray: str | None = None,
+    batch: int = BATCH_SIZE,
 ) -> EvaluationDocument:
     """Evaluate one set of env arguments (one level of a scenario)."""
     kwargs, privileged = resolve_env_kwargs(request, base)
-    jobs = [
-        EpisodeJob(request.env_id, kwargs, request.policy, request.seed + i, i < request.record_traces)
-        for i in range(request.episodes)
-    ]
-    level = _Level(0, 0, request, label, kwargs, privileged, jobs)
-    display = _OrderedDisplay([(level, i) for i in range(len(jobs))], progress)
+    level = _Level(0, 0, request, label, kwargs, privileged, episode_jobs(request, kwargs, batch))
+    display = _OrderedDisplay([(level, i) for i in range(request.episodes)], progress)
     try:
         outs = run_episodes(
-            jobs, workers=workers, ray=ray, on_result=lambda k, _, out: display.finished(k, out["record"])
+            level.jobs, workers=workers, ray=ray, on_result=lambda k, _, out: display.finished(k, out["record"])
         )
     finally:
         display.close()
@@ -245,12 +339,14 @@ def evaluate_level(
 def _level_doc(level: _Level, outs: list[EpisodeOutput]) -> EvaluationDocument:
     request = level.request
     episodes = [out["record"] for out in outs]
+    if request.campaign_runs > 1:  # the world each campaign drove
+        for job in level.jobs:
+            for k in range(job.runs):
+                episodes[job.seed - request.seed + k]["layout_seed"] = int(job.env_kwargs["layout_seed"])
     traces: list[TraceDocument] = [
-        {"seed": job.seed, "data": out["trace"]}
-        for job, out in zip(level.jobs, outs, strict=True)
-        if out["trace"] is not None
+        {"seed": request.seed + i, "data": out["trace"]} for i, out in enumerate(outs) if out["trace"] is not None
     ]
-    return {
+    doc: EvaluationDocument = {
         "env_id": request.env_id,
         "scenario": request.scenario,
         "label": level.label or request.scenario,
@@ -265,6 +361,9 @@ def _level_doc(level: _Level, outs: list[EpisodeOutput]) -> EvaluationDocument:
         "episodes": episodes,
         "traces": traces,
     }
+    if request.campaign_runs > 1:
+        doc["campaign_runs"] = request.campaign_runs
+    return doc
 
 
 class _OrderedDisplay:
@@ -318,6 +417,14 @@ def format_summary(result: Mapping[str, Any]) -> str:
             lines.append(f"  {name:<24} {format_interval(value, s.get(key + '_ci'), fmt):<30} {iqm_text}")
     if s.get("min_clearance") is not None:
         lines.append(f"  {'min_clearance (worst)':<24} {s['min_clearance']:.3f}")
+    for part, name in (("first_run_", "first runs"), ("later_runs_", "later runs")):
+        if f"{part}episodes" not in s:
+            continue
+        lines.append(f"  campaigns, {name} ({s[part + 'episodes']} episodes):")
+        for key in ("success_rate", "mean_episode_time", "mean_max_cross_track", "mean_cross_track_corridors_max"):
+            if s.get(part + key) is not None:
+                fmt = "{:.2f}" if key.endswith("rate") else _FORMATS.get(key[len("mean_") :], "{:.3g}")
+                lines.append(f"    {key:<30} {format_interval(s[part + key], s.get(part + key + '_ci'), fmt)}")
     lines.append("  " + INTERVALS_NOTE)
     return "\n".join(lines)
 

@@ -30,8 +30,12 @@ class EvalRequest:
         seed: First seed.
         scenario: Name of an env-argument preset (``agri_envs.scenarios``), or None.
         env_kwargs: Extra env arguments (override the scenario's; must not contradict the policy's needs).
-        record_traces: How many episodes record per-step traces.
+        record_traces: How many episodes record per-step traces (campaigns: how many campaigns).
         label: Name of the evaluation in progress displays and in the result (default: the scenario's).
+        campaign_runs: Runs per campaign: the episodes are driven in campaigns of this many consecutive seeds,
+            each by one policy that keeps its state between runs, in one world held fixed by the env's
+            ``layout_seed`` (the campaign's first seed, unless the arguments fix it). 1: every episode is a
+            fresh policy's first.
     """
 
     env_id: str
@@ -42,6 +46,15 @@ class EvalRequest:
     env_kwargs: Mapping[str, Any] = dataclasses.field(default_factory=dict)
     record_traces: int = 1
     label: str | None = None
+    campaign_runs: int = 1
+
+    def __post_init__(self) -> None:
+        if self.episodes < 1:
+            raise ValueError(f"episodes must be >= 1, got {self.episodes}")
+        if self.campaign_runs < 1 or self.episodes % self.campaign_runs:
+            raise ValueError(
+                f"campaign_runs must be >= 1 and divide episodes ({self.episodes}), got {self.campaign_runs}"
+            )
 
 
 def resolve_env_kwargs(request: EvalRequest, base: Mapping[str, Any] | None = None) -> tuple[dict[str, Any], bool]:

@@ -111,7 +111,7 @@ def record(request: ClipRequest) -> dict[str, Any]:
         if step % request.every == 0:
             frame = env.render()
             if headless and frame is not None:
-                frames.append(_shrink(np.asarray(frame, dtype=np.uint8), request.scale))
+                frames.append(shrink_frame(np.asarray(frame, dtype=np.uint8), request.scale))
         return request.max_steps is not None and step >= request.max_steps
 
     try:
@@ -137,7 +137,8 @@ def _render_fps(env: Any) -> float:
     return float(metadata.get("render_fps") or 15)
 
 
-def _shrink(frame: np.ndarray, scale: float) -> np.ndarray:
+def shrink_frame(frame: np.ndarray, scale: float) -> np.ndarray:
+    """An RGB frame shrunk by ``scale`` (bilinear) to even width and height, as H.264 needs."""
     if scale >= 1.0:
         return frame
     from PIL import Image

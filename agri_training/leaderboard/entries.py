@@ -27,6 +27,7 @@ import yaml
 import agri_envs
 from agri_baselines import list_policies, policy_spec
 from agri_training.core.documents import EvaluationDocument, git_commit, is_timing_key, jsonable
+from agri_training.evaluation.batched import BATCH_SIZE
 from agri_training.evaluation.evaluate import EvalRequest, evaluate_many, summarize
 from agri_training.leaderboard.suites import ENTRIES_DIR, ENTRY_FORMAT, ROOT, SUITES_DIR, Suite, find_suite, sha256_file
 from agri_training.learned.zoo import zoo_path
@@ -136,13 +137,19 @@ class Block:
 
 
 def run_blocks(
-    blocks: Sequence[Block], workers: int | None = 1, progress: bool = True, ray: str | None = None
+    blocks: Sequence[Block],
+    workers: int | None = 1,
+    progress: bool = True,
+    ray: str | None = None,
+    batch: int = BATCH_SIZE,
+    costs: Sequence[Sequence[float] | None] | None = None,
 ) -> list[EvaluationDocument]:
     """Evaluate blocks and return the evaluator's level document of each, in order.
 
     All episodes of all blocks go to one pool of ``workers`` processes (or Ray tasks; see
-    :func:`agri_training.evaluate.evaluate_many`) behind one progress bar (block k of N, overall ETA).
-    Results do not depend on where episodes run: each is seeded by the suite.
+    :func:`agri_training.evaluate.evaluate_many`, which also says what ``batch`` and ``costs``, one per
+    block, do) behind one progress bar (block k of N, overall ETA). Results do not depend on where or how
+    episodes run: each is seeded by the suite.
     """
     requests = [
         EvalRequest(
@@ -153,10 +160,11 @@ def run_blocks(
             env_kwargs=dict(b.env_kwargs),
             record_traces=b.traces,
             label=b.label,
+            campaign_runs=b.suite.campaign_runs,
         )
         for b in blocks
     ]
-    docs = evaluate_many(requests, progress=progress, workers=workers, ray=ray)
+    docs = evaluate_many(requests, progress=progress, workers=workers, ray=ray, batch=batch, costs=costs)
     for b, doc in zip(blocks, docs, strict=True):
         doc["scenario"] = b.suite.scenario
     return docs
@@ -202,15 +210,35 @@ def evaluate_entries(
     progress: bool = True,
     command: str = "",
     ray: str | None = None,
+    traces: list[list[Any]] | None = None,
+    batch: int = BATCH_SIZE,
+    costs: Sequence[Sequence[Sequence[float]] | None] | None = None,
 ) -> list[dict[str, Any]]:
-    """Evaluate each (suite, policy reference) pair and return the entries, all blocks in one pool."""
+    """Evaluate each (suite, policy reference) pair and return the entries, all blocks in one pool.
+
+    Args:
+        pairs: The (suite, policy reference) pairs.
+        workers: Worker processes (see :func:`run_blocks`).
+        progress: Show the progress bar.
+        command: The command recorded in the entries.
+        ray: Run the episodes as Ray tasks.
+        traces: When given, every episode records its per-step trace, and this list receives, per pair, the
+            traces of each level (entries never hold traces; a report that evaluates afresh plots them).
+        batch: Most episodes stepped together in an env's batched form (see :func:`run_blocks`).
+        costs: Per pair, the expected cost of each episode of each level (or None): longest jobs start first.
+    """
     blocks: list[Block] = []
     spans = []
-    for suite, ref in pairs:
-        bl = blocks_of(suite, policy_argument(ref))
+    block_costs: list[Sequence[float] | None] = []
+    for p, (suite, ref) in enumerate(pairs):
+        bl = blocks_of(suite, policy_argument(ref), suite.episodes if traces is not None else 0)
         spans.append((len(blocks), len(blocks) + len(bl)))
         blocks += bl
-    results = run_blocks(blocks, workers, progress, ray)
+        pair_costs = costs[p] if costs is not None else None
+        block_costs += list(pair_costs) if pair_costs is not None and len(pair_costs) == len(bl) else [None] * len(bl)
+    results = run_blocks(blocks, workers, progress, ray, batch, block_costs if costs is not None else None)
+    if traces is not None:
+        traces += [[doc["traces"] for doc in results[a:b]] for a, b in spans]
     return [make_entry(suite, ref, results[a:b], command) for (suite, ref), (a, b) in zip(pairs, spans, strict=True)]
 
 
@@ -233,10 +261,15 @@ def load_entries(entries_dir: Path | str = ENTRIES_DIR) -> list[dict[str, Any]]:
 
 
 def all_baseline_pairs(suites: Iterable[Suite]) -> list[tuple[Suite, dict[str, Any]]]:
-    """Every registered policy (baselines and shipped learned ones) on every suite of its env it can run."""
+    """Every registered policy (baselines and shipped learned ones) on every suite of its env it can run.
+
+    A suite that names its ``policies`` gets those only.
+    """
     pairs = []
     for suite in suites:
         for spec in list_policies(suite.env_id):
+            if suite.policies is not None and spec.name not in suite.policies:
+                continue
             # a policy that needs other env arguments than the suite pins cannot run it (luo-apf drives joints,
             # the reach suite end-effector steps; the learned reach policy is sized for one cluster)
             if any(k in suite.env_kwargs and suite.env_kwargs[k] != v for k, v in spec.env_kwargs.items()):
@@ -307,10 +340,12 @@ def verify_entries(
     rtol: float = 0.0,
     progress: bool = True,
     ray: str | None = None,
+    batch: int = BATCH_SIZE,
 ) -> list[str]:
     """Re-evaluate entries on their pinned seeds and list every number that does not reproduce.
 
     Also fails an entry whose suite file changed since it was made (stale: the suite's sha256 differs).
+    The jobs start longest first by the committed episodes' wall times; ``batch`` as in :func:`run_blocks`.
 
     Returns:
         Problems, one line each (empty when all reproduce).
@@ -335,7 +370,8 @@ def verify_entries(
             continue
         pairs.append((suite, entry["policy"]))
         kept.append(entry)
-    fresh = evaluate_entries(pairs, workers, progress, ray=ray)
+    costs = [[[float(e.get("wall_time_s") or 0.0) for e in lv["episodes"]] for lv in entry["levels"]] for entry in kept]
+    fresh = evaluate_entries(pairs, workers, progress, ray=ray, batch=batch, costs=costs)
     for entry, new in zip(kept, fresh, strict=True):
         name = f"{entry['suite']['name']}/{entry['policy']['name']}"
         committed = {k: v for k, v in entry.items() if k not in _META_KEYS}

@@ -14,7 +14,15 @@ from typing import Any
 from agri_training.core.stats import format_interval, paired_comparison
 from agri_training.evaluation.evaluate import INTERVALS_NOTE
 from agri_training.leaderboard.entries import load_entries
-from agri_training.leaderboard.suites import ENTRIES_DIR, LEADERBOARD_MD, SUITES_DIR, RankKey, Suite, load_suites
+from agri_training.leaderboard.suites import (
+    ENTRIES_DIR,
+    LEADERBOARD_MD,
+    MIN_EPISODES,
+    SUITES_DIR,
+    RankKey,
+    Suite,
+    load_suites,
+)
 
 
 def _sort_key(entry: Mapping[str, Any], rank_by: Sequence[RankKey]) -> tuple[float, ...]:
@@ -26,57 +34,117 @@ def _sort_key(entry: Mapping[str, Any], rank_by: Sequence[RankKey]) -> tuple[flo
     return tuple(key)
 
 
+#: Prefixes of the summary keys of campaigns' first runs and later runs (``later_runs_success_rate``).
+CAMPAIGN_PARTS = {"first_run_": "first run", "later_runs_": "later runs"}
+
+
+def _campaign_part(metric: str) -> tuple[str | None, str]:
+    """``(prefix, rest)`` of a campaign summary key (``(None, metric)`` for any other key)."""
+    for prefix in CAMPAIGN_PARTS:
+        if metric.startswith(prefix):
+            return prefix, metric[len(prefix) :]
+    return None, metric
+
+
+def _base_key(metric: str) -> str:
+    """The per-episode key behind a summary key: ``later_runs_mean_max_cross_track`` -> ``max_cross_track``."""
+    key = _campaign_part(metric)[1]
+    for prefix in ("mean_", "iqm_"):
+        if key.startswith(prefix):
+            return key[len(prefix) :]
+    return key
+
+
+def metric_scale(metric: str) -> float:
+    """Factor from a metric's stored unit to the unit tables show it in (cross-track errors: m -> cm)."""
+    return 100.0 if "cross_track" in metric else 1.0
+
+
 def metric_format(metric: str) -> str:
-    """The format of a metric's values in tables: rates and ratios to 2 decimals, distances in m to 3 (mm)."""
-    if metric.endswith(("_rate", "_ratio")) or "path_length" in metric:
+    """The format of a metric's values in tables (after :func:`metric_scale`).
+
+    Rates and ratios to 2 decimals; cross-track errors in cm to 1 (mm); other distances in m to 3 (mm).
+    """
+    key = _base_key(metric)
+    if metric.endswith(("_rate", "_ratio")) or key.endswith("_ratio") or "path_length" in key:
         return "{:.2f}"
-    if any(k in metric for k in ("coverage", "clearance", "error", "ate", "cross_track", "distance", "gap")):
+    if "cross_track" in key:
+        return "{:.1f}"
+    if key.startswith("ate_") or any(k in key for k in ("coverage", "clearance", "error", "distance", "gap")):
         return "{:.3f}"
     return "{:.1f}"
 
 
-#: Units of the per-episode keys behind summary metrics (``mean_<key>``, ``iqm_<key>``).
+def format_metric(metric: str, value: Any, ci: Any = None) -> str:
+    """A summary value with its interval as a table shows it: scaled (:func:`metric_scale`) and formatted."""
+    f = metric_scale(metric)
+    scaled = None if value is None else float(value) * f
+    interval = None if ci is None else [None if c is None else float(c) * f for c in ci]
+    return format_interval(scaled, interval, metric_format(metric))
+
+
+#: Units of the per-episode keys behind summary metrics (``mean_<key>``, ``iqm_<key>``), as tables show them.
 UNITS = {
     "episode_time": "s",
     "path_length": "m",
     "min_clearance": "m",
     "ate_rmse": "m",
     "final_position_error": "m",
-    "max_cross_track": "m",
-    "mean_cross_track": "m",
+    "max_cross_track": "cm",
+    "mean_cross_track": "cm",
+    "cross_track_corridors_max": "cm",
+    "cross_track_corridors_mean": "cm",
+    "cross_track_turns_max": "cm",
+    "cross_track_turns_mean": "cm",
     "mean_strip_distance": "m",
     "max_strip_distance": "m",
     "max_gap": "m",
+}
+
+#: Column names of per-episode keys whose own names read badly.
+NAMES = {
+    "episode time": "time",
+    "success rate": "success",
+    "collision rate": "collisions",
+    "max cross track": "max cross-track to centre line",
+    "mean cross track": "mean cross-track to centre line",
+    "cross track corridors max": "max cross-track to plan, corridors",
+    "cross track corridors mean": "mean cross-track to plan, corridors",
+    "cross track turns max": "max cross-track to plan, turns",
+    "cross track turns mean": "mean cross-track to plan, turns",
 }
 
 
 def metric_label(metric: str) -> str:
     """A summary key as a column name: ``mean_mean_strip_distance`` -> ``mean strip distance [m]``.
 
-    Means drop their prefix (every metric but a rate is a mean over episodes); IQMs keep it as "IQM".
+    Means drop their prefix (every metric but a rate is a mean over episodes); IQMs keep it as "IQM";
+    campaign parts lead (``later_runs_success_rate`` -> ``later runs: success``).
     """
-    key = metric
-    for prefix in ("mean_", "iqm_"):
-        if metric.startswith(prefix):
-            key = metric[len(prefix) :]
+    part, rest = _campaign_part(metric)
+    key = _base_key(metric)
     name = key.replace("_", " ")
-    name = ("IQM " if metric.startswith("iqm_") else "") + {
-        "episode time": "time",
-        "success rate": "success",
-        "collision rate": "collisions",
-    }.get(name, name)
-    return f"{name} [{UNITS[key]}]" if key in UNITS else name
+    name = ("IQM " if rest.startswith("iqm_") else "") + NAMES.get(name, name)
+    label = f"{name} [{UNITS[key]}]" if key in UNITS else name
+    return f"{CAMPAIGN_PARTS[part]}: {label}" if part else label
 
 
 def episode_values(entry: Mapping[str, Any], metric: str) -> tuple[list[Any], bool]:
-    """Per-episode values behind a summary key (paired by seed order) and whether the metric is a rate."""
-    if metric in ("success_rate", "collision_rate"):
-        key = "is_success" if metric == "success_rate" else "collision"
-        return [bool(e.get(key)) for lv in entry["levels"] for e in lv["episodes"]], True
+    """Per-episode values behind a summary key (paired by seed order) and whether the metric is a rate.
+
+    A campaign part's key (``later_runs_...``) takes the episodes of that part only.
+    """
+    part, rest = _campaign_part(metric)
+    episodes = [e for lv in entry["levels"] for e in lv["episodes"]]
+    if part is not None:
+        episodes = [e for e in episodes if bool(e.get("campaign_run")) == (part == "later_runs_")]
+    if rest in ("success_rate", "collision_rate"):
+        key = "is_success" if rest == "success_rate" else "collision"
+        return [bool(e.get(key)) for e in episodes], True
     for prefix in ("mean_", "iqm_"):
-        if metric.startswith(prefix):
-            key = metric[len(prefix) :]
-            return [e.get(key) for lv in entry["levels"] for e in lv["episodes"]], False
+        if rest.startswith(prefix):
+            key = rest[len(prefix) :]
+            return [e.get(key) for e in episodes], False
     return [], False
 
 
@@ -94,10 +162,9 @@ def is_conditional(metric: str) -> bool:
     metric describes how an episode went, and a failed episode (a crash that ends it early, a chain that
     never arrived) makes it look better than it is.
     """
-    if metric in ("success_rate", "collision_rate") or metric.endswith("_rate"):
+    if metric.endswith("_rate"):
         return False
-    key = metric.split("_", 1)[1] if metric.startswith(("mean_", "iqm_")) else metric
-    return key not in PROGRESS_METRICS
+    return _base_key(metric) not in PROGRESS_METRICS
 
 
 def paired_values(
@@ -114,8 +181,9 @@ def paired_values(
     vy, _ = episode_values(y, metric)
     if not vx or len(vx) != len(vy) or not is_conditional(metric):
         return vx, vy, binary, None
-    sx, _ = episode_values(x, "success_rate")
-    sy, _ = episode_values(y, "success_rate")
+    part = _campaign_part(metric)[0] or ""
+    sx, _ = episode_values(x, part + "success_rate")
+    sy, _ = episode_values(y, part + "success_rate")
     both = [a and b for a, b in zip(sx, sy, strict=True)]
     vx = [v if ok else None for v, ok in zip(vx, both, strict=True)]
     vy = [v if ok else None for v, ok in zip(vy, both, strict=True)]
@@ -169,7 +237,14 @@ def render_markdown(entries: Sequence[Mapping[str, Any]], suites: Sequence[Suite
             lines.append(
                 f"Seeds {suite.seed_start}-{suite.seed_start + suite.episodes - 1}"
                 + (f" at each of {levels} levels of `{suite.sweep[0]}`" if suite.sweep else "")
+                + (
+                    f", in {suite.episodes // suite.campaign_runs} campaigns of {suite.campaign_runs} runs "
+                    "(one world and one policy each)"
+                    if suite.campaign_runs > 1
+                    else ""
+                )
                 + f"; env arguments `{json.dumps(dict(suite.env_kwargs), sort_keys=True)}`."
+                + (f" Under {MIN_EPISODES} episodes per level: {suite.fewer_episodes}" * bool(suite.fewer_episodes))
             )
             lines.append("")
             if not group:
@@ -195,7 +270,7 @@ def render_markdown(entries: Sequence[Mapping[str, Any]], suites: Sequence[Suite
                     str(s["episodes"]),
                 ]
                 for r in suite.rank_by:
-                    cells.append(format_interval(s.get(r.metric), s.get(f"{r.metric}_ci"), metric_format(r.metric)))
+                    cells.append(format_metric(r.metric, s.get(r.metric), s.get(f"{r.metric}_ci")))
                 if rank == 1:
                     cells.append("-")
                 else:

@@ -10,6 +10,9 @@ A suite is ``leaderboard/suites/<name>.yaml`` (format: ``docs/leaderboard.md``):
     env_kwargs: {scene: corridor, n_people: 1}   # pinned here, not looked up by scenario name
     sweep: {parameter: growth, values: [0.0, 0.5, 1.0]}   # optional: one level per value
     seeds: {start: 100000, episodes: 20}           # per level; held out: start >= 100000
+    campaign: {runs: 4}              # optional: episodes in campaigns of 4 runs, one policy per campaign
+    fewer_episodes: why              # required in a committed suite with under 20 episodes per level
+    policies: [gonzalez-hybrid]      # optional: only these policies run it (default: every one of the env)
     traces: 1                        # episodes per level the report re-runs with traces for plots
     rank_by:                         # summary keys, most important first
       - {metric: success_rate, higher_is_better: true}
@@ -71,6 +74,9 @@ _SUITE_KEYS = (
     "env_kwargs",
     "sweep",
     "seeds",
+    "campaign",
+    "fewer_episodes",
+    "policies",
     "traces",
     "rank_by",
 )
@@ -92,6 +98,13 @@ class Suite:
         scenario: Named preset the arguments were copied from, or None.
         sweep: Optional ``(argument, values)``: one level per value.
         traces: Episodes per level re-run with per-step traces for the report's plots, >= 0.
+        campaign_runs: Runs per campaign (``campaign: {runs: R}``): the episodes of a level are driven in
+            campaigns of R consecutive seeds, each in one world by one policy that keeps its state between
+            runs (:func:`agri_training.evaluation.evaluate.episode_jobs`); 1: a fresh policy per episode.
+        policies: The registered policies that run the suite (its entries), or None for every policy of the
+            env that can run it.
+        fewer_episodes: Why a level has fewer than :data:`MIN_EPISODES` episodes ("" when it has enough);
+            committed suites must give a reason (a test checks it).
         sha256: Hash of the file's bytes (set by :func:`load_suite`).
     """
 
@@ -106,6 +119,9 @@ class Suite:
     scenario: str | None = None
     sweep: tuple[str, tuple[Any, ...]] | None = None
     traces: int = 1
+    campaign_runs: int = 1
+    policies: tuple[str, ...] | None = None
+    fewer_episodes: str = ""
     sha256: str = ""
 
     def __post_init__(self) -> None:
@@ -125,6 +141,12 @@ class Suite:
             raise ValueError(f"traces must be >= 0, got {self.traces}")
         if self.sweep is not None and (not self.sweep[1] or self.sweep[0] in self.env_kwargs):
             raise ValueError(f"sweep must give values for an argument not also in env_kwargs, got {self.sweep!r}")
+        if self.campaign_runs < 1 or self.episodes % self.campaign_runs:
+            raise ValueError(
+                f"campaign.runs must be >= 1 and divide seeds.episodes ({self.episodes}), got {self.campaign_runs}"
+            )
+        if self.policies is not None and not self.policies:
+            raise ValueError("policies must name at least one policy (or be left out: every policy of the env)")
 
     @property
     def env_version(self) -> str:
@@ -164,6 +186,12 @@ def parse_suite(doc: Mapping[str, Any], sha256: str = "") -> Suite:
         if not isinstance(sweep, Mapping) or set(sweep) != {"parameter", "values"}:
             raise ValueError(f"sweep must be a mapping with exactly 'parameter' and 'values', got {sweep!r}")
         sweep = (str(sweep["parameter"]), tuple(sweep["values"]))
+    campaign = doc.get("campaign")
+    if campaign is not None and (not isinstance(campaign, Mapping) or set(campaign) != {"runs"}):
+        raise ValueError(f"campaign must be a mapping with exactly 'runs', got {campaign!r}")
+    policies = doc.get("policies")
+    if policies is not None and (not isinstance(policies, list) or not all(isinstance(p, str) for p in policies)):
+        raise ValueError(f"policies must be a list of policy names, got {policies!r}")
     rank = []
     for item in doc["rank_by"]:
         if not isinstance(item, Mapping) or not set(item) <= {"metric", "higher_is_better"} or "metric" not in item:
@@ -181,6 +209,9 @@ def parse_suite(doc: Mapping[str, Any], sha256: str = "") -> Suite:
         scenario=doc.get("scenario"),
         sweep=sweep,
         traces=int(doc.get("traces", 1)),
+        campaign_runs=int(campaign["runs"]) if campaign else 1,
+        policies=tuple(policies) if policies is not None else None,
+        fewer_episodes=str(doc.get("fewer_episodes") or "").strip(),
         sha256=sha256,
     )
 

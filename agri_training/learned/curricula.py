@@ -3,7 +3,10 @@
 Evaluation never sees them.
 
 They are declared in a hyperparameter block's ``train_wrappers`` (by name, like ``wrappers``) and wrap
-only the training envs: periodic evaluation, ``agri evaluate`` and the leaderboard run the plain env.
+only the training envs: periodic evaluation, ``agri evaluate`` and the leaderboard run the plain env. Each
+has a vector form (:data:`VECTOR_TRAIN_WRAPPERS`, the same names) for the vector envs ``agri train`` drives
+through :class:`~agri_training.learned.vec_env.VectorVecEnv`: it acts per sub-env and draws the same numbers
+as the single-env wrapper on each sub-env would.
 """
 
 from __future__ import annotations
@@ -13,9 +16,11 @@ from typing import Any
 
 import gymnasium as gym
 import numpy as np
+from gymnasium.vector import VectorEnv, VectorWrapper
 
 from agri_training.learned.harvest import HarvestLegs
 from agri_training.learned.policy import wrap_by_name
+from agri_training.learned.vector import per_env_seeds, reset_rows
 
 
 class RandomStartWaypoint(gym.Wrapper[Any, Any, Any, Any]):
@@ -50,7 +55,38 @@ class RandomStartWaypoint(gym.Wrapper[Any, Any, Any, Any]):
         return obs, info
 
 
-class CrashCostRamp(gym.Wrapper[Any, Any, Any, Any]):
+class CrashShare:
+    """The crash penalty's share that :class:`CrashCostRamp` and its vector form charge: ``start`` rising to 1.
+
+    Attributes:
+        start: Share charged at first, in [0, 1].
+        ramp_steps: Steps over which the share reaches 1, >= 1.
+        steps: Steps taken so far.
+    """
+
+    start: float
+    ramp_steps: int
+    steps: int
+
+    def start_ramp(self, start: float, ramp_steps: int) -> None:
+        """Set the ramp and count from 0.
+
+        Raises:
+            ValueError: For a ``start`` outside [0, 1] or ``ramp_steps`` below 1.
+        """
+        if not 0.0 <= start <= 1.0:
+            raise ValueError(f"CrashCostRamp: start must be in [0, 1], got {start}")
+        if ramp_steps < 1:
+            raise ValueError(f"CrashCostRamp: ramp_steps must be >= 1, got {ramp_steps}")
+        self.start, self.ramp_steps, self.steps = start, ramp_steps, 0
+
+    @property
+    def share(self) -> float:
+        """The share of the crash penalty charged now."""
+        return self.start + (1.0 - self.start) * min(1.0, self.steps / self.ramp_steps)
+
+
+class CrashCostRamp(CrashShare, gym.Wrapper[Any, Any, Any, Any]):
     """Phase a crash's penalty in over the first part of training: cheap crashes first, the env's cost later.
 
     A learner whose first random drives end in a crash that costs more than idling to the time limit learns
@@ -66,19 +102,8 @@ class CrashCostRamp(gym.Wrapper[Any, Any, Any, Any]):
     """
 
     def __init__(self, env: gym.Env[Any, Any], start: float = 0.1, ramp_steps: int = 100_000) -> None:
-        if not 0.0 <= start <= 1.0:
-            raise ValueError(f"CrashCostRamp: start must be in [0, 1], got {start}")
-        if ramp_steps < 1:
-            raise ValueError(f"CrashCostRamp: ramp_steps must be >= 1, got {ramp_steps}")
         super().__init__(env)
-        self.start = start
-        self.ramp_steps = ramp_steps
-        self.steps = 0
-
-    @property
-    def share(self) -> float:
-        """The share of the crash penalty charged now."""
-        return self.start + (1.0 - self.start) * min(1.0, self.steps / self.ramp_steps)
+        self.start_ramp(start, ramp_steps)
 
     def step(self, action: Any) -> tuple[Any, float, bool, bool, dict[str, Any]]:
         """Step the env; refund ``1 - share`` of a crash's penalty."""
@@ -102,4 +127,93 @@ def apply_train_wrappers(env: gym.Env[Any, Any], wrappers: Sequence[str | Mappin
     Raises:
         ValueError: For a wrapper that is not in :data:`TRAIN_WRAPPERS`, or a malformed entry.
     """
-    return wrap_by_name(env, wrappers, TRAIN_WRAPPERS, kind="training wrapper")
+    wrapped: gym.Env[Any, Any] = wrap_by_name(env, wrappers, TRAIN_WRAPPERS, kind="training wrapper")
+    return wrapped
+
+
+class VectorRandomStartWaypoint(VectorWrapper[Any, Any, Any, Any, Any]):
+    """:class:`RandomStartWaypoint` for each sub-env of a vector env (reset option ``start_waypoint`` per sub-env).
+
+    Each sub-env has its own generator, seeded like the single-env wrapper's (``[seed_i, 1]`` at a seeded
+    reset), so sub-env i starts where ``RandomStartWaypoint`` around a single env seeded ``seed_i`` would.
+    The vector env must take ``start_waypoint`` as an array with one value per sub-env (0: the mission's start).
+
+    Args:
+        env: A vector GreenhouseNav env.
+        prob: Share of the episodes that start at a waypoint drawn uniformly from 1 .. n - 1, in [0, 1].
+    """
+
+    def __init__(self, env: VectorEnv[Any, Any, Any], prob: float = 0.5) -> None:
+        if not 0.0 <= prob <= 1.0:
+            raise ValueError(f"RandomStartWaypoint: prob must be in [0, 1], got {prob}")
+        super().__init__(env)
+        self.prob = prob
+        self._rngs = [np.random.default_rng(0) for _ in range(self.num_envs)]
+        self._n_targets = np.zeros(self.num_envs, dtype=np.int64)
+
+    def reset(self, *, seed: Any = None, options: dict[str, Any] | None = None) -> tuple[Any, dict[str, Any]]:
+        """Reset the sub-envs (all, or those of ``reset_mask``), each at a random waypoint with probability ``prob``."""
+        rows = reset_rows(options, self.num_envs)
+        seeds = per_env_seeds(seed, self.num_envs)
+        options = dict(options or {})
+        for i in rows:
+            if seeds[i] is not None:
+                self._rngs[i] = np.random.default_rng([seeds[i], 1])
+        if "start_waypoint" not in options:
+            start = np.zeros(self.num_envs, dtype=np.int64)
+            for i in rows:
+                rng, n = self._rngs[i], int(self._n_targets[i])
+                if n > 1 and rng.random() < self.prob:
+                    start[i] = int(rng.integers(1, n))
+            if start.any():
+                options["start_waypoint"] = start
+        observations, infos = self.env.reset(seed=seed, options=options or None)
+        self._n_targets[rows] = np.asarray(infos["n_waypoints"])[rows]
+        return observations, infos
+
+
+class VectorCrashCostRamp(CrashShare, VectorWrapper[Any, Any, Any, Any, Any]):
+    """:class:`CrashCostRamp` for every sub-env of a vector env at once.
+
+    The sub-envs step together, so they share one step count and one share: after ``k`` vector steps each
+    sub-env has taken ``k`` steps, as each copy of the single-env wrapper would have.
+
+    Args:
+        env: The training vector env (its info carries ``reward_collision``).
+        start: Share of the crash penalty charged at first, in [0, 1].
+        ramp_steps: Steps of each sub-env over which the share reaches 1, >= 1.
+    """
+
+    def __init__(self, env: VectorEnv[Any, Any, Any], start: float = 0.1, ramp_steps: int = 100_000) -> None:
+        super().__init__(env)
+        self.start_ramp(start, ramp_steps)
+
+    def step(self, actions: Any) -> tuple[Any, np.ndarray, Any, Any, dict[str, Any]]:
+        """Step the sub-envs; refund ``1 - share`` of each crash's penalty."""
+        observations, rewards, terminations, truncations, infos = self.env.step(actions)
+        self.steps += 1
+        penalty = np.zeros(self.num_envs)
+        if "reward_collision" in infos:
+            present = np.asarray(infos.get("_reward_collision", np.ones(self.num_envs, bool)), bool)
+            penalty[present] = -np.asarray(infos["reward_collision"], dtype=np.float64)[present]
+        rewards = np.asarray(rewards, dtype=np.float64) + (1.0 - self.share) * penalty
+        return observations, rewards, terminations, truncations, infos
+
+
+#: Vector forms of :data:`TRAIN_WRAPPERS`, by the same names.
+VECTOR_TRAIN_WRAPPERS: dict[str, type[VectorWrapper[Any, Any, Any, Any, Any]]] = {
+    "RandomStartWaypoint": VectorRandomStartWaypoint,
+    "CrashCostRamp": VectorCrashCostRamp,
+}
+
+
+def apply_vector_train_wrappers(
+    env: VectorEnv[Any, Any, Any], wrappers: Sequence[str | Mapping[str, Any]]
+) -> VectorEnv[Any, Any, Any]:
+    """Wrap a vector env in the declared training wrappers' vector forms, innermost first.
+
+    Raises:
+        ValueError: For a wrapper that is not in :data:`VECTOR_TRAIN_WRAPPERS`, or a malformed entry.
+    """
+    wrapped: VectorEnv[Any, Any, Any] = wrap_by_name(env, wrappers, VECTOR_TRAIN_WRAPPERS, kind="training wrapper")
+    return wrapped

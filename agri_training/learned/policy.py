@@ -23,7 +23,7 @@ import dataclasses
 import importlib
 import json
 import pickle
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -168,17 +168,17 @@ def algorithm_class(name: str) -> Any:
 
 
 def wrap_by_name(
-    env: gym.Env[Any, Any],
+    env: Any,
     wrappers: Sequence[str | Mapping[str, Any]],
-    allowed: Mapping[str, type[gym.Wrapper[Any, Any, Any, Any]]],
+    allowed: Mapping[str, Callable[..., Any]],
     kind: str = "wrapper",
-) -> gym.Env[Any, Any]:
+) -> Any:
     """Wrap ``env`` in wrappers declared by name, innermost first; only names in ``allowed`` are built.
 
     Args:
-        env: The env to wrap.
+        env: The env (or vector env) to wrap.
         wrappers: Names from ``allowed``, or one-key mappings ``{name: {kwarg: value}}``.
-        allowed: The allow-list, name -> class (nothing is imported from a string).
+        allowed: The allow-list, name -> wrapper class or factory (nothing is imported from a string).
         kind: What the list holds, for error messages.
 
     Raises:
@@ -205,7 +205,8 @@ def apply_wrappers(env: gym.Env[Any, Any], wrappers: Sequence[str | Mapping[str,
     Raises:
         ValueError: For a wrapper that is not in :data:`WRAPPERS`, or a malformed entry.
     """
-    return wrap_by_name(env, wrappers, WRAPPERS)
+    wrapped: gym.Env[Any, Any] = wrap_by_name(env, wrappers, WRAPPERS)
+    return wrapped
 
 
 def observation_chain(
@@ -410,6 +411,37 @@ def refuse_pickled(name_or_path: str) -> None:
         )
 
 
+#: Networks and observation statistics read in this process, by folder, file stamps, config and spaces.
+_NETWORKS: collections.OrderedDict[tuple[Any, ...], tuple[PolicyNetwork, ObsNormalization | None]] = (
+    collections.OrderedDict()
+)
+
+
+def _network_of(
+    folder: Path, config: Mapping[str, Any], observation_space: gym.Space[Any], action_space: gym.Space[Any]
+) -> tuple[PolicyNetwork, ObsNormalization | None]:
+    """A run's acting network and observation statistics, read once per process while its files are unchanged.
+
+    Both are immutable, so the fresh policy of every episode shares them (reading the weights takes
+    milliseconds, and a batch of episodes builds a policy each); what a policy keeps of an episode (its
+    observation history, its held action) is its own.
+    """
+    weights, norm = folder / WEIGHTS_FILE, folder / NORMALIZE_FILE
+    stamps = tuple((f.stat().st_mtime_ns, f.stat().st_size) if f.is_file() else None for f in (weights, norm))
+    key = (str(folder.resolve()), stamps, repr(sorted(config.items())), repr(observation_space), repr(action_space))
+    if key in _NETWORKS:
+        _NETWORKS.move_to_end(key)
+        return _NETWORKS[key]
+    network = PolicyNetwork.from_state_dict(
+        load_weights(weights), config["algo"], config.get("policy_kwargs", {}), observation_space, action_space
+    )
+    normalization = ObsNormalization.from_json(json.loads(norm.read_text())) if norm.is_file() else None
+    while len(_NETWORKS) >= 8:
+        _NETWORKS.popitem(last=False)
+    _NETWORKS[key] = (network, normalization)
+    return network, normalization
+
+
 class LearnedPolicy:
     """A trained policy rebuilt weights-only from a run (or checkpoint) folder; SB3's ``predict`` on raw obs.
 
@@ -443,15 +475,7 @@ class LearnedPolicy:
         if not weights.is_file():
             raise ValueError(f"{folder} holds no {WEIGHTS_FILE}")
         #: The acting network, evaluated the same way on every CPU (:mod:`agri_training.inference`).
-        self.network = PolicyNetwork.from_state_dict(
-            load_weights(weights),
-            self.config["algo"],
-            self.config.get("policy_kwargs", {}),
-            observation_space,
-            action_space,
-        )
-        norm = folder / NORMALIZE_FILE
-        self.normalization = ObsNormalization.from_json(json.loads(norm.read_text())) if norm.is_file() else None
+        self.network, self.normalization = _network_of(folder, self.config, observation_space, action_space)
         self._replay = ObservationReplay(chain, self.normalization)
         self._hold = HeldActions(int(self.config.get("action_repeat", 1)))
 

@@ -1,19 +1,24 @@
-"""The documentation site's source: one page per env family, with its frame, docstring and arguments.
+"""The documentation site's source: a page per env family, a page per policy, and the API reference.
 
-Each page holds a rendered frame, the env class's docstring, every argument with its default and range
-from the config class, the env's scenarios and its registered policies.
-``python -m agri_training.report.gallery build/docs`` writes the Markdown and PNGs that ``mkdocs build
---strict`` (``mkdocs.yml``, ``make docs``) turns into the site. The argument tables are read from the
-config dataclass each env is built on (``env.unwrapped.config``: its fields' ``doc``, ``unit``, ``low``,
-``high``, ``choices`` metadata), so they cannot drift from the code.
+Each env page holds a rendered frame, the env class's docstring, every argument with its default and range
+from the config class, the env's scenarios and its registered policies. Each policy page (``policies/``)
+says what the policy is, which env and env arguments it needs, whether it is privileged, and carries the
+API of the function that builds it and of the class it returns. The API pages (``api/``) are
+mkdocstrings directives (``::: module``) over the packages' public modules, rendered from their
+docstrings. ``python -m agri_training.report.gallery build/docs`` writes the Markdown and PNGs that
+``mkdocs build --strict`` (``mkdocs.yml``, ``make docs``) turns into the site. The argument tables are
+read from the config dataclass each env is built on (``env.unwrapped.config``: its fields' ``doc``,
+``unit``, ``low``, ``high``, ``choices`` metadata), so they cannot drift from the code.
 """
 
 from __future__ import annotations
 
 import dataclasses
+import importlib
 import inspect
 import re
 import sys
+import typing
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
@@ -21,8 +26,9 @@ from typing import Any
 import numpy as np
 
 import agri_envs
-from agri_baselines import list_policies
+from agri_baselines import PolicySpec, list_policies
 from agri_envs.scenarios import list_scenarios
+from agri_training.learned import zoo  # noqa: F401  (registers the shipped learned policies: they get pages too)
 
 #: Env families of the site: (page name, env id, preset ids that share the page).
 ENV_PAGES = (
@@ -32,12 +38,81 @@ ENV_PAGES = (
     ("grape-harvest", "agri_envs/GrapeHarvest-v1", ("agri_envs/GrapeHarvestReach-v1",)),
 )
 
+#: API reference pages: (page name, title, what it covers, modules rendered from their docstrings).
+API_PAGES = (
+    (
+        "envs",
+        "agri_envs",
+        "The registry (`make`, the ids), the scenarios and the shared scenes.",
+        ("agri_envs", "agri_envs.scenarios", "agri_envs.scenes.greenhouse", "agri_envs.scenes.rosmap"),
+    ),
+    (
+        "sim2d",
+        "agri_envs.sim2d",
+        "The 2D engine the rover, the coverage robot and the chain share: world, robots, sensors, maps, planning.",
+        (
+            "agri_envs.sim2d.world",
+            "agri_envs.sim2d.diff_drive",
+            "agri_envs.sim2d.sensors",
+            "agri_envs.sim2d.odometry",
+            "agri_envs.sim2d.gridmap",
+            "agri_envs.sim2d.astar",
+            "agri_envs.sim2d.polyline",
+        ),
+    ),
+    (
+        "baselines",
+        "agri_baselines",
+        "The papers' controllers as policies (the registry), and the pure algorithms behind them.",
+        (
+            "agri_baselines",
+            "agri_baselines.harik_apf",
+            "agri_baselines.hector_slam",
+            "agri_baselines.gonzalez",
+            "agri_baselines.gonzalez_planner",
+            "agri_baselines.gonzalez_policies",
+            "agri_baselines.apoorva_chain",
+            "agri_baselines.luo_apf",
+        ),
+    ),
+    (
+        "evaluation",
+        "agri_training.evaluation",
+        "Evaluate any policy on any env: requests, the episode loop, campaigns, the worker pool, clips.",
+        (
+            "agri_training.evaluation.policies",
+            "agri_training.evaluation.evaluate",
+            "agri_training.evaluation.episode",
+            "agri_training.evaluation.parallel",
+            "agri_training.evaluation.video",
+        ),
+    ),
+    (
+        "leaderboard",
+        "agri_training.leaderboard",
+        "Pinned suites, entries, verify and LEADERBOARD.md (format: docs/leaderboard.md in the repository).",
+        ("agri_training.leaderboard.suites", "agri_training.leaderboard.entries", "agri_training.leaderboard.markdown"),
+    ),
+    (
+        "learned",
+        "agri_training.learned and training",
+        "Training with SB3, the CPU-independent inference of learned policies, the zoo.",
+        (
+            "agri_training.train",
+            "agri_training.learned.policy",
+            "agri_training.learned.inference",
+            "agri_training.learned.zoo",
+        ),
+    ),
+)
+
 INDEX = """\
 # agri_envs
 
 Gymnasium / PettingZoo environments for agricultural robots, with the controllers of published papers as
 scripted baselines and learned policies (stable-baselines3) benchmarked against them. The README is the
-short path in (set-up, `agri` commands); these pages document each env in full.
+short path in (set-up, `agri` commands); these pages document each env in full, each
+[policy](policies/index.md), and the [Python API](api/index.md).
 
 | env | page |
 |---|---|
@@ -130,6 +205,58 @@ def env_page(name: str, env_id: str, aliases: tuple[str, ...], out_dir: Path) ->
     return "\n".join(lines)
 
 
+def _qualified(obj: Any) -> str:
+    return f"{obj.__module__}.{obj.__qualname__}"
+
+
+def policy_page(spec: PolicySpec) -> str:
+    """A policy's page: what it is, what it needs, and the API of its factory and of the class it returns."""
+    module, attr = spec.entry_point.split(":")
+    factory = getattr(importlib.import_module(module), attr)
+    kind = f"learned ({spec.algo})" if spec.learned else "scripted baseline"
+    needs = ", ".join(f"`{k}={v!r}`" for k, v in spec.env_kwargs.items()) or "none beyond the suite's"
+    env_page_name = next((n for n, e, aliases in ENV_PAGES if spec.env_id in (e, *aliases)), None)
+    env_link = f"[`{spec.env_id}`](../{env_page_name}.md)" if env_page_name else f"`{spec.env_id}`"
+    lines = [
+        f"# {spec.name}",
+        "",
+        spec.description + ("." if spec.description and not spec.description.endswith(".") else ""),
+        "",
+        "| | |",
+        "|---|---|",
+        f"| env | {env_link} |",
+        f"| kind | {kind} |",
+        f"| privileged | {'yes: it uses what a real robot lacks (see below)' if spec.privileged else 'no'} |",
+        f"| env arguments it needs | {_cell(needs)} |",
+        f"| evaluate | `agri evaluate --env {spec.env_id} --policy {spec.name} --episodes 20 --out result.json` |",
+        f"| watch | `agri record --env {spec.env_id} --policy {spec.name} --seed 0 --out clip.mp4` |",
+    ]
+    if spec.train_command:
+        lines.append(f"| trained with | `{_cell(spec.train_command)}` |")
+    lines += ["", "## How it works", ""]
+    returned = typing.get_type_hints(factory).get("return")
+    made = [factory] + ([returned] if inspect.isclass(returned) else [])
+    for obj in made:
+        summary = inspect.cleandoc(obj.__doc__ or "").split("\n\n")
+        text = " ".join(p.replace("\n", " ") for p in summary if not re.match(r"^(Args|Returns|Raises|Example)", p))
+        lines += [f"[`{obj.__qualname__}`][{_qualified(obj)}] (API reference): {_docstring_inline(text)}", ""]
+    return "\n".join(lines)
+
+
+def _docstring_inline(text: str) -> str:
+    """A docstring's prose as Markdown: reST roles (``:class:`x```) as code, double backticks as single."""
+    text = re.sub(r":[a-z]+:`~?([^`]+)`", lambda m: f"`{m.group(1).split('.')[-1]}`", text)
+    return text.replace("``", "`")
+
+
+def api_page(title: str, what: str, modules: tuple[str, ...]) -> str:
+    """An API reference page: mkdocstrings renders each module's public names from their docstrings."""
+    lines = [f"# {title}", "", what, ""]
+    for module in modules:
+        lines += [f"::: {module}", "    options:", "      heading_level: 2", ""]
+    return "\n".join(lines)
+
+
 def build_docs_source(out_dir: Path) -> list[Path]:
     """Write the site's Markdown pages and frames into ``out_dir``; return the pages."""
     out_dir.mkdir(parents=True, exist_ok=True)
@@ -142,6 +269,26 @@ def build_docs_source(out_dir: Path) -> list[Path]:
         index.append(f"| `{env_id}` | [{name}]({name}.md) |")
     index_path = out_dir / "index.md"
     index_path.write_text("\n".join(index) + "\n")
+    (out_dir / "policies").mkdir(exist_ok=True)
+    listing = ["# Policies", "", "| policy | env | kind | privileged | what it is |", "|---|---|---|---|---|"]
+    for spec in list_policies():
+        path = out_dir / "policies" / f"{spec.name}.md"
+        path.write_text(policy_page(spec))
+        pages.append(path)
+        kind = f"learned ({spec.algo})" if spec.learned else "baseline"
+        listing.append(
+            f"| [{spec.name}]({spec.name}.md) | `{spec.env_id}` | {kind} | {'yes' if spec.privileged else 'no'} | "
+            f"{_cell(spec.description)} |"
+        )
+    (out_dir / "policies" / "index.md").write_text("\n".join(listing) + "\n")
+    (out_dir / "api").mkdir(exist_ok=True)
+    listing = ["# Python API", "", "Rendered from the docstrings (mkdocstrings).", "", "| page | what |", "|---|---|"]
+    for name, title, what, modules in API_PAGES:
+        path = out_dir / "api" / f"{name}.md"
+        path.write_text(api_page(title, what, modules))
+        pages.append(path)
+        listing.append(f"| [{title}]({name}.md) | {_cell(what)} |")
+    (out_dir / "api" / "index.md").write_text("\n".join(listing) + "\n")
     return [index_path, *pages]
 
 

@@ -41,7 +41,7 @@ from agri_training.core.stats import bootstrap_ci, newcombe_interval, paired_com
 from agri_training.evaluation.episode import run_episode
 from agri_training.evaluation.evaluate import INTERVALS_NOTE
 from agri_training.evaluation.policies import load_policy
-from agri_training.evaluation.video import ClipRequest, record
+from agri_training.evaluation.video import shrink_frame, write_clip
 from agri_training.learned.zoo import ZOO_DIR
 
 #: Per-env report sections: env id -> ``"module:function"`` (see the module docstring).
@@ -88,11 +88,15 @@ How to read the numbers:
 
 @dataclasses.dataclass
 class Row:
-    """One policy on one suite: its entry and whether it came from the committed leaderboard."""
+    """One policy on one suite: its entry and whether it came from the committed leaderboard.
+
+    A quick look, which evaluates afresh, also keeps the per-step traces of every episode of each level.
+    """
 
     suite: lb.Suite
     entry: dict[str, Any]
     committed: bool
+    traces: list[list[Any]] | None = None
 
 
 def _entry_is_current(entry: Mapping[str, Any], suite: lb.Suite) -> bool:
@@ -123,7 +127,8 @@ def collect_rows(
     todo: list[tuple[lb.Suite, dict[str, Any]]] = []
     for suite in suites:
         if episodes is not None:
-            suite = dataclasses.replace(suite, episodes=episodes)
+            runs = suite.campaign_runs  # a campaign suite runs whole campaigns: at least one
+            suite = dataclasses.replace(suite, episodes=-(-episodes // runs) * runs)
         have = {e["policy"]["name"]: e for e in entries if e["suite"]["name"] == suite.name}
         refs = [ref for _, ref in lb.all_baseline_pairs([suite])]  # the policies that can run this suite
         named = {ref["name"] for ref in refs}  # registered learned policies are among them already
@@ -138,44 +143,79 @@ def collect_rows(
                 todo.append((suite, dict(ref)))
     if todo:
         print(f"evaluating {len(todo)} missing or stale (suite, policy) pairs", file=sys.stderr)
-        fresh = lb.evaluate_entries(todo, workers, progress, "agri report", ray)
-        for (suite, _), entry in zip(todo, fresh, strict=True):
+        # A quick look traces every episode as it runs (a few per level), so that nothing is run twice.
+        traces: list[list[Any]] | None = [] if episodes is not None else None
+        fresh = lb.evaluate_entries(todo, workers, progress, "agri report", ray, traces)
+        for k, ((suite, _), entry) in enumerate(zip(todo, fresh, strict=True)):
             lb.write_entry(entry, out_dir / "results")
-            rows.append(Row(suite, entry, False))
+            rows.append(Row(suite, entry, False, None if traces is None else traces[k]))
     order = {s.name: i for i, s in enumerate(suites)}
     rows.sort(key=lambda r: (order[r.suite.name], r.entry["policy"]["name"]))
     return rows
 
 
-def level_results(rows: Sequence[Row], progress: bool = True) -> list[dict[str, Any]]:
+#: Most frames of a clip (the episode is sampled evenly), and the shrink factor of its frames.
+CLIP_FRAMES = 60
+CLIP_SCALE = 0.4
+
+
+def level_results(
+    rows: Sequence[Row], progress: bool = True, out_dir: Path | None = None, clips: bool = True
+) -> list[dict[str, Any]]:
     """The evaluator's per-level result documents of the rows, with traces of the episodes to be plotted.
 
     Traced: per level, the first seed of the lead policy (the first unprivileged one) and the first failed
-    seed of every policy.
+    seed of every policy. With ``clips`` (and ``out_dir``), every policy also gets a clip of one success and
+    one failure per suite (where it has both), recorded while its episode is re-run: the first traced
+    episode of that outcome, or else its first episode of that outcome. A row that carries its traces (a
+    quick look) is not re-run for them; its clips are only the lead policy's.
     """
-    plan: list[tuple[Row, int, list[int]]] = []
+    plan: list[tuple[Row, int, list[int], dict[int, str]]] = []
     for suite_name in dict.fromkeys(r.suite.name for r in rows):
         group = [r for r in rows if r.suite.name == suite_name]
         lead = next((r for r in group if not r.entry.get("privileged")), group[0])
         for r in group:
-            for k, level in enumerate(r.entry["levels"]):
-                seeds = [level["episodes"][0]["seed"]] if r is lead and r.suite.traces > 0 and level["episodes"] else []
+            levels = r.entry["levels"]
+            seeds: list[list[int]] = []
+            for level in levels:
+                first = r is lead and r.suite.traces > 0 and level["episodes"]
+                chosen = [level["episodes"][0]["seed"]] if first else []
+                if first and r.suite.campaign_runs > 1:  # and the first later run of its first campaign
+                    chosen.append(level["episodes"][1]["seed"])
                 failed = [e["seed"] for e in level["episodes"] if not e["is_success"]]
-                if failed and failed[0] not in seeds:
-                    seeds.append(failed[0])
-                plan.append((r, k, seeds))
-    total = sum(len(s) for _, _, s in plan)
-    bar = Progress(total, sum(1 for _, _, s in plan if s), progress)
+                if failed and failed[0] not in chosen:
+                    chosen.append(failed[0])
+                seeds.append(chosen)
+            films: dict[tuple[int, int], str] = {}
+            if clips and out_dir is not None and (r.traces is None or r is lead):
+                for outcome, name in ((True, "success"), (False, "failure")):
+                    traced = [(k, s) for k, ss in enumerate(seeds) for s in ss]
+                    where = [(k, s) for k, s in traced if _record_of(levels[k], s).get("is_success") == outcome]
+                    # in a campaign, show a later run (what the runs before it taught the policy) where traced
+                    where.sort(key=lambda ks: not _record_of(levels[ks[0]], ks[1]).get("campaign_run"))
+                    if not where:
+                        episodes = [(k, e) for k, lv in enumerate(levels) for e in lv["episodes"]]
+                        where = [(k, e["seed"]) for k, e in episodes if e["is_success"] == outcome][:1]
+                        if where:
+                            seeds[where[0][0]].append(where[0][1])
+                    if where:
+                        films[where[0]] = name
+            for k in range(len(levels)):
+                plan.append((r, k, seeds[k], {s: name for (kk, s), name in films.items() if kk == k}))
+    reruns = sum(len(s) for r, _, s, f in plan if r.traces is None) + sum(len(f) for r, _, _, f in plan if r.traces)
+    bar = Progress(reruns, sum(1 for _, _, s, _ in plan if s), progress)
     out = []
     try:
-        for r, k, seeds in plan:
-            out.append(_level_document(r, k, seeds, bar))
+        for r, k, level_seeds, level_films in plan:
+            out.append(_level_document(r, k, level_seeds, level_films, bar, out_dir))
     finally:
         bar.close()
     return out
 
 
-def _level_document(row: Row, k: int, seeds: list[int], bar: Any) -> dict[str, Any]:
+def _level_document(
+    row: Row, k: int, seeds: list[int], films: Mapping[int, str], bar: Any, out_dir: Path | None
+) -> dict[str, Any]:
     entry, level = row.entry, row.entry["levels"][k]
     doc = {
         "env_id": entry["env_id"],
@@ -192,24 +232,111 @@ def _level_document(row: Row, k: int, seeds: list[int], bar: Any) -> dict[str, A
         "summary": level["summary"],
         "episodes": level["episodes"],
         "traces": [],
+        "clips": [],
     }
     if not seeds:
         return doc
     bar.start_block(f"traces: {doc['policy']} on {doc['label']}")
-    env = agri_envs.make(doc["env_id"], **doc["env_kwargs"])
+    kept = {t["seed"]: t["data"] for t in row.traces[k]} if row.traces is not None else {}
+    name = lb.policy_argument(entry["policy"])
+    replay = _Replay(doc["env_id"], doc["env_kwargs"], name)
     try:
-        name = lb.policy_argument(entry["policy"])
-        keys = tuple(getattr(env, "unwrapped", env).metadata.get("trace_keys", ()))
         for seed in seeds:
-            # a fresh policy per episode, as the evaluator's workers build it: the re-run is the counted episode
-            ep = run_episode(env, load_policy(name, env), seed, keys)
-            if ep["record"]["is_success"] != _record_of(level, seed).get("is_success"):
+            record = _record_of(level, seed)
+            if seed in kept and seed not in films:
+                doc["traces"].append({"seed": seed, "data": kept[seed], "is_success": record.get("is_success")})
+                continue
+            film = films.get(seed)
+            ep, frames = replay.run(record, film is not None)
+            if ep["record"]["is_success"] != record.get("is_success"):
                 print(f"warning: {doc['policy']} seed {seed} did not reproduce its recorded outcome", file=sys.stderr)
             doc["traces"].append({"seed": seed, "data": ep["trace"], "is_success": ep["record"]["is_success"]})
+            if film is not None and frames and out_dir is not None:
+                stem = f"clip_{_anchor(row.suite.name)}_{lb.slug(doc['policy'])}_{film}"
+                clip = {"outcome": film, "seed": seed, "steps": ep["record"]["steps"]}
+                doc["clips"].append({**clip, **_write_clip(frames, out_dir, stem)})
             bar.episode_done(ep["record"])
     finally:
-        env.close()
+        replay.close()
     return doc
+
+
+class _Replay:
+    """Re-runs recorded episodes of one level, exactly as the entry counted them, with traces and frames.
+
+    A fresh policy per episode, as the evaluator's workers build it; a later run of a campaign is re-run
+    after the campaign's earlier runs, with the same policy, in the campaign's world (``layout_seed``).
+    """
+
+    def __init__(self, env_id: str, env_kwargs: Mapping[str, Any], policy: str) -> None:
+        self.env_id, self.env_kwargs, self.policy = env_id, dict(env_kwargs), policy
+        self._envs: dict[tuple[Any, bool], Any] = {}
+
+    def _env(self, layout_seed: Any, render: bool) -> Any:
+        key = (layout_seed, render)
+        if key not in self._envs:
+            kwargs = dict(self.env_kwargs)
+            if layout_seed is not None:
+                kwargs["layout_seed"] = layout_seed
+            self._envs[key] = agri_envs.make(self.env_id, **kwargs, render_mode="rgb_array" if render else None)
+        return self._envs[key]
+
+    def run(self, record: Mapping[str, Any], film: bool) -> tuple[Any, list[np.ndarray]]:
+        """The episode of ``record`` with its trace, and (``film``) about :data:`CLIP_FRAMES` frames of it."""
+        env = self._env(record.get("layout_seed"), film)
+        keys = tuple(getattr(env, "unwrapped", env).metadata.get("trace_keys", ()))
+        policy = load_policy(self.policy, env)
+        seed, run = int(record["seed"]), int(record.get("campaign_run") or 0)
+        for earlier in range(seed - run, seed):
+            run_episode(env, policy, earlier, None)
+        frames: list[np.ndarray] = []
+        every = max(1, math.ceil(int(record.get("steps") or 1) / CLIP_FRAMES))
+
+        def on_step(step: int) -> bool:
+            if step % every == 0:
+                frame = env.render()
+                if frame is not None:
+                    frames.append(shrink_frame(np.asarray(frame, dtype=np.uint8), CLIP_SCALE))
+            return False
+
+        ep = run_episode(env, policy, seed, keys, on_step if film else None)
+        if film and ep["record"]["steps"] % every:  # and the episode's last state (the poster)
+            frames.append(shrink_frame(np.asarray(env.render(), dtype=np.uint8), CLIP_SCALE))
+        return ep, frames
+
+    def close(self) -> None:
+        for env in self._envs.values():
+            env.close()
+
+
+def _write_clip(frames: list[np.ndarray], out_dir: Path, stem: str) -> dict[str, str]:
+    """An MP4 with a poster frame (PNG of the last frame) where imageio's ffmpeg is installed, else a GIF."""
+    try:
+        write_clip(frames, out_dir / f"{stem}.mp4", 10.0)
+    except ImportError:
+        write_clip(frames, out_dir / f"{stem}.gif", 10.0)
+        return {"file": f"{stem}.gif"}
+    from PIL import Image
+
+    Image.fromarray(frames[-1]).save(out_dir / f"{stem}.png", optimize=True)
+    return {"file": f"{stem}.mp4", "poster": f"{stem}.png"}
+
+
+def clip_lines(docs: Sequence[Mapping[str, Any]]) -> list[str]:
+    """Markdown for the clips of one suite: per policy, its success and its failure, labelled."""
+    lines: list[str] = []
+    for doc in docs:
+        for clip in doc.get("clips", []):
+            what = f"`{doc['policy']}` on `{doc['label']}`, seed {clip['seed']}: a {clip['outcome']}"
+            what += f" ({clip['steps']} steps)"
+            lines += [what, "", _clip_tag(clip), ""]
+    return lines
+
+
+def _clip_tag(clip: Mapping[str, Any]) -> str:
+    if "poster" in clip:
+        return f'<video controls preload="none" poster="{clip["poster"]}" src="{clip["file"]}"></video>'
+    return f"![{clip['file']}]({clip['file']})"
 
 
 def _record_of(level: Mapping[str, Any], seed: int) -> dict[str, Any]:
@@ -291,6 +418,8 @@ def comparison_table(group: Sequence[Row]) -> tuple[list[str], list[str]]:
                 )
                 continue
             fmt = "{:+" + lb.metric_format(rk.metric)[2:]
+            f = lb.metric_scale(rk.metric)
+            diff, lo, hi = c.difference * f, c.ci[0] * f, c.ci[1] * f
             verdict = c.verdict
             if i == 0:
                 primary = verdict
@@ -307,11 +436,11 @@ def comparison_table(group: Sequence[Row]) -> tuple[list[str], list[str]]:
             }
             over = f" over the {completed} episodes both completed" if completed is not None else ""
             cells.append(
-                f"{fmt.format(c.difference)} [{fmt.format(c.ci[0])}, {fmt.format(c.ci[1])}], "
+                f"{fmt.format(diff)} [{fmt.format(lo)}, {fmt.format(hi)}], "
                 f"P(X better) {c.prob_improvement:.2f}; {word[verdict]}{over}"
             )
             text = (
-                f"{_metric_name(rk.metric)} ({fmt.format(c.difference)} [{fmt.format(c.ci[0])}, {fmt.format(c.ci[1])}]"
+                f"{_metric_name(rk.metric)} ({fmt.format(diff)} [{fmt.format(lo)}, {fmt.format(hi)}]"
                 f"{'; ' + over.strip() if over else ''})"
             )
             {"better": wins, "worse": losses, "matches": same}.get(verdict, []).append(text)
@@ -623,54 +752,6 @@ def learning_curves(env_id: str, runs: list[dict[str, Any]], rows: Sequence[Row]
     return out
 
 
-# ---------------------------------------------------------------- clips
-
-#: Most frames of an env's clip in the report (the episode is sampled evenly), and their shrink factor.
-CLIP_FRAMES = 60
-CLIP_SCALE = 0.5
-
-
-def env_clip(env_id: str, rows: Sequence[Row], out_dir: Path) -> list[str]:
-    """Markdown: a short GIF of one representative episode of the env, and what it shows.
-
-    The episode: on the env's first suite where a baseline succeeds, the first unprivileged such baseline
-    (the paper's robot) on its first successful seed, re-run from its seed as the entry counted it.
-    """
-    for suite_name in dict.fromkeys(r.suite.name for r in rows if r.suite.env_id == env_id):
-        group = [r for r in rows if r.suite.name == suite_name and r.entry["policy"]["kind"] == "baseline"]
-        group.sort(key=lambda r: bool(r.entry.get("privileged")))
-        for r in group:
-            found = next(
-                ((lv, e) for lv in r.entry["levels"] for e in lv["episodes"] if e["is_success"] and e.get("steps")),
-                None,
-            )
-            if found is None:
-                continue
-            level, episode = found
-            name = f"{_anchor(env_id.split('/')[-1])}_clip.gif"
-            every = max(1, math.ceil(int(episode["steps"]) / CLIP_FRAMES))
-            clip = record(
-                ClipRequest(
-                    env_id,
-                    lb.policy_argument(r.entry["policy"]),
-                    seed=int(episode["seed"]),
-                    out=out_dir / name,
-                    env_kwargs=level["env_kwargs"],
-                    every=every,
-                    fps=10.0,
-                    scale=CLIP_SCALE,
-                )
-            )
-            return [
-                f"`{r.entry['policy']['name']}` on `{level['label']}`, seed {episode['seed']} (a success): one frame "
-                f"every {every} step(s) of {episode['steps']}, {clip['frames']} frames at 10 fps. Record any "
-                f"policy with `agri record --env {env_id} --policy NAME --seed S --out clip.gif`.",
-                "",
-                f"![{name}]({name})",
-            ]
-    return []
-
-
 # ---------------------------------------------------------------- the page
 
 
@@ -738,16 +819,18 @@ def build_report(
     if not suites:
         raise ValueError(f"no suite in {suites_dir}" + (f" for {only_env}" if only_env else ""))
     rows = collect_rows(suites, lb.load_entries(entries_dir), out_dir, workers, progress, episodes, ray)
-    results = level_results(rows, progress)
+    results = level_results(rows, progress, out_dir)
     runs = find_runs(runs_dir) + zoo_runs()
     env_ids = list(dict.fromkeys(s.env_id for s in suites))
 
     parts = ["# agri_envs evaluation report", "", INTRO]
     if episodes is not None:
         parts += [
-            f"**Quick look: {episodes} episodes per suite level** (`--episodes {episodes}`), evaluated afresh "
-            "instead of the committed entries. Intervals from so few episodes are wide or degenerate; read the "
-            "claims below as a smoke test, not as results.",
+            f"**Smoke test, not results. Quick look: {episodes} episodes per suite level** (`--episodes "
+            f"{episodes}`; campaign suites one campaign), evaluated afresh instead of the committed entries, "
+            "with the plotted episodes traced as they ran and clips of the lead policy of each suite only. "
+            "Intervals from so few episodes are wide or degenerate: no claim below is a result. For results, "
+            "run `agri report` without `--episodes`.",
             "",
         ]
     parts += ["Envs in this report:", ""]
@@ -789,6 +872,16 @@ def build_report(
                     *table,
                     "",
                 ]
+            clips = clip_lines([d for d in results if d["suite"] == suite.name])
+            if clips:
+                parts += [
+                    "Clips: a success and a failure of each policy (where it has both), re-run from their seeds "
+                    f"as the entries counted them; about {CLIP_FRAMES} frames sampled evenly from the episode, at "
+                    "10 fps; a clip loads only when played. "
+                    "Record any episode with `agri record --env ENV --policy NAME --seed S --out clip.mp4`.",
+                    "",
+                    *clips,
+                ]
         parts += ["### Learning curves", "", *learning_curves(env_id, runs, rows, out_dir), ""]
         hook = SECTION_HOOKS.get(env_id)
         if hook:
@@ -799,9 +892,6 @@ def build_report(
             except ImportError as exc:
                 section = f"(plots unavailable: {exc})"
             parts += ["### Paper reproduction and plots", "", section, ""]
-        clip = env_clip(env_id, rows, out_dir)
-        if clip:
-            parts += ["### A representative episode", "", *clip, ""]
     commits = sorted({r.entry["git_commit"][:10] for r in rows})
     parts += [
         "## How this report was made",
@@ -835,7 +925,9 @@ def markdown_to_html(md: str, title: str) -> str:
 
     def inline(text: str) -> str:
         text = html.escape(text, quote=False)
-        text = re.sub(r"!\[([^\]]*)\]\(([^)]+)\)", r'<img alt="\1" src="\2" style="max-width:100%">', text)
+        text = re.sub(
+            r"!\[([^\]]*)\]\(([^)]+)\)", r'<img alt="\1" src="\2" loading="lazy" style="max-width:100%">', text
+        )
         text = re.sub(r"\[([^\]]+)\]\(([^)]+)\)", r'<a href="\2">\1</a>', text)
         text = re.sub(r"`([^`]+)`", r"<code>\1</code>", text)
         text = re.sub(r"\*\*([^*]+)\*\*", r"<b>\1</b>", text)
@@ -853,6 +945,10 @@ def markdown_to_html(md: str, title: str) -> str:
     while i < len(lines):
         line = lines[i]
         if line.startswith("<!--"):
+            i += 1
+            continue
+        if line.startswith("<video ") and line.endswith("</video>"):  # a clip: loads only when played
+            out.append(line)
             i += 1
             continue
         if line.startswith("#"):

@@ -211,9 +211,10 @@ ROVER_NOTES = (
     "The SLAM policies get no pose from the env: they run Hector SLAM on the full scan from the start "
     "pose. Since the env, not the robot, decides when a waypoint is reached (by default within 0.3 m of the true "
     "position), they aim 0.1 m inside that radius; with d_min = 0.3 m on the estimate they would stop "
-    "a centimetre short and wait forever. `harik-apf` adds two safeguards to Hector (no mapping of beams "
-    "that end in known free space, a cost check on each Gauss-Newton step); `harik-apf-hector-plain` "
-    "runs without them, so the difference between the two rows is what they buy. Failures are "
+    "a centimetre short and wait forever. `harik-apf` adds three safeguards to Hector (no mapping of beams "
+    "that end in known free space, a cost check on each Gauss-Newton step, a constant-velocity start for "
+    "each match); `harik-apf-hector-plain` runs without them, so the difference between the two rows is "
+    "what they buy. Failures are "
     "classified from the episode's end: collision, localization lost (final pose error over "
     "0.25 m), waiting at the safety stop with something in front, or stuck while free to move."
 )

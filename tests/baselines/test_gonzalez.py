@@ -8,8 +8,8 @@ import pytest
 
 import agri_envs  # noqa: F401
 from agri_baselines import coverage_path, make_policy
-from agri_baselines.gonzalez import MouthDetector, PeakFilter, PurePursuit, SensoryMap, peak_filter
-from agri_baselines.gonzalez_planner import CoveragePlannerParams, plan_coverage
+from agri_baselines.gonzalez import MouthDetector, PeakFilter, PurePursuit, SensoryMap, path_curvature, peak_filter
+from agri_baselines.gonzalez_planner import APPROACH, CORRIDOR, TURN, CoveragePlannerParams, plan_coverage
 from agri_envs.scenes.greenhouse import LayoutParams, generate_layout
 from agri_envs.sim2d.gridmap import rasterize
 
@@ -137,6 +137,115 @@ def test_pure_pursuit_drives_a_unicycle_onto_the_path():
         if pp.done:
             break
     assert pp.done and np.hypot(pose[0] - 6.0, pose[1] - 4.0) < 0.2
+
+
+def test_path_curvature_against_circles_lines_and_a_corner():
+    for radius in (0.8, 2.0, 5.0):
+        t = np.linspace(0.0, np.pi, 400)
+        arc = radius * np.column_stack([np.cos(t), np.sin(t)])
+        s = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(arc, axis=0).T))])
+        kappa = path_curvature(arc, s, 0.3)
+        assert np.allclose(kappa[40:-40], 1.0 / radius, rtol=0.02)  # away from the ends
+    line = np.column_stack([np.linspace(0.0, 5.0, 51), 0.3 * np.linspace(0.0, 5.0, 51)])
+    s = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(line, axis=0).T))])
+    assert np.allclose(path_curvature(line, s, 0.3), 0.0, atol=1e-9)
+    corner = np.array([[0.0, 0.0], [2.0, 0.0], [2.0, 2.0]])
+    s = np.array([0.0, 2.0, 4.0])
+    assert path_curvature(corner, s, 0.3)[1] == pytest.approx((np.pi / 2) / 0.3)
+
+
+def _drive(pp, pose, steps=600, dt=0.1, max_turn_rate=0.6, max_angular_accel=0.8):
+    """A unicycle with the Fitorobot's turn-rate and angular-acceleration limits; the poses it drove."""
+    w_now, poses = 0.0, [pose.copy()]
+    for _ in range(steps):
+        v, w = pp.command(pose, 0.5, max_turn_rate, 0.3)
+        w_now += float(np.clip(w - w_now, -max_angular_accel * dt, max_angular_accel * dt))
+        pose = pose + dt * np.array([v * math.cos(pose[2]), v * math.sin(pose[2]), w_now])
+        poses.append(pose.copy())
+        if pp.done:
+            break
+    return np.array(poses)
+
+
+def test_regulated_lookahead_keeps_a_u_turn_within_a_tenth_of_what_a_fixed_one_cuts():
+    """The headland turn of a coverage plan: out of a corridor, 2 m across, back into the next one."""
+    legs = [np.column_stack([np.linspace(0, 6, 61), np.zeros(61)])]
+    legs.append(np.column_stack([np.full(20, 6.0), np.linspace(0.1, 2.0, 20)]))
+    legs.append(np.column_stack([np.linspace(5.9, 0, 60), np.full(60, 2.0)]))
+    path = np.vstack(legs)
+
+    def worst(**kw):
+        pp = PurePursuit(path, lookahead=1.0, **kw)
+        poses = _drive(pp, np.array([0.0, 0.0, 0.0]))
+        dense = PurePursuit(path)  # the deviation from the path, matched in order
+        return max(dense.closest(x, y)[1] for x, y, _ in poses), pp.done
+
+    fixed, done_fixed = worst()
+    regulated, done_regulated = worst(min_lookahead=0.4)
+    assert done_fixed and done_regulated
+    assert fixed > 0.2 and regulated < 0.1, (fixed, regulated)
+    assert PurePursuit(path, lookahead=1.0, min_lookahead=0.4).lookahead_at(0.0) == 1.0  # straight ahead: 1 m
+    with pytest.raises(ValueError, match="min_lookahead"):
+        PurePursuit(path, lookahead=1.0, min_lookahead=1.5)
+
+
+def test_a_corridor_cut_into_short_pieces_is_still_planned():
+    """Fully grown plants in 1.5 m corridors: junctions at every gap in the rows cut one corridor's diagram
+    into pieces shorter than min_corridor_length; together they are a corridor (it was skipped)."""
+    env = gym.make("agri_envs/GreenhouseCoverage-v0", growth=1.0, vegetation_echo_prob=0.3, corridor_width=1.5)
+    env.reset(seed=8000)
+    occ, res, origin = env.unwrapped.true_map()
+    plan = plan_coverage(occ, res, env.unwrapped.robot.pose[:2] - np.asarray(origin))
+    assert len(plan.corridors) == len(env.unwrapped.corridor_lines()) == 5
+    assert _free_along(occ, plan.path)
+    env.close()
+
+
+def test_plan_parts_label_the_approach_every_corridor_and_the_turns():
+    occ, layout, origin, start = _greenhouse(0)
+    plan = plan_coverage(occ, RES, start)
+    part = plan.part
+    assert len(part) == len(plan.path) and part[0] == APPROACH
+    runs = np.flatnonzero(np.diff((part == CORRIDOR).astype(int)) == 1) + 1  # one run per corridor
+    assert len(runs) == len(layout.corridors) and (part[runs[0] :] != APPROACH).all()
+    assert set(np.unique(part)) == {APPROACH, CORRIDOR, TURN}
+    for line in layout.corridors:  # every corridor's middle is labelled corridor
+        mid = line[len(line) // 2] - origin
+        k = int(np.argmin(np.hypot(*(plan.path - mid).T)))
+        assert part[k] == CORRIDOR and np.hypot(*(plan.path[k] - mid)) < 0.15
+
+
+@pytest.mark.parametrize("room, sharp", [(2.6, True), (2.0, False)])
+def test_headland_turns_are_square_where_the_diagram_rounds_them(room, sharp):
+    """Two corridors joined by a round headland (a sensory map's band around the first run): Fig. 5's turn.
+
+    With room to turn on the spot at its corners the turn is square; where a corner is tight it is rounded.
+    """
+    res = 0.05
+    yy, xx = (np.mgrid[0 : int(6.2 / res), 0 : int(11 / res)] + 0.5) * res
+    corridors = (xx >= 3) & (xx < 10) & (((yy > 1.6) & (yy < 2.6)) | ((yy > 3.6) & (yy < 4.6)))
+    headland = (xx < 3.05) & (np.hypot(xx - 3, yy - 3.1) < room)
+    occ = ~(corridors | headland)
+    plan = plan_coverage(occ, res, (9.5, 2.1))
+    assert _free_along(occ, plan.path)
+    turn = plan.path[plan.part == TURN]
+    across = turn[(turn[:, 1] > 2.5) & (turn[:, 1] < 3.7)]  # between the two corridors' lines
+    assert len(across) > 5
+    if sharp:  # straight across, at right angles to the rows, at the diagram's farthest reach
+        assert np.ptp(across[:, 0]) < 0.02 and abs(across[0, 0] - turn[:, 0].min()) < 0.02
+    else:  # rounded corners: the robot turns as it drives
+        assert np.ptp(across[:, 0]) > 0.05
+
+
+def test_deliberative_tracks_its_plan_in_corridors_and_turns():
+    """González Fig. 12: under 10 cm on a turn. Measured against the plan, on the true pose."""
+    from agri_training.evaluation.episode import run_episode
+
+    env = gym.make("agri_envs/GreenhouseCoverage-v0", localization="ground_truth", n_rows=3, row_length=6.0)
+    record = run_episode(env, make_policy("gonzalez-deliberative", env), 7, None)["record"]
+    assert record["is_success"]
+    assert record["cross_track_turns_max"] < 0.10 and record["cross_track_corridors_max"] < 0.10, record
+    assert 0 < record["cross_track_turns_mean"] < record["cross_track_turns_max"]
 
 
 def test_peak_filter_on_known_series():
@@ -293,6 +402,10 @@ def test_hybrid_plans_its_second_run_on_the_first_runs_map():
     assert first["hybrid_deliberative"] == 0 and second["hybrid_deliberative"] == 1
     assert first["is_success"] and second["is_success"] and second["crop_contacts"] == 0
     assert second["episode_time"] < first["episode_time"]
+    # the first run has no plan: its plan-tracking keys are there, empty, so that summaries line up
+    assert first["cross_track_corridors_max"] is None and second["cross_track_corridors_max"] < 0.10
+    # the second run's plan lies in its odometry frame, and its sonars keep it on the true corridors
+    assert second["max_cross_track"] < 0.15 and second["mean_cross_track"] < 0.05
 
 
 def test_report_section_writes_the_figures(tmp_path):

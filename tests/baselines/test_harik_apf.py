@@ -9,7 +9,13 @@ import pytest
 
 import agri_envs  # noqa: F401
 from agri_baselines import make_policy, policy_spec
-from agri_baselines.harik_apf import HarikApfController, HarikApfParams, RobotGeometry
+from agri_baselines.harik_apf import (
+    HarikApfController,
+    HarikApfParams,
+    RobotGeometry,
+    scan_zones,
+    scan_zones_reference,
+)
 from agri_envs.rover import robot as rover
 from agri_envs.sim2d.sensors import tim561
 from agri_training.evaluation.episode import run_episode
@@ -271,3 +277,33 @@ def test_corridor_must_reach_20_seeds():
 def test_repeatability_in_the_office_corridor_completed_by_harik_apf():
     infos = scenario_run("repeatability", "harik-apf", range(2))
     assert all(i["is_success"] and i["waypoints_reached"] == 40 for i in infos)
+
+
+def test_harik_apf_gt_drives_the_example_maps_own_waypoints():
+    """scene='map' on the shipped example map with no waypoints given: the map's loop 0 -> ... -> 7 -> 0."""
+    from agri_envs.scenes import EXAMPLE_MAP
+
+    env = gym.make("agri_envs/GreenhouseNav-v2", scene="map", map_yaml=str(EXAMPLE_MAP), n_people=0, full_scan=True)
+    for seed in (0, 1):
+        record = run_episode(env, make_policy("harik-apf-gt", env), seed, None)["record"]
+        assert record["is_success"] and not record["collision"] and record["waypoints_reached"] == 8, record
+    env.close()
+
+
+def test_compiled_scan_zones_are_the_numpy_statement_bit_for_bit(controller):
+    """Random scans (echoes near and far, no-echo beams) and scans the env took in a corridor and a greenhouse."""
+    rb, p = controller.robot, controller.p
+    rng = np.random.default_rng(4)
+    scans = [rng.uniform(0.05, 10.0, 811) for _ in range(40)] + [rng.uniform(0.05, 1.2, 811) for _ in range(40)]
+    for scan in scans[:20]:
+        scan[rng.random(811) < 0.3] = rb.lidar_max_range  # no echo
+    for kwargs in ({"scene": "corridor", "office_width": 1.2}, {"n_people": 3}):
+        env = gym.make(ENV_ID, full_scan=True, **kwargs)
+        env.reset(seed=1)
+        for _ in range(150):
+            obs, *_ = env.step(np.array([0.8, 0.3], np.float32))
+            scans.append(obs["scan"].astype(np.float64) * rb.lidar_max_range)
+    for scan in scans + [np.full(811, rb.lidar_max_range)]:
+        args = (scan, controller._cos, controller._sin, *controller._mount, rb.lidar_max_range - 1e-6)
+        geometry = (0.5 * rb.length, 0.5 * rb.width, p.front_margin, p.side_lookahead)
+        assert scan_zones(*args, *geometry) == scan_zones_reference(*args, *geometry)

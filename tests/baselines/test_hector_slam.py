@@ -5,6 +5,7 @@ import math
 import gymnasium as gym
 import numpy as np
 import pytest
+from hector_reference import ReferenceHectorSlam
 
 import agri_envs  # noqa: F401
 from agri_baselines import make_policy, policy_spec
@@ -204,8 +205,66 @@ def test_checked_gauss_newton_never_raises_the_matching_cost(scene):
         motion = rng.uniform([-0.6, -0.6, -0.5], [0.6, 0.6, 0.5])
         points = slam.scan_points(exact_scan(scene, compose(start, motion)))
         for level in range(slam.config.levels):
-            args = (slam.prob[level], slam.cell_size(level), slam._origin, points)
+            cell = slam.cell_size(level)
+            args = (slam.prob[level], cell, slam._origin)
+            in_cells = (points[:, 0] / cell, points[:, 1] / cell)
             pose = rng.uniform([-0.5, -0.5, -0.4], [0.5, 0.5, 0.4])
-            before = _matching_cost(*args, *pose)
-            after = _gauss_newton(*args, pose, 5, 0.2, 3)
-            assert after <= before and after == pytest.approx(_matching_cost(*args, *pose))
+            before = _matching_cost(*args, *in_cells, *pose)
+            after = _gauss_newton(*args, points, pose, 5, 0.2, 3)
+            assert after <= before and after == pytest.approx(_matching_cost(*args, *in_cells, *pose))
+
+
+@pytest.mark.parametrize("constant_velocity", [True, False])
+def test_constant_velocity_prediction_follows_a_fast_turn_on_the_spot(scene, constant_velocity):
+    """A turn on the spot speeding up to 0.4 rad per scan: matched from the last pose, the estimate is lost."""
+    start = scene.robot.pose.copy()
+    slam = make_slam(scene, constant_velocity=constant_velocity)
+    heading, worst = 0.0, 0.0
+    for k in range(40):
+        heading += min(0.04 * k, 0.4)
+        pose = slam.update(exact_scan(scene, compose(start, (0.0, 0.0, heading))))
+        error = abs(math.atan2(math.sin(pose[2] - heading), math.cos(pose[2] - heading))) + math.hypot(*pose[:2])
+        worst = max(worst, error)
+    assert (worst < 0.05) == constant_velocity, worst
+
+
+def _recorded_scans(kwargs: dict, seed: int, steps: int) -> tuple[list[np.ndarray], dict]:
+    """The full scans harik-apf-gt's drive gives (m), and the env's LIDAR geometry."""
+    env = gym.make(ENV_ID, full_scan=True, localization="ground_truth", **kwargs)
+    policy = make_policy("harik-apf-gt", env)
+    obs, _ = env.reset(seed=seed)
+    scans = []
+    for k in range(steps):
+        scans.append(obs["scan"].astype(np.float64) * env.unwrapped.lidar.spec.max_range)
+        action, _ = policy.predict(obs, episode_start=np.array([k == 0]))
+        obs, _, terminated, truncated, _ = env.step(action)
+        if terminated or truncated:
+            break
+    spec = env.unwrapped.lidar.spec
+    return scans, {"beam_angles": spec.beam_angles, "lidar_mount": spec.mount}
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "config"),
+    [
+        ({"n_people": 3, "people_tease_prob": 0.8}, {}),  # people in the way: the free-space guard at work
+        ({"scene": "corridor", "office_width": 1.4, "n_people": 0}, {}),  # 180 deg turns near walls
+        ({"n_people": 2}, {"free_space_guard": None, "max_step_halvings": 0, "constant_velocity": False}),  # plain
+        ({"scene": "corridor", "n_people": 1}, {"levels": 2, "iterations_coarse": 0, "map_size": 512}),
+    ],
+)
+def test_compiled_scan_path_is_the_earlier_implementation_bit_for_bit(kwargs, config):
+    """Pose after every scan, and every level's log-odds, probabilities and marks, on scans recorded in the env."""
+    scans, geometry = _recorded_scans(kwargs, seed=7, steps=400)
+    cfg = HectorSlamConfig(**config)
+    ours, theirs = HectorSlam(cfg, **geometry), ReferenceHectorSlam(cfg, **geometry)
+    for scan in scans:
+        assert ours.update(scan).tobytes() == theirs.update(scan).tobytes()
+    assert ours.map_updates == theirs.map_updates > 5
+    for name in ("log_odds", "prob", "_mark"):
+        for a, b in zip(getattr(ours, name), getattr(theirs, name), strict=True):
+            assert a.tobytes() == b.tobytes(), name
+    ours.reset()
+    theirs.reset()
+    for scan in scans[:50]:  # a new map after reset, in the same instance
+        assert ours.update(scan).tobytes() == theirs.update(scan).tobytes()

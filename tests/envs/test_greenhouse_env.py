@@ -220,6 +220,26 @@ def test_map_scene_from_ros_map():
         gym.make(ENV_ID, waypoints=wps)
 
 
+def test_the_example_map_ships_its_waypoints(tmp_path):
+    """scene='map' on EXAMPLE_MAP needs no invented waypoints (tests/baselines: harik-apf-gt drives them)."""
+    from agri_envs.scenes import EXAMPLE_MAP, EXAMPLE_WAYPOINTS
+
+    assert len(EXAMPLE_WAYPOINTS) == 8
+    env = gym.make(ENV_ID, scene="map", map_yaml=str(EXAMPLE_MAP), n_people=0)
+    env.reset(seed=0)
+    assert np.allclose(env.unwrapped.layout.waypoints, EXAMPLE_WAYPOINTS)
+    # A map without its own waypoints still needs them, and the message says where they can come from.
+    text = EXAMPLE_MAP.read_text().split("# Not read")[0]
+    bare = tmp_path / "bare.yaml"
+    bare.write_text(text.replace("example_greenhouse.pgm", str(EXAMPLE_MAP.with_suffix(".pgm"))))
+    with pytest.raises(ValueError, match="names its own under 'waypoints'"):
+        gym.make(ENV_ID, scene="map", map_yaml=str(bare))
+    broken = tmp_path / "broken.yaml"
+    broken.write_text(bare.read_text() + "waypoints: [[1.0, 2.0]]\n")
+    with pytest.raises(ValueError, match="'waypoints' must be a list of >= 2"):
+        gym.make(ENV_ID, scene="map", map_yaml=str(broken))
+
+
 def test_docstring_documents_every_argument():
     from agri_envs.rover.greenhouse_nav import GreenhouseNavEnv
 
@@ -243,3 +263,10 @@ def test_occupancy_grid_of_the_scene():
     start = env.unwrapped.layout.start_pose
     i, j = grid.world_to_cell(np.array(start[:2]))
     assert grid.data[i, j] == 0 and (grid.data == 100).mean() > 0.02
+
+
+def test_episodes_equal_the_digests_recorded_before_resets_were_made_fast():
+    """Seeded rollouts over 17 argument sets (people, growth, corridor, map, localization, frame_skip, limits)."""
+    from greenhouse_reference import NAV_ID, digests, recorded
+
+    assert digests(NAV_ID) == recorded(NAV_ID)

@@ -12,7 +12,20 @@ import torch
 
 import agri_envs  # noqa: F401  (registers the env ids)
 from agri_training.learned import goal_features
-from agri_training.learned.inference import _EXP_TAYLOR, _INV_LN2, _LN2_HI, _LN2_LO, PolicyNetwork, exp, fold_sum, tanh
+from agri_training.learned.inference import (
+    _EXP_TAYLOR,
+    _INV_LN2,
+    _LN2_HI,
+    _LN2_LO,
+    ACTIVATION_CODES,
+    ACTIVATION_FUNCTIONS,
+    PolicyNetwork,
+    dense_layer,
+    exp,
+    fold_sum,
+    linear,
+    tanh,
+)
 from agri_training.learned.policy import LearnedPolicy, load_weights, observation_chain, read_config
 from agri_training.learned.zoo import ZOO_DIR
 
@@ -125,6 +138,44 @@ def test_fold_sum_order_is_the_reference_and_ignores_the_batch():
     # Not the sequential sum: the order is a stated one, not whatever a BLAS picks.
     terms = np.array([1e16, 1.0, -1e16, 1.0])
     assert fold_sum(terms[None])[0] == (1e16 + -1e16) + (1.0 + 1.0) == 2.0
+
+
+def _same_bits(a: np.ndarray, b: np.ndarray) -> bool:
+    return a.shape == b.shape and bool(np.array_equal(a.view(np.int64), b.view(np.int64)))
+
+
+def test_the_compiled_layer_computes_the_numpy_reference_bit_for_bit():
+    """Every activation, layer sizes odd and even, inputs over 7 decades, zeros of both signs, special values."""
+    rng = np.random.default_rng(5)
+    for _ in range(60):
+        n_in, n_out, batch = int(rng.integers(1, 320)), int(rng.integers(1, 40)), int(rng.integers(1, 6))
+        weight = rng.normal(size=(n_out, n_in)) * 10.0 ** rng.integers(-3, 3)
+        bias = rng.normal(size=n_out)
+        x = rng.normal(size=(batch, n_in)) * 10.0 ** rng.integers(-3, 4)
+        x[rng.random(x.shape) < 0.03] = 0.0
+        x[rng.random(x.shape) < 0.03] = -0.0
+        assert _same_bits(dense_layer(x, weight, bias, 0), linear(x, weight, bias))
+        for name, function in ACTIVATION_FUNCTIONS.items():
+            assert _same_bits(dense_layer(x, weight, bias, ACTIVATION_CODES[name]), function(linear(x, weight, bias)))
+    special = np.array([[0.0, -0.0, np.nan, np.inf, -np.inf, 1e-320, -1e-320, 40.0, -40.0, 700.0, -710.0, 1e308]]).T
+    one, minus_zero = np.ones((1, 1)), np.array([-0.0])  # x * 1 + -0.0 is x, -0.0 included: the activation alone
+    for name, function in ACTIVATION_FUNCTIONS.items():
+        out = dense_layer(special, one, minus_zero, ACTIVATION_CODES[name])
+        with np.errstate(invalid="ignore", over="ignore"):
+            assert _same_bits(out, function(linear(special, one, minus_zero))), name
+
+
+def test_zoo_networks_run_compiled_as_the_reference_on_their_own_observations():
+    for folder in sorted(p for p in ZOO_DIR.iterdir() if (p / "policy.pt").is_file()):
+        config = read_config(folder)
+        state = load_weights(folder / "policy.pt")
+        n_actions = len(state["action_net.bias" if config["algo"] == "ppo" else "actor.mu.bias"])
+        unit = gym.spaces.Box(-1.0, 1.0, (n_actions,), np.float32)
+        net = PolicyNetwork.from_state_dict(
+            state, config["algo"], config.get("policy_kwargs", {}), gym.spaces.Box(-np.inf, np.inf, (1,)), unit
+        )
+        x = np.random.default_rng(11).normal(0.0, 2.0, size=(64, net.hidden[0][0].shape[1])).astype(np.float32)
+        assert _same_bits(net.output_layer(x), net.reference_output_layer(x)), folder.name
 
 
 def _sb3_model(algo, obs_space, act_space, seed, **policy_kwargs):

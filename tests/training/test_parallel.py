@@ -39,6 +39,7 @@ def _requests():
         EvalRequest(GRAPE, "luo-apf", episodes=3, seed=2, record_traces=1),
         EvalRequest(NAV, "harik-apf", episodes=3, seed=0, env_kwargs=SMALL_NAV, record_traces=3),
         EvalRequest(NAV, "harik-apf-gt", episodes=1, seed=3, scenario="plant-development"),
+        EvalRequest(NAV, "harik-apf-gt", episodes=4, seed=20, env_kwargs=SMALL_NAV, campaign_runs=2),
     ]
 
 
@@ -51,6 +52,28 @@ def test_pool_documents_equal_serial():
     # the traces came back too, and are the first episodes' ones
     assert [t["seed"] for t in pooled[0]["traces"]] == [7, 8] and len(pooled[2]["traces"]) == 3
     assert all(e["wall_time_s"] > 0 for d in pooled[:3] for e in d["episodes"])
+    # campaigns: two worlds (layout_seed = each campaign's first seed), runs 0 and 1 in each
+    campaign = pooled[4]["episodes"]
+    assert [(e["seed"], e["campaign_run"], e["layout_seed"]) for e in campaign] == [
+        (20, 0, 20),
+        (21, 1, 20),
+        (22, 0, 22),
+        (23, 1, 22),
+    ]
+    assert pooled[4]["campaign_runs"] == 2 and pooled[4]["summary"]["later_runs_episodes"] == 2
+    assert [t["seed"] for t in pooled[4]["traces"]] == [20, 21]  # every run of the first campaign
+
+
+def test_a_campaign_keeps_its_policy_between_runs():
+    """gonzalez-hybrid in one job of two runs: the second run plans on the first run's sensory map."""
+    kw = {"localization": "odometry", "n_rows": 2, "row_length": 6.0, "layout_seed": 4}
+    result = run_job(EpisodeJob("agri_envs/GreenhouseCoverage-v0", kw, "gonzalez-hybrid", 4, runs=2))
+    first, second = (out["record"] for out in result["outs"])
+    assert first["hybrid_deliberative"] == 0 and second["hybrid_deliberative"] == 1
+    assert [first["campaign_run"], second["campaign_run"], second["seed"]] == [0, 1, 5]
+    # episode by episode, every run is a fresh policy's first
+    alone = run_job(EpisodeJob("agri_envs/GreenhouseCoverage-v0", kw, "gonzalez-hybrid", 5))
+    assert alone["outs"][0]["record"]["hybrid_deliberative"] == 0
 
 
 @pytest.mark.parametrize("spec", list_policies(), ids=lambda s: s.name)
@@ -73,7 +96,7 @@ def test_reused_env_equals_fresh_one(spec):
             fresh = run_episode(env, load_policy(spec.name, env), seed, keys)
         finally:
             env.close()
-        assert _without_wall_time(r["out"]) == _without_wall_time(fresh)
+        assert _without_wall_time(r["outs"][0]) == _without_wall_time(fresh)
 
 
 def test_episode_error_names_seed_and_exception(monkeypatch):
@@ -108,6 +131,13 @@ def test_build_value_error_stays_a_user_error():
     jobs = [EpisodeJob(NAV, {"n_row": 2}, "harik-apf-gt", s) for s in (0, 1)]
     with pytest.raises(ValueError, match="n_row"):
         run_episodes(jobs, workers=2)
+
+
+def test_campaign_runs_must_divide_the_episodes():
+    with pytest.raises(ValueError, match="campaign_runs must be >= 1 and divide episodes"):
+        EvalRequest(NAV, "harik-apf-gt", episodes=5, campaign_runs=2)
+    with pytest.raises(ValueError, match="runs must be an int >= 1"):
+        EpisodeJob(NAV, {}, "harik-apf-gt", 0, runs=0)
 
 
 def test_bad_arguments():

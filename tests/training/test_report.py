@@ -77,15 +77,45 @@ def test_report_from_entries_and_fresh_runs(tmp_path, capsys):
     assert "_d_alpha.png" in md and "_trajectory.png" in md
     from PIL import Image
 
-    assert "![greenhousenav-v2_clip.gif](greenhousenav-v2_clip.gif)" in md
-    assert Image.open(out / "greenhousenav-v2_clip.gif").n_frames >= 10
+    # a clip of every baseline's success (none fails this suite), MP4 with its poster, loaded only when played
+    for policy in ("harik-apf-gt", "harik-apf", "harik-apf-hector-plain"):
+        clip = f"clip_tiny-rover_{policy}_success"
+        assert f'<video controls preload="none" poster="{clip}.png" src="{clip}.mp4"></video>' in md
+        assert (out / f"{clip}.mp4").stat().st_size > 5_000 and Image.open(out / f"{clip}.png").width == 320
+    # the learned policy fails this tiny scene (it never saw one): its failure, and no success to show
+    assert "clip_tiny-rover_ppo-greenhouse-nav_failure.mp4" in md and "ppo-greenhouse-nav_success" not in md
     for line in md.splitlines():
         if line.startswith("!["):
             assert (out / line.split("(")[1].rstrip(")")).stat().st_size > 10_000
     assert scan_report_tables(md, lb.load_entries(entries) + lb.load_entries(out / "results")) == []
     html = (out / "report.html").read_text()
     assert "<table>" in html and "<img" in html and "<h2 id='who-wins-where'>" in html
+    assert '<video controls preload="none"' in html and 'loading="lazy"' in html
     assert json.loads((out / "summary.json").read_text())[0]["suite"] == "tiny-rover"
+
+
+def test_quick_look_runs_each_episode_once_and_says_it_is_a_smoke_test(tmp_path, monkeypatch):
+    from agri_training.report import page
+
+    suites, out = tmp_path / "suites", tmp_path / "out"
+    suites.mkdir()
+    (suites / "tiny-rover.yaml").write_text(yaml.safe_dump(SUITE))
+    replays = []
+    real = page._Replay.run
+
+    def counted(self, record, film):
+        replays.append((self.policy, record["seed"], film))
+        return real(self, record, film)
+
+    monkeypatch.setattr(page._Replay, "run", counted)
+    args = ["report", "--episodes", "1", "--out", str(out), "--suites", str(suites), "--workers", "1", "--quiet"]
+    args += ["--entries", str(tmp_path / "none"), "--runs", str(tmp_path / "none")]
+    assert main(args) == 0
+    md = (out / "report.md").read_text()
+    assert "Smoke test, not results" in md
+    # the traces came from the evaluation itself: the only re-run is the lead policy's clip
+    assert replays == [("harik-apf", 100000, True)]
+    assert "_trajectory.png" in md
 
 
 def _entry(name, successes, times, kind="baseline"):
@@ -141,23 +171,32 @@ def test_secondary_metrics_are_compared_over_episodes_both_completed():
     assert "match over the 15 episodes both completed" in table[2]
 
 
-def _success_contradicts(table_line, success):
-    """Why a paired-table row's verdicts contradict the success rates (or None)."""
+def _success_contradicts(table_line, success, parts=None):
+    """Why a paired-table row's verdicts contradict the success rates (or None).
+
+    ``parts``: per policy, each episode's campaign part (first run or later run) in a campaign suite, whose
+    columns of one part compare the episodes of that part.
+    """
     cells = [c.strip() for c in table_line.strip().strip("|").split("|")]
     x, y = (n.strip("` ") for n in cells[0].split(" vs "))
     sx, sy = success[x], success[y]
     lo, hi = newcombe_paired_interval(sx, sy)
+    completed = [a and b for a, b in zip(sx, sy, strict=True)]
+    counts = {sum(completed)}
+    if parts:
+        counts |= {sum(c for c, p in zip(completed, parts[x], strict=True) if p == part) for part in set(parts[x])}
     for cell in cells[2:]:  # the secondary metrics
         for word, contradicted in (("**X better**", hi < 0), ("**X worse**", lo > 0)):
             if word not in cell:
                 continue
             if contradicted:
                 return f"{cells[0]}: {word} though the success rates say otherwise ({sum(sx)} vs {sum(sy)})"
-            both = sum(a and b for a, b in zip(sx, sy, strict=True))
-            if f"over the {both} episodes both completed" not in cell and "episodes both completed" in cell:
-                return f"{cells[0]}: compared over other episodes than the {both} both completed"
-            if "episodes both completed" in cell and both < lb.MIN_COMPLETED_PAIRS:
-                return f"{cells[0]}: compared over {both} episodes"
+            if "episodes both completed" in cell:
+                both = int(cell.split("over the ")[1].split(" episodes both completed")[0])
+                if both not in counts:
+                    return f"{cells[0]}: compared over other episodes than the {sorted(counts)} both completed"
+                if both < lb.MIN_COMPLETED_PAIRS:
+                    return f"{cells[0]}: compared over {both} episodes"
     return None
 
 
@@ -169,12 +208,13 @@ def scan_report_tables(md, entries):
         if line.startswith("#### "):
             suite = line[5:].split(" (v")[0]
         elif line.startswith("| `") and " vs `" in line.split("|")[1]:
-            success = {
-                e["policy"]["name"]: lb.episode_values(e, "success_rate")[0]
-                for e in entries
-                if e["suite"]["name"] == suite
+            mine = [e for e in entries if e["suite"]["name"] == suite]
+            success = {e["policy"]["name"]: lb.episode_values(e, "success_rate")[0] for e in mine}
+            parts = {
+                e["policy"]["name"]: [bool(r.get("campaign_run")) for lv in e["levels"] for r in lv["episodes"]]
+                for e in mine
             }
-            problem = _success_contradicts(line, success)
+            problem = _success_contradicts(line, success, parts)
             if problem:
                 problems.append(f"{suite}: {problem}")
     return problems

@@ -120,7 +120,7 @@ def test_pickled_code_in_a_checkpoint_never_runs(tiny_run, tmp_path):
 
 def test_hyperparameters_resolve_and_stay_strict(tmp_path):
     hp = load_hyperparams(ENV_ID, "ppo")
-    assert hp["wrappers"][0] == "FlattenObservation" and hp["algo_kwargs"]["n_steps"] == 2048
+    assert hp["wrappers"][0] == "FlattenObservation" and hp["n_envs"] * hp["algo_kwargs"]["n_steps"] == 8192
     assert load_hyperparams(ENV_ID, "ppo", overrides={"n_envs": 2})["n_envs"] == 2
     assert load_hyperparams("agri_envs/GrapeHarvest-v1", "sac")["policy"] == "MultiInputPolicy"
     with pytest.raises(ValueError, match="unknown hyperparameter keys"):
@@ -136,6 +136,10 @@ def test_hyperparameters_resolve_and_stay_strict(tmp_path):
         TrainRequest(ENV_ID, "ppo", tmp_path, her=True)
     with pytest.raises(ValueError, match="eval seeds"):
         resolve_config(TrainRequest(ENV_ID, "ppo", tmp_path, overrides={"eval_seed": 99_995}))
+    with pytest.raises(ValueError, match="vec_env must be one of dummy, subproc, vector"):
+        resolve_config(TrainRequest(ENV_ID, "ppo", tmp_path, overrides={"vec_env": "batched"}))
+    with pytest.raises(ValueError, match="update_threads must be >= 1"):
+        resolve_config(TrainRequest(ENV_ID, "ppo", tmp_path, overrides={"update_threads": 0}))
 
 
 def test_a_registered_trained_policy_loads_by_name(tiny_run, monkeypatch, capsys):
