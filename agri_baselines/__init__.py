@@ -184,7 +184,7 @@ def __getattr__(name: str) -> Any:
 register_policy(
     PolicySpec(
         name="apoorva-chain",
-        env_id="robot_chain_v0",
+        env_id="robot_chain_v1",
         entry_point="agri_baselines.apoorva_chain:make_apoorva_chain",
         description=(
             "Apoorva 2018: A* + ghost robot, sonar potential field, leader/follower chain, elastic strip laid "
@@ -195,7 +195,7 @@ register_policy(
 register_policy(
     PolicySpec(
         name="apoorva-chain-alg6",
-        env_id="robot_chain_v0",
+        env_id="robot_chain_v1",
         entry_point="agri_baselines.apoorva_chain:make_apoorva_chain_alg6",
         description="Ablation of apoorva-chain: the printed Alg. 6 strip (the straight line from first to last robot)",
     )
@@ -203,7 +203,7 @@ register_policy(
 register_policy(
     PolicySpec(
         name="apoorva-chain-no-strip",
-        env_id="robot_chain_v0",
+        env_id="robot_chain_v1",
         entry_point="agri_baselines.apoorva_chain:make_apoorva_chain_no_strip",
         description="apoorva-chain without the elastic strip (Alg. 6 off)",
     )

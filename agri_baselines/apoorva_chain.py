@@ -17,16 +17,18 @@ returns per-agent dicts (the central system of sec. 6.2 computes every robot's c
 Departure from Alg. 6 (``apoorva-chain``): Alg. 6 lays the strip on the straight line from the first to
 the last robot. Once the chain bends round a corner, a door or the end of a crop row, that line runs
 through the wall, the door frame or the row, and the strip pulls the middle robots into it: followers jam
-at doors and squeeze through plant rows. Office, one dropped obstacle, seeds 8000-8009, printed strip
-against no strip: 8 robots 6/10 against 10/10 successes, 12 robots 8/10 against 10/10, 16 robots 5/10
-against 8/10. ``apoorva-chain`` therefore lays the strip along the leader's recorded trail between the
-leader and the last robot: the trail is where the leader's centre has been, so free space, and each
-middle robot near it is pulled, with Alg. 6's ``Distance * Fix_force``, toward its nearest point on it
-(:func:`path_strip_forces` says when it is not). On a straight stretch the trail is the straight line
-from the first to the last robot and the two strips coincide. The printed strip is kept as the ablation
-``apoorva-chain-alg6``; ``apoorva-chain-no-strip`` has none. On the seeds above the strip along the
-trail succeeds as often as no strip (10/10, 10/10, 8/10; greenhouse, 8 robots: 10/10 each), with the
-chain slightly nearer the first-last line (mean strip distance 0.34 against 0.36 m with 8 robots).
+at doors and squeeze through plant rows. ``apoorva-chain`` therefore lays the strip along the leader's
+recorded trail between the leader and the last robot: the trail is where the leader's centre has been, so
+free space, and each middle robot near it is pulled, with Alg. 6's ``Distance * Fix_force``, toward its
+nearest point on it (:func:`path_strip_forces` says when it is not). On a straight stretch the trail is the
+straight line from the first to the last robot and the two strips coincide. The printed strip is kept as
+the ablation ``apoorva-chain-alg6``; ``apoorva-chain-no-strip`` has none. On the paper's task
+(robot_chain_v1: every robot at the goal, no contact, no gap above Delta at any step), office, one dropped
+obstacle, validation seeds 8000-8019 (``agri evaluate --env robot_chain_v1 --scenario office-chain --seed
+8000 --episodes 20 --env-kwargs n_robots=N``): the strip along the trail 20/20 with 8, 12 and 16 robots
+(greenhouse, 8 robots: 20/20), the printed strip 9/20, 4/20 and 1/20 (its failures are chain breaks and
+chains jammed until the time limit), no strip 20/20 each. The held-out numbers are the leaderboard's
+(suites ``chain-office``, ``-8``, ``-12``, ``-16``).
 """
 
 from __future__ import annotations
@@ -303,7 +305,7 @@ class ApoorvaParams:
 
 
 def default_params(config: Any) -> ApoorvaParams:
-    """:class:`ApoorvaParams` for a ``robot_chain_v0`` config: ``d_s`` its spacing, ``Delta`` its max gap.
+    """:class:`ApoorvaParams` for a ``robot_chain_v1`` config: ``d_s`` its spacing, ``Delta`` its max gap.
 
     The robots brake within their acceleration limit, so a robot that stops only once its follower is
     beyond the env's ``max_gap`` overshoots it (up to 1.24 m for 1.2 m seen, chain broken at the leader's
@@ -335,7 +337,7 @@ def force_to_command(
 
 
 class ApoorvaChainPolicy:
-    """The whole chain controller as one multi-agent policy over ``robot_chain_v0`` observations.
+    """The whole chain controller as one multi-agent policy over ``robot_chain_v1`` observations.
 
     ``predict`` takes ``{agent: observation}`` and returns ``({agent: action}, state)``. It reads from each
     observation the robot's sonar, its pose, its neighbours' relative positions and (leader) the ghost;
@@ -344,7 +346,7 @@ class ApoorvaChainPolicy:
     the central system records from the observed poses.
 
     Args:
-        env: The (unwrapped-able) ``robot_chain_v0`` env.
+        env: The (unwrapped-able) ``robot_chain_v1`` env.
         params: Controller gains; default :class:`ApoorvaParams`.
         strip: The elastic strip: ``"trail"`` along the leader's trail (:func:`path_strip_forces`, the
             default, see the module's note on the departure from Alg. 6), ``"line"`` the printed Alg. 6

@@ -8,7 +8,7 @@ ones in :data:`PARALLEL_ENVS`. :func:`make` builds any of them by id::
     import agri_envs
 
     env = gym.make("agri_envs/GreenhouseNav-v2", n_rows=4, growth=0.5)   # or agri_envs.make(...)
-    chain = agri_envs.make("robot_chain_v0", n_robots=8)                  # a PettingZoo ParallelEnv
+    chain = agri_envs.make("robot_chain_v1", n_robots=8)                  # a PettingZoo ParallelEnv
 
 Package map: ``sim2d`` (the shared 2D engine), ``scenes`` (scene generators shared by the 2D envs),
 ``rover`` (GreenhouseNav), ``coverage`` (GreenhouseCoverage), ``chain`` (robot_chain), ``arm``
@@ -44,7 +44,7 @@ __all__ = [
 
 #: PettingZoo env ids -> the versioned module that provides ``parallel_env``, ``env`` and ``raw_env``.
 PARALLEL_ENVS: dict[str, str] = {
-    "robot_chain_v0": "agri_envs.chain.robot_chain_v0",
+    "robot_chain_v1": "agri_envs.chain.robot_chain_v1",
 }
 
 # ---------------------------------------------------------------- Gymnasium envs
@@ -124,7 +124,7 @@ def is_parallel_env(env: Any) -> bool:
 
 
 def env_version(env_id: str) -> str:
-    """The version tag of an env id: ``v2`` for ``agri_envs/GreenhouseNav-v2``, ``v0`` for ``robot_chain_v0``.
+    """The version tag of an env id: ``v2`` for ``agri_envs/GreenhouseNav-v2``, ``v1`` for ``robot_chain_v1``.
 
     Raises:
         ValueError: For an id that is not the package's.

@@ -225,7 +225,7 @@ register_scenario(
     )
 )
 
-_CHAIN = "robot_chain_v0"
+_CHAIN = "robot_chain_v1"
 register_scenario(
     Scenario(
         _CHAIN,

@@ -98,7 +98,7 @@ def _cmd_watch(args: argparse.Namespace) -> int:
 
 
 def _add_clip_arguments(parser: argparse.ArgumentParser, out_required: bool) -> None:
-    parser.add_argument("--env", required=True, help="env id, e.g. agri_envs/GreenhouseNav-v2 or robot_chain_v0")
+    parser.add_argument("--env", required=True, help="env id, e.g. agri_envs/GreenhouseNav-v2 or robot_chain_v1")
     parser.add_argument("--policy", required=True, help="registered policy name (agri list) or an `agri train` run")
     parser.add_argument("--seed", type=int, default=0, help="seed of the first episode (default 0)")
     parser.add_argument("--scenario", default=None, help="named preset of env arguments (agri list)")

@@ -63,7 +63,13 @@ from agri_envs.scenarios import scenario as get_scenario
 from agri_training.core.documents import git_commit
 from agri_training.core.yaml_values import load_yaml
 from agri_training.evaluation.episode import run_episode
-from agri_training.learned.curricula import apply_train_wrappers, apply_vector_train_wrappers
+from agri_training.learned.curricula import (
+    PARALLEL_TRAIN_WRAPPERS,
+    apply_parallel_train_wrappers,
+    apply_train_wrappers,
+    apply_vector_train_wrappers,
+    check_wrapper_names,
+)
 from agri_training.learned.inference import PolicyNetwork
 from agri_training.learned.parameter_sharing import make_shared_vec_env, predict_shared
 from agri_training.learned.policy import (
@@ -231,9 +237,10 @@ def resolve_config(request: TrainRequest) -> dict[str, Any]:
     if agri_envs.is_parallel_id(request.env_id):  # one parameter-shared policy for every agent (see parameter_sharing)
         if request.algo != "ppo" or request.her:
             raise ValueError(f"{request.env_id} trains a parameter-shared PPO: --algo ppo, without --her")
-        for key in ("wrappers", "train_wrappers", "train_env_kwargs"):
-            if hp.get(key):
-                raise ValueError(f"{request.env_id}: {key} apply to Gymnasium envs only; leave '{key}' empty")
+        if hp.get("wrappers"):
+            raise ValueError(f"{request.env_id}: wrappers apply to Gymnasium envs only; leave 'wrappers' empty")
+        kind = f"{request.env_id}: training wrapper"
+        check_wrapper_names(hp.get("train_wrappers") or [], PARALLEL_TRAIN_WRAPPERS, kind)
         if int(hp.get("action_repeat", 1)) != 1:
             raise ValueError(f"{request.env_id}: action_repeat applies to Gymnasium envs only; leave it at 1")
         if vec_env == "vector":
@@ -289,12 +296,20 @@ def check_same_spaces(config: Mapping[str, Any]) -> None:
     Raises:
         ValueError: When the observation or action spaces differ.
     """
-    evaluation = gym.make(config["env_id"], **config["env_kwargs"])
-    training = gym.make(config["env_id"], **{**config["env_kwargs"], **config["train_env_kwargs"]})
-    same = (
-        evaluation.observation_space == training.observation_space
-        and evaluation.action_space == training.action_space
-    )
+    env_id = config["env_id"]
+    evaluation = agri_envs.make(env_id, **config["env_kwargs"])
+    training = agri_envs.make(env_id, **{**config["env_kwargs"], **config["train_env_kwargs"]})
+    if agri_envs.is_parallel_env(evaluation):
+        agent = evaluation.possible_agents[0]
+        same = (
+            evaluation.observation_space(agent) == training.observation_space(agent)
+            and evaluation.action_space(agent) == training.action_space(agent)
+        )
+    else:
+        same = (
+            evaluation.observation_space == training.observation_space
+            and evaluation.action_space == training.action_space
+        )
     evaluation.close()
     training.close()
     if not same:
@@ -358,7 +373,7 @@ def make_vec_env(config: Mapping[str, Any]) -> Any:
     :class:`~agri_training.learned.vec_env.VectorVecEnv`, with ``VecMonitor`` for the episode statistics (the
     other two wrap each env in ``Monitor``). A multi-agent env (the robot chain) becomes one slot per agent
     of ``n_envs`` copies, all in this process (:func:`agri_training.parameter_sharing.make_shared_vec_env`),
-    with ``VecMonitor``.
+    each copy in its declared training wrappers (``train_wrappers``), with ``VecMonitor``.
     """
     from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv, VecMonitor, VecNormalize
 
@@ -366,8 +381,12 @@ def make_vec_env(config: Mapping[str, Any]) -> Any:
 
     venv: Any
     if agri_envs.is_parallel_id(config["env_id"]):
-        env_id, env_kwargs = config["env_id"], dict(config["env_kwargs"])
-        venv = make_shared_vec_env(lambda: agri_envs.make(env_id, **env_kwargs), config["n_envs"])
+        env_id = config["env_id"]
+        env_kwargs = {**config["env_kwargs"], **config.get("train_env_kwargs", {})}
+        curricula = list(config.get("train_wrappers", []))
+        venv = make_shared_vec_env(
+            lambda: apply_parallel_train_wrappers(agri_envs.make(env_id, **env_kwargs), curricula), config["n_envs"]
+        )
         venv = VecMonitor(venv, info_keywords=("is_success",))
     elif config["vec_env"] == "vector":
         venv = VecMonitor(VectorVecEnv(make_vector_train_env(config)), info_keywords=("is_success",))

@@ -119,7 +119,6 @@ def network_rows(rounds: int) -> list[tuple[str, str, float, float]]:
     for name, env_id, kwargs in (
         ("ppo-greenhouse-nav", NAV, {"localization": "ground_truth"}),
         ("ppo-coverage-almeria", "agri_envs/GreenhouseCoverage-v0", {}),
-        ("ppo-chain-office", "robot_chain_v0", {}),
     ):
         if not (ZOO_DIR / name).is_dir():
             continue

@@ -169,7 +169,7 @@ def startup_parts() -> dict[str, Any]:
         "GreenhouseNav, harik-apf (Hector SLAM)": (nav, "greenhouse-sim-loop", "harik-apf"),
         "GreenhouseNav, ppo-greenhouse-nav": (nav, "greenhouse-sim-loop", "ppo-greenhouse-nav"),
         "GreenhouseCoverage, gonzalez-hybrid": (coverage, "coverage-almeria", "gonzalez-hybrid"),
-        "robot_chain, apoorva-chain": ("robot_chain_v0", "chain-office", "apoorva-chain"),
+        "robot_chain, apoorva-chain": ("robot_chain_v1", "chain-office", "apoorva-chain"),
         "GrapeHarvest, luo-apf": ("agri_envs/GrapeHarvest-v1", "grape-table2", "luo-apf"),
     }
     for label, (env_id, suite_name, policy) in families.items():

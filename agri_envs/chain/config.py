@@ -1,4 +1,4 @@
-"""Arguments of robot_chain_v0: one strict, typed, frozen dataclass (each field a keyword of ``parallel_env``)."""
+"""Arguments of robot_chain_v1: one strict, typed, frozen dataclass (each field a keyword of ``parallel_env``)."""
 
 from __future__ import annotations
 
@@ -14,7 +14,7 @@ from agri_envs.scenes.office import OfficeFloorParams
 
 @dataclasses.dataclass(frozen=True)
 class RobotChainConfig(StrictConfig):
-    """Arguments of ``robot_chain_v0`` (each one a keyword of ``parallel_env`` / ``env``)."""
+    """Arguments of ``robot_chain_v1`` (each one a keyword of ``parallel_env`` / ``env``)."""
 
     n_robots: int = param(4, "robots in the chain (robot_0 leads)", low=1, high=256)
     scene: str = param("office", "kind of map", choices=("office", "greenhouse", "map"))
@@ -47,16 +47,32 @@ class RobotChainConfig(StrictConfig):
     ghost_back_speed: float = param(0.2, "v_B: ghost speed back toward a stuck leader", unit="m/s", low=0.0, high=5.0)
     ghost_leash: float = param(0.5, "eta: the ghost waits while the leader is farther", unit="m", low=0.1, high=10.0)
     ghost_patience: float = param(2.0, "T: time beyond eta before the ghost comes back", unit="s", low=0.0, high=60.0)
-    goal_radius: float = param(0.3, "the leader has arrived within this distance", unit="m", low=0.05, high=2.0)
+    goal_radius: float = param(
+        0.3, "the leader has arrived within this distance of the goal", unit="m", low=0.05, high=2.0
+    )
+    arrival_stretch: float = param(
+        1.2, "robot k has arrived within goal_radius + k * arrival_stretch * spacing of the goal", low=1.0, high=10.0
+    )
     max_cycles: int = param(1500, "steps before truncation", low=1, high=1_000_000)
     terminate_on_collision: bool = param(True, "end the episode when any robot touches anything")
-    reward_progress: float = param(1.0, "per metre of leader progress along the A* path", low=0.0, high=100.0)
-    reward_spacing: float = param(0.05, "penalty per step at relative spacing error 1", low=0.0, high=10.0)
-    reward_strip: float = param(0.05, "penalty per step per metre of mean distance to the strip", low=0.0, high=10.0)
-    reward_collision: float = param(10.0, "penalty per robot in contact", low=0.0, high=1000.0)
-    reward_break: float = param(0.1, "penalty per step per gap larger than Delta", low=0.0, high=100.0)
-    reward_success: float = param(10.0, "bonus when the leader arrives with the chain intact", low=0.0, high=1000.0)
-    reward_time: float = param(0.005, "penalty per step", low=0.0, high=10.0)
+    terminate_on_break: bool = param(True, "end the episode when a gap between neighbours exceeds max_gap")
+    reward_progress: float = param(
+        1.0, "per metre the robots come nearer to arriving (mean over robots)", low=0.0, high=100.0
+    )
+    reward_spacing: float = param(
+        1.0, "spacing-error penalty over a whole episode (paid per step)", low=0.0, high=100.0
+    )
+    reward_strip: float = param(0.5, "strip-distance penalty over a whole episode (paid per step)", low=0.0, high=100.0)
+    reward_time: float = param(1.0, "time penalty over a whole episode (paid per step)", low=0.0, high=100.0)
+    reward_collision: float = param(
+        10.0, "cost of a contact (plus the rest of the episode at the worst step cost)", low=0.0, high=1000.0
+    )
+    reward_break: float = param(
+        10.0, "cost of a gap above max_gap (plus the rest of the episode likewise)", low=0.0, high=1000.0
+    )
+    reward_success: float = param(
+        10.0, "bonus when every robot has arrived, chain intact, no contact", low=0.0, high=1000.0
+    )
     render_width: int = param(800, "width of rendered frames", unit="px", low=100, high=4000)
 
     def validate(self) -> None:
@@ -82,6 +98,23 @@ class RobotChainConfig(StrictConfig):
             )
         if self.max_gap <= self.spacing:
             raise ValueError(f"RobotChainConfig: max_gap ({self.max_gap}) must exceed spacing ({self.spacing}).")
+        if self.arrival_stretch * self.spacing > self.max_gap:
+            raise ValueError(
+                f"RobotChainConfig: arrival_stretch * spacing ({self.arrival_stretch * self.spacing:.3g} m) must not "
+                f"exceed max_gap ({self.max_gap} m): an arrived chain is an intact chain; use arrival_stretch <= "
+                f"{self.max_gap / self.spacing:.3g}."
+            )
+        step_cost = self.reward_time + self.reward_spacing + self.reward_strip
+        if self.reward_success <= step_cost:
+            raise ValueError(
+                f"RobotChainConfig: reward_success ({self.reward_success}) must exceed reward_time + reward_spacing + "
+                f"reward_strip ({step_cost:.3g}), the most the per-step penalties can cost in an episode; otherwise a "
+                "slow success can pay less than never arriving."
+            )
+        if self.terminate_on_collision and not self.reward_collision > 0:
+            raise ValueError("RobotChainConfig: reward_collision must be > 0 while terminate_on_collision is set.")
+        if self.terminate_on_break and not self.reward_break > 0:
+            raise ValueError("RobotChainConfig: reward_break must be > 0 while terminate_on_break is set.")
 
     def office_params(self) -> OfficeFloorParams:
         """The office floor of ``scene="office"``."""
@@ -112,3 +145,8 @@ class RobotChainConfig(StrictConfig):
             success=self.reward_success,
             time=self.reward_time,
         )
+
+    def arrival_radii(self) -> tuple[float, ...]:
+        """Robot k has arrived within ``goal_radius + k * arrival_stretch * spacing`` of the goal (m)."""
+        step = self.arrival_stretch * self.spacing
+        return tuple(self.goal_radius + k * step for k in range(self.n_robots))

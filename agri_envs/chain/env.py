@@ -3,8 +3,8 @@
 The parts live beside it: :mod:`~agri_envs.chain.config` (arguments), :mod:`~agri_envs.chain.robot` (body,
 limits, sonar mounts), :mod:`~agri_envs.chain.mission` (start, goal, A* path, formation, obstacle drops),
 :mod:`~agri_envs.chain.task` (the ghost robot and one ``evaluate()`` for reward, success and termination),
-:mod:`~agri_envs.chain.observation` (the 23-value observation). Users import the versioned module
-:mod:`agri_envs.chain.robot_chain_v0`.
+:mod:`~agri_envs.chain.observation` (the 29-value observation and the robots' trails). Users import the
+versioned module :mod:`agri_envs.chain.robot_chain_v1`.
 """
 
 from __future__ import annotations
@@ -18,11 +18,13 @@ from pettingzoo import ParallelEnv
 
 from agri_envs._actions import checked_agent_actions
 from agri_envs.chain import robot
+from agri_envs.chain._kernels import distances_to_go
 from agri_envs.chain.config import RobotChainConfig
-from agri_envs.chain.maps import ChainMap, greenhouse_map, office_map, ros_map
-from agri_envs.chain.mission import drop_spot, plan_mission
-from agri_envs.chain.observation import ChainObservation
+from agri_envs.chain.maps import ChainMap, block_disc, greenhouse_map, office_map, ros_map
+from agri_envs.chain.mission import ChainDoesNotFit, Mission, drop_spot, plan_mission
+from agri_envs.chain.observation import ChainObservation, Trails
 from agri_envs.chain.task import ChainTask
+from agri_envs.sim2d.astar import distance_field
 from agri_envs.sim2d.geometry import Kind
 from agri_envs.sim2d.polyline import Polyline
 from agri_envs.sim2d.render import TopDownRenderer
@@ -30,6 +32,7 @@ from agri_envs.sim2d.view import SceneView
 from agri_envs.sim2d.world import World2D
 
 _PARK = 1.0e6  # where dynamic obstacles wait before they are dropped (far outside any map)
+LAYOUT_TRIES = 3  # generated maps drawn for an episode before a chain that fits none of them is an error
 
 
 class RobotChainEnv(ParallelEnv):  # type: ignore[misc]
@@ -38,14 +41,15 @@ class RobotChainEnv(ParallelEnv):  # type: ignore[misc]
     ## Description
 
     ``n_robots`` round robots like the Amigobots of Apoorva et al. (2018) (radius ``robot_radius``, eight
-    sonars) stand in a chain: ``robot_0`` leads, ``robot_k`` follows ``robot_{k-1}``. The leader must reach
-    the goal; the others must follow at about ``spacing`` (d_s) from each other without a gap above
-    ``max_gap`` (Delta), in as straight a line as possible (the elastic strip between the first and last
-    robot), without touching walls, furniture, obstacles or each other. The map (an office floor, a
-    greenhouse or a ROS map) is inflated by the robot radius plus ``planning_margin``, and A* plans the
-    leader's path from start to goal on it; a ghost robot runs along that path ahead of the leader (sec.
+    sonars) stand in a chain: ``robot_0`` leads, ``robot_k`` follows ``robot_{k-1}``. Every robot must reach
+    the goal, as in the paper's Fig. 8f: the leader onto it, its followers close behind, keeping about
+    ``spacing`` (d_s) from each other and never a gap above ``max_gap`` (Delta), in as straight a line as
+    possible (the elastic strip between the first and last robot), without touching walls, furniture,
+    obstacles or each other. The map (an office floor, a greenhouse or a ROS map) is inflated by the robot
+    radius plus ``planning_margin``; the leader's path is a shortest 8-connected path on it from start to
+    goal (what the paper's A*, Alg. 1, finds), and a ghost robot runs along it ahead of the leader (sec.
     4.4). While the leader advances, ``n_dynamic_obstacles`` boxes drop onto the path ahead of it (Fig. 8d).
-    Robots are solid pymunk bodies of the shared 2D world: they see and block each other.
+    Robots are solid bodies of the shared 2D world: they see and block each other.
 
     ## Action Space
 
@@ -55,22 +59,29 @@ class RobotChainEnv(ParallelEnv):  # type: ignore[misc]
 
     ## Observation Space
 
-    Every agent: ``Box(low, high, (23,), float32)`` (one space shared by all, for parameter sharing):
+    Every agent: ``Box(low, high, (29,), float32)`` (one space shared by all, for parameter sharing). All
+    vectors are in the robot's own frame (x ahead, y to its left):
 
     | index | meaning | bounds |
     |---|---|---|
     | 0-7 | sonar ranges / ``sonar_range`` at 90, 41, 15, -15, -41, -90, -145, 145 deg | [0, 1] |
     | 8-9 | position ``(x, y)`` normalised by the map's bounds | [0, 1] |
     | 10-11 | ``sin(yaw)``, ``cos(yaw)`` | [-1, 1] |
-    | 12-13 | predecessor in the robot's frame / 3 m (leader: the ghost) | [-1, 1] |
-    | 14-15 | successor in the robot's frame / 3 m (0 for the last robot) | [-1, 1] |
-    | 16 | 1 if there is a successor, else 0 | [0, 1] |
-    | 17 | signed distance to the strip (first-last line; + on its left) / 3 m | [-1, 1] |
-    | 18 | 1 for the leader, else 0 | [0, 1] |
-    | 19-20 | achieved ``v / max_speed``, ``omega / max_turn_rate`` | [-1, 1] |
-    | 21-22 | goal in the robot's frame / map diagonal | [-1, 1] |
+    | 12-13 | own achieved ``v / max_speed``, ``omega / max_turn_rate`` | [-1, 1] |
+    | 14-15 | predecessor's position / 3 m (leader: the ghost's) | [-1, 1] |
+    | 16-17 | predecessor's velocity minus own / (2 ``max_speed``) (leader: the ghost's) | [-1, 1] |
+    | 18-19 | slot: the predecessor's trail point ``spacing`` behind it / 3 m (leader: the ghost) | [-1, 1] |
+    | 20-21 | successor's position / 3 m (0 for the last robot) | [-1, 1] |
+    | 22-23 | successor's velocity minus own / (2 ``max_speed``) (0 for the last robot) | [-1, 1] |
+    | 24 | 1 if there is a successor, else 0 | [0, 1] |
+    | 25 | 1 for the leader, else 0 | [0, 1] |
+    | 26-27 | unit vector toward the goal (0 on it) | [-1, 1] |
+    | 28 | straight distance to the goal / 10 m, clipped | [0, 1] |
 
-    Positions come from each robot's localization and inter-robot communication as in the paper (exact here).
+    What a robot knows of the others comes from its neighbours, as in the paper (positions and velocities
+    shared over the network, exact here); the predecessor's trail is the paper's follower "fetching its
+    previous position" (sec. 8): each robot records a point every 2 cm it moves, and the slot is where a
+    follower stands in a chain at rest behind it. At the start every follower stands on its slot.
 
     ## Sensors
 
@@ -80,59 +91,99 @@ class RobotChainEnv(ParallelEnv):  # type: ignore[misc]
 
     ## Rewards
 
-    One cooperative reward, the same for every agent, the sum of these terms (each in ``info``):
+    One cooperative reward, the same for every agent, the sum of these terms (each in ``info``). ``T`` is
+    ``max_cycles``; ``D_k`` is robot k's free-floor distance to the goal (the goal's 8-connected distance
+    field on the inflated map, round the dropped obstacles once they are down) and
+    ``R_k = goal_radius + k * arrival_stretch * spacing`` its arrival radius; the potential is
+    ``Phi = -mean_k max(0, D_k - R_k)``, counted as 0 once the episode succeeds.
 
     | term | formula |
     |---|---|
-    | ``reward_progress`` | ``reward_progress * (s - s_prev)``, s the leader's arc length along the A* path |
-    | ``reward_spacing`` | ``-reward_spacing * mean_k min(1, abs(gap_k - d_s) / d_s)`` |
-    | ``reward_strip`` | ``-reward_strip * mean distance (m) of the robots to the strip`` |
-    | ``reward_collision`` | ``-reward_collision * robots in contact this step`` |
-    | ``reward_break`` | ``-reward_break * gaps larger than Delta`` |
+    | ``reward_progress`` | ``reward_progress * (Phi_new - Phi_old)`` (0 on a step ending in a contact or break) |
+    | ``reward_spacing`` | ``-reward_spacing / T * mean_k min(1, abs(gap_k - d_s) / d_s)`` |
+    | ``reward_strip`` | ``-reward_strip / T * min(1, mean distance (m) of the robots to the strip)`` |
+    | ``reward_time`` | ``-reward_time / T`` every step |
+    | ``reward_collision`` | ``-reward_collision`` on a step with any robot in contact |
+    | ``reward_break`` | ``-reward_break`` on a step with any gap above Delta |
+    | ``reward_forfeit`` | ``-(time + spacing + strip) / T`` per step left, on a step ending in a contact or break |
     | ``reward_success`` | ``+reward_success`` when the episode ends in success |
-    | ``reward_time`` | ``-reward_time`` every step |
+
+    On a step that ends the episode in a contact or break, that step's spacing and strip penalties are
+    charged at their worst (1).
+
+    The terms are ordered (``tests/envs/test_chain_reward.py`` checks it):
+
+    * **A contact or a break costs more than stopping in place**, whenever it happens: stopping until the time
+      limit costs at most ``(time + spacing + strip) / T`` per step; the contact or break charges that for
+      every step left plus ``reward_collision`` (``reward_break``) and pays no progress for its step.
+    * **Reaching the goal as a chain pays most**, whatever the moment and the chain length: the progress of
+      any episode sums to at most ``-Phi`` at its start, a success pays all of it, and every episode pays the
+      per-step penalties, at most ``time + spacing + strip`` in all; so a success pays more than any episode
+      without one, as long as ``reward_success > reward_time + reward_spacing + reward_strip`` (checked). Every
+      term is a mean over robots or gaps, or one flat amount: none grows with the chain.
 
     ## Starting State
 
-    The map is generated from the episode seed (``layout_seed=-1``) or from ``layout_seed``. Start and goal
-    are sampled on free floor at least 0.35 m from obstacles and ``min_goal_distance`` apart along the A*
-    path (or given). The followers stand behind the leader along a free path away from the goal, ``spacing``
-    apart and facing their predecessor; when no such path is long enough they fill the free floor nearest
-    to the leader. A sampled start that leaves followers nearer to the goal than the leader (a room's far
-    corner with the door toward the goal) is drawn again, up to 10 times. Obstacles drop when the leader
-    has covered random fractions (0.15-0.7) of the path, onto the path 1.2-3 m ahead of it, only where at
-    least a robot's width stays free beside them.
+    The map is generated from the episode seed (``layout_seed=-1``) or from ``layout_seed``. A goal is drawn
+    on free floor at least 0.35 m from obstacles (or given). The last robot's place is drawn among the cells
+    at least ``min_goal_distance + (n_robots - 1) * spacing`` from the goal along the free floor, and the
+    chain stands on the shortest path from there to the goal, ``spacing`` apart along it, the leader at its
+    head: the followers stand behind the leader on the backward extension of its own path, each farther from
+    the goal than its predecessor, facing it, all at rest: the chain is intact. (With a given ``start`` the
+    leader stands there and the chain behind it along a free path that leads away from the goal.) A goal
+    without such cells is drawn again (4 goals; a generated map is drawn anew up to 3 times); when none
+    fits, ``reset`` raises ``ValueError`` saying how much free floor the chain needs. Obstacles drop when the
+    leader has covered random fractions (0.15-0.7) of the path, onto the path 1.2-3 m ahead of it, only
+    where at least a robot's width stays free beside them.
 
     ## Episode End
 
-    Every agent terminates when the leader is within ``goal_radius`` of the goal (success if no robot ever
-    touched anything and no gap exceeds Delta), or when any robot touches anything and
-    ``terminate_on_collision``. Every agent is truncated after ``max_cycles`` steps.
+    Success (every agent terminates): every robot k is within ``R_k`` of the goal (straight distance) at
+    the same step, and so far no robot has touched anything and no gap has exceeded Delta. The leader's
+    arrival (within ``goal_radius``) does not end the episode: the followers close up behind it while it
+    holds at the goal. Failure (every agent terminates): any robot touches anything
+    (``terminate_on_collision``) or any gap exceeds Delta (``terminate_on_break``). Every agent is truncated
+    after ``max_cycles`` steps.
 
     ## Info
 
-    Per agent: true ``x``, ``y``, ``yaw``, ``v``, ``w`` and ``collision`` (this robot touched something this
-    step). Shared by all agents: ``is_success``, ``leader_at_goal``, ``chain_intact``, ``collisions`` (robot
-    contacts so far), ``max_gap`` (m, this episode), ``mean_strip_distance`` and ``max_strip_distance`` (m, this
-    episode), ``leader_path_length``, ``astar_length`` (m), ``path_ratio``, ``episode_time`` (s) and the
-    reward terms.
+    Per agent: true ``x``, ``y``, ``yaw``, ``v``, ``w``, ``collision`` (this robot touched something this
+    step). Shared by all agents: ``is_success``, ``leader_at_goal``, ``robots_at_goal`` (robots within their
+    arrival radius), ``chain_intact`` (no gap above Delta this step), ``collisions`` (robot contacts so far),
+    ``max_gap`` (m, this episode), ``mean_strip_distance`` and ``max_strip_distance`` (m, this episode),
+    ``leader_path_length``, ``astar_length`` (m), ``path_ratio``, ``episode_time`` (s), ``distance_to_go``
+    (``-Phi``, m) and the reward terms.
 
     ## Arguments
 
     Every argument is a field of :class:`RobotChainConfig`; unknown names and values out of range raise
     ``ValueError`` naming the argument and its valid range. Example::
 
-        env = robot_chain_v0.parallel_env(n_robots=8, scene="greenhouse", n_dynamic_obstacles=2)
+        env = robot_chain_v1.parallel_env(n_robots=8, scene="greenhouse", n_dynamic_obstacles=2)
 
     ## Baselines
 
     ``apoorva-chain`` (A* + ghost + sonar potential field + elastic strip along the leader's trail), and its
-    ablations ``apoorva-chain-alg6`` (the printed strip) and ``apoorva-chain-no-strip``.
+    ablations ``apoorva-chain-alg6`` (the printed strip) and ``apoorva-chain-no-strip``; the learned
+    ``ppo-chain`` (one network shared by every robot).
 
     ## Version History
 
-    * v0: initial release. Fixed since: the followers' start no longer lies between the leader and the
-      goal when another sampled start avoids it (the documented starting state; spaces and reward unchanged).
+    * v1: the paper's task. Success needs every robot at the goal (robot k within
+      ``goal_radius + k * arrival_stretch * spacing``), with no contact and no gap above Delta at any step;
+      the episode goes on after the leader arrives; a gap above Delta ends it (``terminate_on_break``). The
+      start is always an intact chain standing on the backward extension of the leader's path: no more
+      packed starts, a chain that does not fit raises ``ValueError``. The goal is drawn first, then the
+      chain's place; ``reset(options={"goal_distance": (lo, hi)})`` draws short missions (training
+      curricula). New observation (29 values):
+      neighbours' relative velocities, the follower's slot on its predecessor's trail, the goal as a
+      direction and a distance; the strip distance and the map-sized goal vector are gone. New reward:
+      progress of every robot toward arriving (free-floor distance, round dropped obstacles), per-episode
+      penalty budgets, a contact or break forfeits the rest of the episode, ordered as stated above.
+      Resets reuse fixed maps, the robots' bodies and the world, and search the free floor with a
+      bucket-queue Dijkstra (about 10x faster). v0 is gone (no code kept: its task, spaces and reward all
+      changed, and its leaderboard entries with it).
+    * v0: initial release (success when the leader arrived with the chain intact at that moment).
 
     ## References
 
@@ -141,7 +192,7 @@ class RobotChainEnv(ParallelEnv):  # type: ignore[misc]
     """
 
     metadata: dict[str, Any] = {
-        "name": "robot_chain_v0",
+        "name": "robot_chain_v1",
         "render_modes": ["rgb_array", "human"],
         "render_fps": 10,
         "is_parallelizable": True,
@@ -149,6 +200,7 @@ class RobotChainEnv(ParallelEnv):  # type: ignore[misc]
             "collision",
             "collisions",
             "leader_at_goal",
+            "robots_at_goal",
             "chain_intact",
             "episode_time",
             "leader_path_length",
@@ -157,6 +209,7 @@ class RobotChainEnv(ParallelEnv):  # type: ignore[misc]
             "mean_strip_distance",
             "max_strip_distance",
             "max_gap",
+            "distance_to_go",
         ),
         "trace_keys": ("positions", "mean_strip_distance_now", "max_gap_now", "ghost_x", "ghost_y"),
     }
@@ -171,11 +224,13 @@ class RobotChainEnv(ParallelEnv):  # type: ignore[misc]
         self.spec = robot.body_spec(cfg)
         self.sonars = robot.sonar_array(cfg)
         self.observation = ChainObservation(cfg, self.sonars)
+        self.trails = Trails(cfg.n_robots, cfg.spacing)
         self._act_space = spaces.Box(-1.0, 1.0, (2,), np.float32)
-        self._static_map: ChainMap | None = None
+        self._inflation = cfg.robot_radius + cfg.planning_margin
+        self._fixed_map: ChainMap | None = None  # a loaded map, or the generated one of a fixed layout_seed
         if cfg.scene == "map":
-            self._static_map = ros_map(cfg.map_yaml, cfg.robot_radius + cfg.planning_margin)
-            canvas = self._static_map.geometry.bounds
+            self._fixed_map = ros_map(cfg.map_yaml, self._inflation)
+            canvas = self._fixed_map.geometry.bounds
         elif cfg.scene == "office":
             canvas = cfg.office_params().bounds()
         else:
@@ -185,6 +240,8 @@ class RobotChainEnv(ParallelEnv):  # type: ignore[misc]
         self.world: World2D | None = None
         self.chain_map: ChainMap | None = None
         self.task: ChainTask | None = None
+        self._radii = np.array(cfg.arrival_radii())
+        self._excess = np.zeros(cfg.n_robots)
         n_dyn = cfg.n_dynamic_obstacles
         self.state_space = spaces.Box(-np.inf, np.inf, (5 * cfg.n_robots + 4 + 3 * n_dyn,), np.float32)
 
@@ -206,17 +263,22 @@ class RobotChainEnv(ParallelEnv):  # type: ignore[misc]
 
     @property
     def path(self) -> Polyline:
-        """The leader's A* path of this episode (m)."""
+        """The leader's path of this episode (m)."""
         if self.task is None:
             raise RuntimeError("call reset() first")
         return self.task.path
 
     @property
     def goal(self) -> np.ndarray:
-        """The leader's goal (m), the last point of :attr:`path`."""
+        """The goal (m), the last point of :attr:`path`."""
         if self.task is None:
             raise RuntimeError("call reset() first")
         return self.task.goal
+
+    @property
+    def arrival_radii(self) -> np.ndarray:
+        """``(n,)`` robot k has arrived within ``arrival_radii[k]`` of the goal (m)."""
+        return self._radii.copy()
 
     def observation_layout(self) -> dict[str, Any]:
         """Where things sit in an observation and how to scale them back (for scripted policies)."""
@@ -228,41 +290,91 @@ class RobotChainEnv(ParallelEnv):  # type: ignore[misc]
         self.world = None
 
     # -- episode set-up --------------------------------------------------------------------------------
+    def _draw_map(self, rng: np.random.Generator) -> ChainMap:
+        """The episode's map: the fixed one, or a new one drawn with ``rng``."""
+        cfg = self.config
+        if self._fixed_map is not None:
+            return self._fixed_map
+        layout_rng = rng if cfg.layout_seed < 0 else np.random.default_rng(cfg.layout_seed)
+        if cfg.scene == "office":
+            cmap = office_map(cfg.office_params(), layout_rng, self._inflation, cfg.map_resolution)
+        else:
+            cmap = greenhouse_map(cfg.greenhouse_params(), layout_rng, self._inflation, cfg.map_resolution)
+        if cfg.layout_seed >= 0:
+            self._fixed_map = cmap  # the same map every episode: made once
+        return cmap
+
+    def _plan(
+        self, rng: np.random.Generator, goal_distance: tuple[float, float] | None
+    ) -> tuple[ChainMap, Mission]:
+        """Map and mission of an episode; a generated map without room for the chain is drawn anew."""
+        for attempt in range(LAYOUT_TRIES):
+            cmap = self._draw_map(rng)
+            try:
+                return cmap, plan_mission(cmap, self.config, rng, goal_distance)
+            except ChainDoesNotFit:
+                if self._fixed_map is not None or attempt == LAYOUT_TRIES - 1:
+                    raise
+        raise AssertionError("unreachable")
+
     def reset(
         self, seed: int | None = None, options: dict[str, Any] | None = None
     ) -> tuple[dict[str, np.ndarray], dict[str, dict[str, Any]]]:
-        """New map (unless fixed), start, goal, A* path, chain placement and obstacle schedule.
+        """New map (unless fixed), goal, start, path, chain placement and obstacle schedule.
 
-        ``options`` is accepted for API compatibility and unused (PettingZoo's API test passes some).
+        Args:
+            seed: Seed of the episode's random stream.
+            options: ``{"goal_distance": (lo, hi)}`` draws this episode's leader start between ``lo`` and
+                ``hi`` metres from the goal along the free floor (a training curriculum's short missions)
+                instead of at least ``min_goal_distance``. Other keys are ignored (PettingZoo's API test
+                passes one).
+
+        Raises:
+            ValueError: When the chain does not fit behind any start tried (the message says what to change),
+                or for a malformed ``goal_distance``.
         """
+        goal_distance = None
+        if options and "goal_distance" in options:
+            try:
+                lo, hi = (float(v) for v in options["goal_distance"])
+            except (TypeError, ValueError):
+                raise ValueError(
+                    f"reset: options['goal_distance'] must be (lo, hi) in metres, got {options['goal_distance']!r}"
+                ) from None
+            if not (0.0 <= lo <= hi):
+                raise ValueError(f"reset: options['goal_distance'] needs 0 <= lo <= hi, got ({lo}, {hi})")
+            goal_distance = (lo, hi)
         if seed is not None or not hasattr(self, "np_random"):
             self.np_random = np.random.default_rng(seed)
         cfg = self.config
         rng = self.np_random
-        inflation = cfg.robot_radius + cfg.planning_margin
-        layout_rng = rng if cfg.layout_seed < 0 else np.random.default_rng(cfg.layout_seed)
-        if self._static_map is not None:
-            cmap = self._static_map
-        elif cfg.scene == "office":
-            cmap = office_map(cfg.office_params(), layout_rng, inflation, cfg.map_resolution)
-        else:
-            cmap = greenhouse_map(cfg.greenhouse_params(), layout_rng, inflation, cfg.map_resolution)
+        cmap, mission = self._plan(rng, goal_distance)
         self.chain_map = cmap
         xmin, ymin, xmax, ymax = cmap.geometry.bounds
         self._bounds = np.array([xmin, ymin, xmax, ymax])
-        self.diagonal = math.hypot(xmax - xmin, ymax - ymin)
-        mission = plan_mission(cmap, cfg, rng)
+        ox, oy, oyaw = cmap.grid.origin
+        self._frame = np.array([ox, oy, math.cos(oyaw), math.sin(oyaw), cmap.grid.resolution])
+        self._window = int(math.ceil(self._inflation / cmap.grid.resolution)) + 2
+        self._to_goal = mission.to_goal
+        self._blocked = cmap.blocked
+        gi, gj = (int(v) for v in mission.path_cells[-1])
+        self._goal_cell = (gi, gj)
+        self._goal_xy = mission.path.points[-1].copy()
+        finite = mission.to_goal[np.isfinite(mission.to_goal)]
+        self._far = float(finite.max()) + 1.0
         positions = mission.positions
         self.astar_cells = mission.path_cells
         self.astar_length = mission.astar_length
-        self.world = World2D(cmap.geometry, n_movers=cfg.n_dynamic_obstacles)
+        yaw = mission.start_yaws()
+        poses = np.column_stack([positions, yaw])
+        if self.world is None:
+            self.world = World2D(cmap.geometry, n_movers=cfg.n_dynamic_obstacles)
+            self.robots = self.world.add_disc_robots(self.spec, poses, cfg.robot_radius)
+        else:  # the same bodies, in the new scene (nothing to do for a fixed map)
+            self.world.set_scene(cmap.geometry)
+            self.world.place_robots(self.robots, poses)
         for k in range(cfg.n_dynamic_obstacles):
             self.world.place_mover(k, _PARK + 10.0 * k, _PARK, cfg.obstacle_radius)
-        yaw = mission.start_yaws()
-        self.robots = [
-            self.world.add_robot(self.spec, np.array([positions[k, 0], positions[k, 1], yaw[k]]), cfg.robot_radius)
-            for k in range(cfg.n_robots)
-        ]
         self._robot_rows = np.array([r.circle_index for r in self.robots], dtype=np.int64)
         task = ChainTask(
             mission.path,
@@ -270,17 +382,22 @@ class RobotChainEnv(ParallelEnv):  # type: ignore[misc]
             cfg.weights(),
             cfg.control_period,
             cfg.goal_radius,
+            cfg.max_cycles,
             cfg.terminate_on_collision,
+            cfg.terminate_on_break,
         )
-        task.reset(positions[0])
+        self._poses = poses
+        self._vel = np.zeros((cfg.n_robots, 2))
+        self.trails.reset(mission.formation, cfg.spacing)
+        arrived = self._to_go()
+        task.reset(positions[0], -float(self._excess.mean()))
+        task.arrived = arrived
         self.task = task
         # Obstacle schedule: drop k when the leader has covered fraction f_k of the path.
         self._drop_at = np.sort(rng.uniform(0.15, 0.7, cfg.n_dynamic_obstacles)) * self.astar_length
         self._next_drop = 0
         self._n_dropped = 0
         self.agents = list(self.possible_agents)
-        self._poses = np.array([r.pose for r in self.robots])
-        self._vel = np.zeros((cfg.n_robots, 2))
         self._steps = 0
         self._cmd_scale = np.array([cfg.max_speed, cfg.max_turn_rate])
         self._leader_path = 0.0
@@ -309,8 +426,6 @@ class RobotChainEnv(ParallelEnv):  # type: ignore[misc]
         world, task = self.world, self.task
         if self._next_drop < len(self._drop_at) and task.ghost.s_leader >= self._drop_at[self._next_drop]:
             self._drop_obstacle()
-        if self._n_dropped:
-            world.step(dt)
         poses = self._poses
         lx, ly = poses[0, 0], poses[0, 1]
         collided = world.drive_discs(self.robots, cmd, dt, poses, self._vel)
@@ -319,9 +434,18 @@ class RobotChainEnv(ParallelEnv):  # type: ignore[misc]
         if self.render_mode is not None:
             self._trail.append(poses[0, :2].copy())
         self._last_collided = collided
+        self.trails.record(poses)
         task.move_ghost(poses[0, :2])
         obs = self._observe()
-        outcome = task.evaluate(poses[0, :2], int(collided.sum()), self.observation.stats.tolist())
+        arrived = self._to_go()
+        outcome = task.evaluate(
+            poses[0, :2],
+            int(collided.sum()),
+            self.observation.stats.tolist(),
+            -float(self._excess.mean()),
+            arrived,
+            cfg.n_robots,
+        )
         terminated = bool(outcome["terminated"])
         truncated = (not terminated) and self._steps >= cfg.max_cycles
         infos = self._infos()
@@ -335,14 +459,38 @@ class RobotChainEnv(ParallelEnv):  # type: ignore[misc]
             self.render()
         return obs, rewards, terminations, truncations, infos
 
+    def _to_go(self) -> int:
+        """Fill each robot's free-floor distance beyond its arrival radius; return how many have arrived."""
+        assert self.chain_map is not None
+        return int(
+            distances_to_go(
+                self._poses,
+                self._to_goal,
+                self._blocked,
+                self._frame,
+                self._window,
+                self._far,
+                self._goal_xy,
+                self._radii,
+                self._excess,
+            )
+        )
+
     def _drop_obstacle(self) -> None:
         """Drop the next scheduled obstacle onto the path ahead of the leader (retried each step until it fits)."""
         assert self.world is not None and self.task is not None and self.chain_map is not None
-        spot = drop_spot(self.chain_map, self.config, self.task.path, self.task.ghost.s_leader, self._poses)
+        cfg = self.config
+        spot = drop_spot(self.chain_map, cfg, self.task.path, self.task.ghost.s_leader, self._poses)
         if spot is not None:
-            self.world.place_mover(self._next_drop, float(spot[0]), float(spot[1]), self.config.obstacle_radius)
+            self.world.place_mover(self._next_drop, float(spot[0]), float(spot[1]), cfg.obstacle_radius)
             self._next_drop += 1
             self._n_dropped += 1
+            # The free-floor distance to go now runs round the obstacle (the robots' centres stay a robot
+            # radius from it); the path and the ghost keep the plan made on the static map.
+            blocked = block_disc(self.chain_map, self._blocked, spot, cfg.obstacle_radius + cfg.robot_radius)
+            field = distance_field(blocked, self._goal_cell) * self.chain_map.grid.resolution
+            if np.isfinite(field[self.chain_map.cell(self._poses[0, :2])]):
+                self._blocked, self._to_goal = blocked, field
 
     # -- observations, infos, state -------------------------------------------------------------------
     def _observe(self) -> dict[str, np.ndarray]:
@@ -353,9 +501,10 @@ class RobotChainEnv(ParallelEnv):  # type: ignore[misc]
             self.world,
             self._robot_rows,
             self.task.ghost_xy,
+            self.task.ghost_velocity,
+            self.trails,
             self.task.goal,
             self._bounds,
-            self.diagonal,
             self.np_random,
         )
         return dict(zip(self.agents, obs, strict=True))
@@ -368,6 +517,7 @@ class RobotChainEnv(ParallelEnv):  # type: ignore[misc]
         shared = {
             "is_success": bool(task.success),
             "leader_at_goal": bool(task.leader_arrived),
+            "robots_at_goal": int(task.arrived),
             "chain_intact": bool(stats[3] == 0),
             "collisions": int(task.collisions),
             "max_gap": float(task.max_gap),
@@ -377,6 +527,7 @@ class RobotChainEnv(ParallelEnv):  # type: ignore[misc]
             "astar_length": float(self.astar_length),
             "path_ratio": float(self._leader_path / self.astar_length) if self.astar_length > 0 else 1.0,
             "episode_time": self._steps * self.config.control_period,
+            "distance_to_go": -float(task.potential),
             "ghost_x": gx,
             "ghost_y": gy,
             "mean_strip_distance_now": float(stats[0]),

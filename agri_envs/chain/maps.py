@@ -9,12 +9,13 @@ blocked for planning.
 from __future__ import annotations
 
 import dataclasses
+import functools
 
 import numpy as np
-from scipy import ndimage
 
 from agri_envs.scenes.greenhouse import LayoutParams, generate_layout
 from agri_envs.scenes.office import OfficeFloorParams, generate_office_floor
+from agri_envs.sim2d.distance import euclidean_distance_transform
 from agri_envs.sim2d.geometry import Geometry
 from agri_envs.sim2d.gridmap import OccupancyGrid, grid_to_geometry, load_ros_map, rasterize
 
@@ -36,6 +37,11 @@ class ChainMap:
     blocked: np.ndarray
     wall_distance: np.ndarray
 
+    @functools.cached_property
+    def free_cells(self) -> np.ndarray:
+        """Flat indices (row-major) of the cells a robot centre may occupy (not :attr:`blocked`)."""
+        return np.flatnonzero(~self.blocked.ravel())
+
     def cell(self, xy: np.ndarray) -> tuple[int, int]:
         """``(row, col)`` of the cell holding world point ``xy`` (clamped into the grid)."""
         i, j = self.grid.world_to_cell(np.asarray(xy, dtype=np.float64)).tolist()
@@ -46,12 +52,31 @@ class ChainMap:
         return self.grid.cell_to_world(np.asarray(cells).reshape(-1, 2))
 
 
+def block_disc(cmap: ChainMap, blocked: np.ndarray, centre: np.ndarray, radius: float) -> np.ndarray:
+    """A copy of ``blocked`` with every cell whose centre lies within ``radius`` of ``centre`` blocked too.
+
+    Args:
+        cmap: The map whose grid ``blocked`` belongs to.
+        blocked: ``(H, W)`` bool.
+        centre: ``(x, y)`` (m).
+        radius: (m).
+    """
+    out = blocked.copy()
+    i0, j0 = cmap.cell(np.asarray(centre, dtype=np.float64) - radius)
+    i1, j1 = cmap.cell(np.asarray(centre, dtype=np.float64) + radius)
+    rows, cols = np.mgrid[i0 : i1 + 1, j0 : j1 + 1]
+    xy = cmap.centres(np.stack([rows.ravel(), cols.ravel()], axis=1))
+    inside = np.hypot(xy[:, 0] - centre[0], xy[:, 1] - centre[1]) <= radius
+    out[rows.ravel()[inside], cols.ravel()[inside]] = True
+    return out
+
+
 def make_chain_map(geometry: Geometry, grid: OccupancyGrid, inflation: float) -> ChainMap:
     """Inflate a scene's grid by ``inflation`` metres (Euclidean distance transform)."""
     obstacle = (grid.data >= 50) | (grid.data < 0)
     if obstacle.all():
         raise ValueError("the map has no free cell")
-    distance = ndimage.distance_transform_edt(~obstacle) * grid.resolution
+    distance = euclidean_distance_transform(~obstacle) * grid.resolution
     # Cells touching the map's border count as next to an obstacle: nothing is known beyond it.
     h, w = obstacle.shape
     rows = (np.arange(h) + 0.5) * grid.resolution

@@ -13,10 +13,14 @@ import numpy as np
 
 from agri_envs.chain.config import RobotChainConfig
 from agri_envs.chain.maps import ChainMap
-from agri_envs.sim2d.astar import astar, distance_field
+from agri_envs.sim2d.astar import descend, distance_field
 from agri_envs.sim2d.polyline import Polyline
 
-START_TRIES = 10  # sampled starts tried for one with room for the chain behind the leader
+GOAL_TRIES = 4  # sampled goals tried before the map counts as too small for the chain
+
+
+class ChainDoesNotFit(ValueError):
+    """The map has no room for the whole chain behind the leader (raised by :func:`plan_mission`)."""
 
 
 @dataclasses.dataclass(frozen=True)
@@ -24,18 +28,25 @@ class Mission:
     """One episode's route and starting formation.
 
     Attributes:
-        path_cells: ``(k, 2)`` A* path cells from start to goal.
-        path: The A* path in the world (m); its last point is the goal.
-        positions: ``(n, 2)`` start positions of the robots, leader first (m).
+        path_cells: ``(k, 2)`` path cells from start to goal (a shortest 8-connected path, as A* finds).
+        path: The path in the world (m); its last point is the goal.
+        positions: ``(n, 2)`` start positions of the robots, leader first (m), ``spacing`` apart along a
+            free path behind the leader.
+        to_goal: ``(H, W)`` free-floor distance (m) from every cell of the inflated map to the goal (inf
+            where unreachable).
+        formation: The line the chain stands on, from the last robot to the leader: robot k stands at arc
+            length ``(n - 1 - k) * spacing``.
     """
 
     path_cells: np.ndarray
     path: Polyline
     positions: np.ndarray
+    to_goal: np.ndarray
+    formation: Polyline
 
     @property
     def astar_length(self) -> float:
-        """Length of the A* path through the cell centres (m)."""
+        """Length of the path through the cell centres (m)."""
         xy = self.path.points
         return float(np.hypot(*np.diff(xy, axis=0).T).sum()) if len(self.path_cells) > 1 else 0.0
 
@@ -52,121 +63,176 @@ class Mission:
         return yaw
 
 
-def plan_mission(cmap: ChainMap, cfg: RobotChainConfig, rng: np.random.Generator) -> Mission:
-    """Start, goal, A* path and the chain's places for one episode.
+def plan_mission(
+    cmap: ChainMap,
+    cfg: RobotChainConfig,
+    rng: np.random.Generator,
+    goal_distance: tuple[float, float] | None = None,
+) -> Mission:
+    """Goal, start, path and the chain's places for one episode.
 
-    A sampled start with no room behind it for the chain (a room's far corner) would put followers between
-    the leader and the goal: such a start is drawn again, up to ``START_TRIES`` times, keeping the draw with
-    the fewest followers ahead (a given start is kept).
+    A goal is drawn on roomy free floor (or given) and its free-floor distance field computed (the reward
+    needs it too). Then the last robot's place is drawn among the cells at least ``min_goal_distance +
+    (n - 1) * spacing`` from the goal along the free floor, and the chain stands on the shortest path from
+    there to the goal, ``spacing`` apart, the leader at its head: the followers stand behind the leader on
+    the backward extension of its own path, never nearer to the goal, and the leader starts at least
+    ``min_goal_distance`` from it. A goal without such cells is drawn again (``GOAL_TRIES``). With a given
+    start the leader stands there and the chain behind it along a free path that leads away from the goal.
+    The leader's path is a shortest 8-connected path on the inflated map (what Alg. 1's A* finds), read
+    off the goal's field.
+
+    Args:
+        cmap: The episode's map.
+        cfg: The env's config.
+        rng: The episode's random stream.
+        goal_distance: ``(lo, hi)``: the leader starts between ``lo`` and ``hi`` metres from the goal along
+            the free floor, instead of at least ``min_goal_distance`` (a drawn start only).
+
+    Raises:
+        ChainDoesNotFit: When no goal tried leaves room for the chain (the message says what to change).
+        ValueError: For a given start or goal off the free floor, or without a path between them.
     """
-    best: tuple | None = None
-    for _ in range(START_TRIES):
-        start_cell, goal_cell, path_cells = plan_route(cmap, cfg, rng)
-        positions, ahead = place_chain(cmap, cfg, start_cell, goal_cell)
-        if best is None or ahead < best[0]:
-            best = (ahead, path_cells, positions)
-        if ahead == 0 or cfg.start:
-            break
-    assert best is not None
-    _, path_cells, positions = best
-    cells = np.array(path_cells)
-    return Mission(path_cells=cells, path=Polyline(cmap.centres(cells)), positions=positions)
-
-
-def plan_route(
-    cmap: ChainMap, cfg: RobotChainConfig, rng: np.random.Generator
-) -> tuple[tuple[int, int], tuple[int, int], list]:
-    """Start and goal cells (given or sampled) and the A* path between them."""
-    free = ~cmap.blocked
-    roomy = free & (cmap.wall_distance >= cfg.robot_radius + 0.35)
-    candidates = np.argwhere(roomy if roomy.any() else free)
-    if len(candidates) == 0:
-        raise ValueError("robot_chain_v0: the inflated map has no free cell for the robots")
-
-    def given(xy: tuple, name: str) -> tuple[int, int]:
-        cell = cmap.cell(np.array(xy, dtype=np.float64))
-        if cmap.blocked[cell]:
-            raise ValueError(f"robot_chain_v0: {name}={xy} is not on free floor (inflated map)")
-        return cell
-
+    free = cmap.free_cells
+    if len(free) == 0:
+        raise ValueError("robot_chain_v1: the inflated map has no free cell for the robots")
+    roomy = free[cmap.wall_distance.ravel()[free] >= cfg.robot_radius + 0.35]
+    candidates = roomy if len(roomy) else free
+    width = cmap.grid.width
     res = cmap.grid.resolution
-    for _ in range(200):
-        s = given(cfg.start, "start") if cfg.start else tuple(candidates[rng.integers(len(candidates))])
-        if cfg.goal:
-            g = given(cfg.goal, "goal")
+    n = cfg.n_robots
+    need = (n - 1) * cfg.spacing
+    start_given = given_cell(cmap, cfg.start, "start") if cfg.start else None
+    goal_given = given_cell(cmap, cfg.goal, "goal") if cfg.goal else None
+    farthest = 0.0  # the longest free-floor distance to a goal tried (for the error message)
+    for _ in range(GOAL_TRIES):
+        if goal_given is not None:
+            goal = goal_given
+        elif start_given is not None:
+            # A given start: the goal is drawn among the cells far enough from it.
+            from_start = distance_field(cmap.blocked, start_given).ravel() * res
+            far = candidates[from_start[candidates] >= cfg.min_goal_distance]
+            far = far[np.isfinite(from_start[far])]
+            if len(far) == 0:
+                raise ValueError(
+                    f"robot_chain_v1: no goal lies {cfg.min_goal_distance} m from start={cfg.start}; "
+                    "lower min_goal_distance"
+                )
+            goal = divmod(int(far[rng.integers(len(far))]), width)
         else:
-            dist = distance_field(cmap.blocked, s) * res
-            ok = candidates[dist[candidates[:, 0], candidates[:, 1]] >= cfg.min_goal_distance]
-            ok = ok[np.isfinite(dist[ok[:, 0], ok[:, 1]])] if len(ok) else ok
-            if len(ok) == 0:
-                if cfg.start:
-                    raise ValueError(
-                        f"robot_chain_v0: no goal lies {cfg.min_goal_distance} m from start={cfg.start}; "
-                        "lower min_goal_distance"
-                    )
-                continue
-            g = tuple(ok[rng.integers(len(ok))])
-        path = astar(cmap.blocked, s, g)
-        if path is not None:
-            return (int(s[0]), int(s[1])), (int(g[0]), int(g[1])), path
-        if cfg.start and cfg.goal:
-            break
-    raise ValueError("robot_chain_v0: no A* path between start and goal on the inflated map")
+            goal = divmod(int(candidates[rng.integers(len(candidates))]), width)
+        goal_cells = distance_field(cmap.blocked, goal)
+        to_goal = goal_cells * res
+        if start_given is not None:
+            if not np.isfinite(to_goal[start_given]):
+                raise ValueError("robot_chain_v1: no path between start and goal on the inflated map")
+            if to_goal[start_given] < cfg.min_goal_distance and goal_given is not None:
+                raise ValueError(
+                    f"robot_chain_v1: goal={cfg.goal} lies nearer than min_goal_distance={cfg.min_goal_distance} m "
+                    f"to start={cfg.start}; lower min_goal_distance"
+                )
+            line = place_chain(cmap, cfg, start_given, to_goal)
+            if line is not None:
+                return _mission(cmap, cfg, goal_cells, start_given, line, to_goal)
+            if goal_given is not None:
+                break
+            continue
+        lo, hi = goal_distance if goal_distance is not None else (cfg.min_goal_distance, np.inf)
+        on_free = to_goal.ravel()[free]
+        reachable = on_free < np.inf
+        tails = free[reachable & (on_free >= lo + need) & (on_free <= hi + need)]
+        if len(tails) == 0:
+            farthest = max(farthest, float(on_free[reachable].max()) if reachable.any() else 0.0)
+            if goal_given is not None:
+                break
+            continue
+        tail = divmod(int(tails[rng.integers(len(tails))]), width)
+        line = Polyline(cmap.centres(np.array(descend(cmap.blocked, goal_cells, tail))))
+        return _mission(cmap, cfg, goal_cells, cmap.cell(line.at(need)), line, to_goal)
+    if start_given is not None:
+        raise ChainDoesNotFit(
+            f"robot_chain_v1: n_robots={n} need {need:.2f} m of free floor behind start={cfg.start} "
+            "((n_robots - 1) * spacing, leading away from the goal); there is none. Use fewer robots, a smaller "
+            "spacing, another start, or no start (one is drawn where the chain fits)."
+        )
+    raise ChainDoesNotFit(
+        f"robot_chain_v1: n_robots={n} need a free path of min_goal_distance + (n_robots - 1) * spacing = "
+        f"{cfg.min_goal_distance + need:.2f} m to the goal (the leader at least min_goal_distance from it, the "
+        f"chain behind); the longest found on this map is {farthest:.2f} m. Use fewer robots, a smaller spacing or "
+        "min_goal_distance, or a larger map (office_width / office_height, n_rows / row_length)."
+    )
 
 
-def place_chain(
-    cmap: ChainMap, cfg: RobotChainConfig, start: tuple[int, int], goal: tuple[int, int]
-) -> tuple[np.ndarray, int]:
-    """Leader at the start; followers ``spacing`` apart along a free path behind it (or packed nearby).
+def _mission(
+    cmap: ChainMap,
+    cfg: RobotChainConfig,
+    goal_cells: np.ndarray,
+    start: tuple[int, int],
+    line: Polyline,
+    to_goal: np.ndarray,
+) -> Mission:
+    """The mission whose chain stands on ``line`` (from the last robot on), the leader at ``start``."""
+    need = (cfg.n_robots - 1) * cfg.spacing
+    formation = line.between(0.0, need)
+    positions = np.array([formation.at(need - k * cfg.spacing) for k in range(cfg.n_robots)])
+    cells = np.array(descend(cmap.blocked, goal_cells, start))
+    return Mission(
+        path_cells=cells, path=Polyline(cmap.centres(cells)), positions=positions, to_goal=to_goal, formation=formation
+    )
+
+
+def given_cell(cmap: ChainMap, xy: tuple, name: str) -> tuple[int, int]:
+    """The cell of a given start or goal, which must lie on the inflated map's free floor."""
+    cell = cmap.cell(np.array(xy, dtype=np.float64))
+    if cmap.blocked[cell]:
+        raise ValueError(f"robot_chain_v1: {name}={xy} is not on free floor (inflated map)")
+    return cell
+
+
+def place_chain(cmap: ChainMap, cfg: RobotChainConfig, start: tuple[int, int], to_goal: np.ndarray) -> Polyline | None:
+    """A free path behind a given start for the followers, ``spacing`` apart; None if there is none.
+
+    The path runs from the start to the cell farthest from the goal among those ``(n - 1) * spacing`` to
+    ``(n - 1) * spacing + 1`` metres away along the free floor (a shortest path, so the chain stands
+    straight where the floor allows). None also when a follower would stand nearer to the goal than the
+    leader (a start in a room's far corner, its door toward the goal).
+
+    Args:
+        cmap: The map.
+        cfg: The env's config.
+        start: The leader's cell.
+        to_goal: Free-floor distance (m) of every cell to the goal.
 
     Returns:
-        The ``(n, 2)`` positions, and how many followers stand ahead of the leader (nearer to the goal
-        along the free floor than the leader).
+        The line from the last robot's place to the start (m), or None.
     """
     n = cfg.n_robots
     res = cmap.grid.resolution
-    positions = np.zeros((n, 2))
-    positions[0] = cmap.centres(np.array([start]))[0]
     if n == 1:
-        return positions, 0
+        return Polyline(cmap.centres(np.array([start])))
     need = (n - 1) * cfg.spacing
-    from_start = distance_field(cmap.blocked, start) * res
-    to_goal = distance_field(cmap.blocked, goal) * res
-
-    def ahead() -> int:
-        cells = cmap.grid.world_to_cell(positions[1:])
-        rows = np.clip(cells[:, 0], 0, cmap.grid.height - 1)
-        cols = np.clip(cells[:, 1], 0, cmap.grid.width - 1)
-        return int(np.sum(to_goal[rows, cols] < to_goal[start]))
-
-    reach = np.isfinite(from_start) & (from_start <= need + 1.0) & (from_start >= need)
-    if reach.any():
-        # The cell at the right distance that lies farthest from the goal: "behind" the leader.
-        cells = np.argwhere(reach)
-        tail = tuple(cells[int(np.argmax(to_goal[reach]))])
-        tail_path = astar(cmap.blocked, start, tail)
-        if tail_path is not None:
-            line = Polyline(cmap.centres(np.array(tail_path)))
-            if line.length >= need - 1e-6:
-                for k in range(1, n):
-                    positions[k] = line.at(k * cfg.spacing)
-                return positions, ahead()
-    # Packed start: free cells by distance from the leader, at least `spacing` from every robot placed.
-    order = np.argwhere(np.isfinite(from_start))
-    order = order[np.argsort(from_start[order[:, 0], order[:, 1]], kind="stable")]
-    xy = cmap.centres(order)
-    placed = 1
-    min_d2 = (max(2 * cfg.robot_radius + 0.1, 0.8 * cfg.spacing)) ** 2
-    for p in xy:
-        d2 = ((positions[:placed] - p) ** 2).sum(axis=1)
-        if d2.min() >= min_d2:
-            positions[placed] = p
-            placed += 1
-            if placed == n:
-                return positions, ahead()
-    raise ValueError(
-        f"robot_chain_v0: {n} robots do not fit on the free floor around the start; use fewer robots or a larger map"
-    )
+    # Exact up to need + 1 m: only that far is searched.
+    start_cells = distance_field(cmap.blocked, start, (need + 1.0) / res)
+    from_start = start_cells * res
+    reach = (from_start >= need) & (from_start <= need + 1.0)
+    if not reach.any():
+        return None
+    cells = np.argwhere(reach)
+    i, j = (int(v) for v in cells[int(np.argmax(to_goal[reach]))])
+    tail = (i, j)
+    tail_path = descend(cmap.blocked, start_cells, tail)
+    if tail_path is None:
+        return None
+    line = Polyline(cmap.centres(np.array(tail_path)))
+    back = line.length
+    if back < need - 1e-6:
+        return None
+    followers = np.array([line.at(back - k * cfg.spacing) for k in range(1, n)])
+    grid_cells = cmap.grid.world_to_cell(followers)
+    rows = np.clip(grid_cells[:, 0], 0, cmap.grid.height - 1)
+    cols = np.clip(grid_cells[:, 1], 0, cmap.grid.width - 1)
+    if np.any(to_goal[rows, cols] < to_goal[start]):
+        return None
+    return line.between(back - need, back)  # from the last robot's place to the leader
 
 
 def drop_spot(

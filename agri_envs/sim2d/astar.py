@@ -33,7 +33,7 @@ def _astar_kernel(blocked: np.ndarray, start: int, goal: int, parent: np.ndarray
     """A* from flat cell ``start`` to ``goal``; returns the path cost (inf: no path).
 
     Fills ``parent`` and ``g`` (which the caller fills with inf). ``goal = -1`` expands every reachable cell
-    (Dijkstra, h = 0).
+    (Dijkstra, h = 0; :func:`distance_field` uses the faster :func:`_field_kernel` for that).
     """
     h_rows, w_cols = blocked.shape
     n = h_rows * w_cols
@@ -169,12 +169,77 @@ def astar(occupancy: np.ndarray, start: tuple[int, int], goal: tuple[int, int]) 
     return [(c // w, c % w) for c in reversed(cells)]
 
 
-def distance_field(occupancy: np.ndarray, start: tuple[int, int]) -> np.ndarray:
+@numba.njit(cache=True)
+def _field_kernel(blocked: np.ndarray, start: int, limit: float, g: np.ndarray) -> None:
+    """Shortest-path lengths from flat cell ``start`` into ``g`` (filled with inf by the caller), up to ``limit``.
+
+    Dinitz's bucket form of Dijkstra's algorithm: bucket ``b`` holds the cells whose tentative distance lies
+    in ``[b, b + 1)``. Every step costs at least 1 (the bucket width), so no cell of bucket ``b`` can improve
+    another one of the same bucket: a bucket's cells are final when it is reached and are expanded in any
+    order, with no priority queue. A step costs less than 2, so a cell of bucket ``b`` only ever lands in
+    bucket ``b + 1`` or ``b + 2``: three stacks in a ring hold every live bucket. Cells farther than
+    ``limit`` are not expanded (their ``g`` may hold a tentative value above ``limit``, or inf).
+
+    The neighbour loop repeats :func:`_astar_kernel`'s on purpose: factored into a shared compiled helper it
+    made this kernel about 2x slower (0.76 -> 1.5 ms on the default office) and A* 20 % slower.
+    """
+    h_rows, w_cols = blocked.shape
+    n = h_rows * w_cols
+    flat = blocked.ravel()
+    stacks = np.empty((3, n), dtype=np.int64)
+    sizes = np.zeros(3, dtype=np.int64)
+    where = np.full(n, -1, dtype=np.int64)  # the bucket a cell waits in, -1 when none (or expanded)
+    g[start] = 0.0
+    stacks[0, 0] = start
+    sizes[0] = 1
+    where[start] = 0
+    b = 0
+    pending = 1
+    while pending > 0 and b <= limit:
+        slot = b % 3
+        while sizes[slot] > 0:
+            sizes[slot] -= 1
+            pending -= 1
+            node = stacks[slot, sizes[slot]]
+            if where[node] != b:
+                continue  # a stale entry: the cell moved to an earlier bucket and was expanded there
+            where[node] = -2
+            i, j = node // w_cols, node % w_cols
+            gn = g[node]
+            for d in range(8):
+                ni = i + _DI[d]
+                nj = j + _DJ[d]
+                if ni < 0 or ni >= h_rows or nj < 0 or nj >= w_cols:
+                    continue
+                m = ni * w_cols + nj
+                if flat[m] or where[m] == -2:
+                    continue
+                if d >= 4:
+                    if flat[i * w_cols + nj] or flat[ni * w_cols + j]:
+                        continue  # the corner-cutting rule of astar()
+                    cost = gn + _SQRT2
+                else:
+                    cost = gn + 1.0
+                if cost < g[m]:
+                    g[m] = cost
+                    nb = int(cost)
+                    if where[m] != nb:
+                        where[m] = nb
+                        t = nb % 3
+                        stacks[t, sizes[t]] = m
+                        sizes[t] += 1
+                        pending += 1
+        b += 1
+
+
+def distance_field(occupancy: np.ndarray, start: tuple[int, int], max_distance: float = math.inf) -> np.ndarray:
     """Shortest-path length (cells) from ``start`` to every cell on the same graph as :func:`astar`.
 
     Args:
         occupancy: ``(H, W)`` boolean array, True = blocked.
         start: ``(row, col)`` source cell.
+        max_distance: Stop the search beyond this length (cells): cells farther away come back as inf or
+            as a tentative length above ``max_distance``; every length up to it is exact.
 
     Returns:
         ``(H, W)`` float64 distances, inf where unreachable (everywhere when ``start`` is blocked).
@@ -183,8 +248,69 @@ def distance_field(occupancy: np.ndarray, start: tuple[int, int]) -> np.ndarray:
     s = _cell(start, blocked.shape, "start")
     g = np.full(blocked.size, np.inf)
     if not blocked[s]:
-        _astar_kernel(blocked, s[0] * blocked.shape[1] + s[1], -1, np.empty(blocked.size, dtype=np.int64), g)
+        _field_kernel(blocked, s[0] * blocked.shape[1] + s[1], float(max_distance), g)
     return g.reshape(blocked.shape)
+
+
+@numba.njit(cache=True)
+def _descend_kernel(blocked: np.ndarray, field: np.ndarray, cell: int, out: np.ndarray) -> int:
+    h_rows, w_cols = blocked.shape
+    flat = blocked.ravel()
+    g = field.ravel()
+    k = 0
+    out[0] = cell
+    while g[cell] > 0.0 and k + 1 < out.shape[0]:
+        i, j = cell // w_cols, cell % w_cols
+        best = -1
+        best_cost = math.inf
+        for d in range(8):
+            ni = i + _DI[d]
+            nj = j + _DJ[d]
+            if ni < 0 or ni >= h_rows or nj < 0 or nj >= w_cols:
+                continue
+            m = ni * w_cols + nj
+            if flat[m]:
+                continue
+            if d >= 4:
+                if flat[i * w_cols + nj] or flat[ni * w_cols + j]:
+                    continue
+                c = g[m] + _SQRT2
+            else:
+                c = g[m] + 1.0
+            if c < best_cost:
+                best = m
+                best_cost = c
+        if best < 0 or not g[best] < g[cell]:
+            return -1
+        cell = best
+        k += 1
+        out[k] = cell
+    return k + 1 if g[cell] == 0.0 else -1
+
+
+def descend(occupancy: np.ndarray, field: np.ndarray, cell: tuple[int, int]) -> list[tuple[int, int]] | None:
+    """A shortest path from ``cell`` to the source of ``field`` (a :func:`distance_field` of ``occupancy``).
+
+    Each step goes to a neighbour that lies on a shortest path (its length plus the step's cost equals the
+    cell's length), so the path costs exactly ``field[cell]``: the length :func:`astar` finds between the
+    two cells, read off the field in one pass instead of a new search.
+
+    Returns:
+        The cells from ``cell`` to the source inclusive, or None when ``cell`` is unreachable.
+    """
+    blocked = np.ascontiguousarray(occupancy, dtype=np.bool_)
+    f = np.ascontiguousarray(field, dtype=np.float64)
+    if f.shape != blocked.shape:
+        raise ValueError(f"descend: field shape {f.shape} differs from the grid's {blocked.shape}")
+    c = _cell(cell, blocked.shape, "cell")
+    if not math.isfinite(f[c]):
+        return None
+    w = blocked.shape[1]
+    out = np.empty(blocked.size, dtype=np.int64)
+    k = _descend_kernel(blocked, f, c[0] * w + c[1], out)
+    if k < 0:
+        return None
+    return [(int(v) // w, int(v) % w) for v in out[:k]]
 
 
 def path_cost(path: list[tuple[int, int]]) -> float:

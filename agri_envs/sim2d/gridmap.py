@@ -28,6 +28,7 @@ import os
 from pathlib import Path
 from typing import Any
 
+import numba
 import numpy as np
 import yaml
 
@@ -168,29 +169,90 @@ class OccupancyGrid:
 # --------------------------------------------------------------------------------------------------
 
 
-def _cell_range(lo: float, hi: float, start: float, res: float, n: int) -> tuple[int, int]:
+@numba.njit(cache=True)
+def _window(lo: float, hi: float, start: float, res: float, n: int) -> tuple[int, int]:
     """Half-open index range of the cells whose centres ``start + (k + 0.5) * res`` lie in ``[lo, hi]``."""
     k0 = max(0, math.ceil((lo - start) / res - 0.5))
     k1 = min(n, math.floor((hi - start) / res - 0.5) + 1)
     return k0, k1
 
 
-def _segment_distance_sq(px: np.ndarray, py: np.ndarray, ax: float, ay: float, bx: float, by: float) -> np.ndarray:
-    """Squared distance from points to segment ``a-b`` (broadcasting over ``px``, ``py``)."""
-    ex, ey = bx - ax, by - ay
-    l2 = ex * ex + ey * ey
-    dx, dy = px - ax, py - ay
-    if l2 == 0.0:
-        return dx * dx + dy * dy
-    t = np.clip((dx * ex + dy * ey) / l2, 0.0, 1.0)
-    qx, qy = dx - t * ex, dy - t * ey
-    return qx * qx + qy * qy
+@numba.njit(cache=True)
+def _rasterize_kernel(
+    occ: np.ndarray,
+    xs: np.ndarray,
+    ys: np.ndarray,
+    xmin: float,
+    ymin: float,
+    res: float,
+    circles: np.ndarray,
+    capsules: np.ndarray,
+    vertices: np.ndarray,
+    starts: np.ndarray,
+) -> None:
+    """Mark the cells whose centre lies in a circle, within a capsule's radius, or in a convex polygon.
+
+    Every primitive is tested over the cells of its bounding box only; the arithmetic is that of the
+    vectorised numpy form this replaced, term for term, so the grids are the same bit for bit.
+    """
+    height, width = occ.shape
+    for c in range(circles.shape[0]):
+        cx, cy, r = circles[c, 0], circles[c, 1], circles[c, 2]
+        j0, j1 = _window(cx - r, cx + r, xmin, res, width)
+        i0, i1 = _window(cy - r, cy + r, ymin, res, height)
+        for i in range(i0, i1):
+            for j in range(j0, j1):
+                if (xs[j] - cx) ** 2 + (ys[i] - cy) ** 2 <= r * r:
+                    occ[i, j] = True
+    for c in range(capsules.shape[0]):
+        ax, ay, bx, by, r = capsules[c, 0], capsules[c, 1], capsules[c, 2], capsules[c, 3], capsules[c, 4]
+        j0, j1 = _window(min(ax, bx) - r, max(ax, bx) + r, xmin, res, width)
+        i0, i1 = _window(min(ay, by) - r, max(ay, by) + r, ymin, res, height)
+        ex, ey = bx - ax, by - ay
+        l2 = ex * ex + ey * ey
+        for i in range(i0, i1):
+            dy = ys[i] - ay
+            for j in range(j0, j1):
+                dx = xs[j] - ax
+                if l2 == 0.0:
+                    d = dx * dx + dy * dy
+                else:
+                    t = min(max((dx * ex + dy * ey) / l2, 0.0), 1.0)
+                    qx, qy = dx - t * ex, dy - t * ey
+                    d = qx * qx + qy * qy
+                if d <= r * r:
+                    occ[i, j] = True
+    for p in range(starts.shape[0] - 1):
+        a0, a1 = starts[p], starts[p + 1]
+        vx0, vy0 = vertices[a0, 0], vertices[a0, 1]
+        vx1, vy1 = vx0, vy0
+        for k in range(a0, a1):
+            vx0, vy0 = min(vx0, vertices[k, 0]), min(vy0, vertices[k, 1])
+            vx1, vy1 = max(vx1, vertices[k, 0]), max(vy1, vertices[k, 1])
+        j0, j1 = _window(vx0, vx1, xmin, res, width)
+        i0, i1 = _window(vy0, vy1, ymin, res, height)
+        for i in range(i0, i1):
+            py = ys[i]
+            for j in range(j0, j1):
+                px = xs[j]
+                inside = True
+                for k in range(a0, a1):
+                    nk = k + 1 if k + 1 < a1 else a0
+                    ax, ay = vertices[k, 0], vertices[k, 1]
+                    bx, by = vertices[nk, 0], vertices[nk, 1]
+                    if not (bx - ax) * (py - ay) - (by - ay) * (px - ax) >= 0.0:
+                        inside = False
+                        break
+                if inside:
+                    occ[i, j] = True
 
 
-def _edge_key(ax: float, ay: float, bx: float, by: float) -> tuple[float, ...]:
-    """Order-independent key of a segment, for recognising polygon edges among the capsules."""
-    a, b = (round(ax, 9), round(ay, 9)), (round(bx, 9), round(by, 9))
-    return (*min(a, b), *max(a, b))
+def _edge_keys(segments: np.ndarray) -> np.ndarray:
+    """Order-independent keys ``(k, 4)`` of segments ``(k, 4)`` ``ax, ay, bx, by`` (rounded end points, lower first)."""
+    a = np.round(np.asarray(segments, dtype=np.float64).reshape(-1, 4), 9)
+    swap = (a[:, 0] > a[:, 2]) | ((a[:, 0] == a[:, 2]) & (a[:, 1] > a[:, 3]))
+    a[swap] = a[swap][:, [2, 3, 0, 1]]
+    return a
 
 
 def rasterize(
@@ -237,49 +299,27 @@ def rasterize(
         )
     xs = xmin + (np.arange(width) + 0.5) * res
     ys = ymin + (np.arange(height) + 0.5) * res
-    occ = np.zeros((height, width), dtype=bool)
-
-    def window(x0: float, y0: float, x1: float, y1: float) -> tuple[slice, slice, np.ndarray, np.ndarray] | None:
-        j0, j1 = _cell_range(x0, x1, xmin, res, width)
-        i0, i1 = _cell_range(y0, y1, ymin, res, height)
-        if j0 >= j1 or i0 >= i1:
-            return None
-        return slice(i0, i1), slice(j0, j1), xs[None, j0:j1], ys[i0:i1, None]
-
-    for cx, cy, r in np.asarray(geometry.circles, dtype=np.float64).reshape(-1, 3):
-        w = window(cx - r, cy - r, cx + r, cy + r)
-        if w is not None:
-            si, sj, px, py = w
-            occ[si, sj] |= (px - cx) ** 2 + (py - cy) ** 2 <= r * r
-
-    polygon_edges = set()
-    for poly in geometry.polygons:
-        v = np.asarray(poly, dtype=np.float64)
-        for a, b in zip(v, np.roll(v, -1, axis=0), strict=True):
-            polygon_edges.add(_edge_key(a[0], a[1], b[0], b[1]))
-    for ax, ay, bx, by, r in np.asarray(geometry.capsules, dtype=np.float64).reshape(-1, 5):
-        if r == 0.0:
-            if _edge_key(ax, ay, bx, by) in polygon_edges:
-                continue
-            r = 0.5 * res
-        w = window(min(ax, bx) - r, min(ay, by) - r, max(ax, bx) + r, max(ay, by) + r)
-        if w is not None:
-            si, sj, px, py = w
-            occ[si, sj] |= _segment_distance_sq(px, py, ax, ay, bx, by) <= r * r
-
+    occ = np.zeros((height, width), dtype=np.bool_)
+    circles = np.asarray(geometry.circles, dtype=np.float64).reshape(-1, 3)
+    capsules = np.asarray(geometry.capsules, dtype=np.float64).reshape(-1, 5).copy()
+    thin = np.flatnonzero(capsules[:, 4] == 0.0)
+    keep = np.ones(len(capsules), dtype=bool)
+    if len(thin):
+        # Zero-radius capsules that are polygon edges are covered by their polygon; the others are
+        # free-standing thin walls, drawn one cell thick.
+        edges = [np.hstack([v, np.roll(v, -1, axis=0)]) for v in map(np.asarray, geometry.polygons)]
+        polygon_edges = set(map(tuple, _edge_keys(np.vstack(edges)).tolist())) if edges else set()
+        is_edge = np.array([key in polygon_edges for key in map(tuple, _edge_keys(capsules[thin, :4]).tolist())])
+        keep[thin[is_edge]] = False
+        capsules[thin[~is_edge], 4] = 0.5 * res
+    vertices, starts = [], [0]
     for poly in geometry.polygons:
         v = np.asarray(poly, dtype=np.float64).reshape(-1, 2)
         area2 = float(np.sum(v[:, 0] * np.roll(v[:, 1], -1) - np.roll(v[:, 0], -1) * v[:, 1]))
-        if area2 < 0:
-            v = v[::-1]
-        w = window(*v.min(axis=0), *v.max(axis=0))
-        if w is not None:
-            si, sj, px, py = w
-            inside = np.ones((py.shape[0], px.shape[1]), dtype=bool)
-            # Convex and counter-clockwise: inside = on the left of (or on) every edge.
-            for a, b in zip(v, np.roll(v, -1, axis=0), strict=True):
-                inside &= (b[0] - a[0]) * (py - a[1]) - (b[1] - a[1]) * (px - a[0]) >= 0.0
-            occ[si, sj] |= inside
+        vertices.append(v[::-1] if area2 < 0 else v)  # counter-clockwise
+        starts.append(starts[-1] + len(v))
+    flat = np.vstack(vertices) if vertices else np.zeros((0, 2))
+    _rasterize_kernel(occ, xs, ys, xmin, ymin, res, circles, capsules[keep], flat, np.array(starts, dtype=np.int64))
 
     data = np.where(occ, np.int8(OCCUPIED), np.int8(FREE)).astype(np.int8)
     if unknown_outside:

@@ -53,27 +53,46 @@ class Polyline:
         seg = np.hypot(*np.diff(p, axis=0).T)
         self.cumulative = np.concatenate([[0.0], np.cumsum(seg)])
         self.length = float(self.cumulative[-1])
-        self._cum = self.cumulative.tolist()
-        self._pts = [(float(a), float(b)) for a, b in p]
+        self._lists: tuple[list[float], list[tuple[float, float]]] | None = None
+
+    def _as_lists(self) -> tuple[list[float], list[tuple[float, float]]]:
+        """Arc lengths and vertices as Python floats (fast scalar lookups), made on first use."""
+        if self._lists is None:
+            self._lists = (self.cumulative.tolist(), [(float(a), float(b)) for a, b in self.points.tolist()])
+        return self._lists
 
     def at(self, s: float) -> np.ndarray:
         """Point at arc length ``s`` (clamped to the ends)."""
         x, y = self.xy_at(s)
         return np.array([x, y])
 
+    def at_many(self, s: np.ndarray) -> np.ndarray:
+        """Points ``(k, 2)`` at arc lengths ``s`` (clamped to the ends), in one vectorised pass."""
+        a = np.clip(np.asarray(s, dtype=np.float64), 0.0, self.length)
+        return np.stack(
+            [np.interp(a, self.cumulative, self.points[:, 0]), np.interp(a, self.cumulative, self.points[:, 1])], -1
+        )
+
     def xy_at(self, s: float) -> tuple[float, float]:
         """:meth:`at` as two floats."""
-        c = self._cum
+        c, pts = self._as_lists()
         s = min(max(s, 0.0), self.length)
         k = min(max(bisect.bisect_right(c, s) - 1, 0), len(c) - 2)
         span = c[k + 1] - c[k]
         t = 0.0 if span <= 0 else (s - c[k]) / span
-        (ax, ay), (bx, by) = self._pts[k], self._pts[k + 1]
+        (ax, ay), (bx, by) = pts[k], pts[k + 1]
         return ax + t * (bx - ax), ay + t * (by - ay)
+
+    def between(self, s_from: float, s_to: float) -> Polyline:
+        """The part of the path from arc length ``s_from`` to ``s_to`` (clamped; ends interpolated)."""
+        lo = min(max(s_from, 0.0), self.length)
+        hi = min(max(s_to, lo), self.length)
+        inner = self.points[(self.cumulative > lo) & (self.cumulative < hi)]
+        return Polyline(np.vstack([self.at(lo)[None], inner, self.at(hi)[None]]))
 
     def project(self, xy: np.ndarray, s_from: float, s_to: float) -> float:
         """Arc length of the point of the path nearest to ``xy``, searched between ``s_from`` and ``s_to``."""
-        c = self._cum
+        c = self._as_lists()[0]
         k0 = max(0, bisect.bisect_right(c, s_from) - 1)
         k1 = min(len(c) - 1, bisect.bisect_left(c, s_to) + 1)
         if k1 <= k0:

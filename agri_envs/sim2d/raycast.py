@@ -237,10 +237,13 @@ def _sonar_body(
     max_range: float,
     circles: np.ndarray,
     capsules: np.ndarray,
-    skip: int,
+    circle_rows: np.ndarray,
+    n_circles: int,
+    capsule_rows: np.ndarray,
+    n_capsules: int,
     out: np.ndarray,
 ) -> None:
-    """:func:`sonar_ranges` for one body, ignoring circle ``skip`` (the body itself; -1: none)."""
+    """:func:`sonar_ranges` for one body, over the circles ``circle_rows[:n_circles]`` and capsules likewise."""
     ex_x = math.cos(half_aperture)
     ex_y = math.sin(half_aperture)
     cb = math.cos(body_yaw)
@@ -251,9 +254,8 @@ def _sonar_body(
         ch = math.cos(body_yaw + mounts[j, 2])
         sh = math.sin(body_yaw + mounts[j, 2])
         best = max_range
-        for i in range(circles.shape[0]):
-            if i == skip:
-                continue
+        for c in range(n_circles):
+            i = circle_rows[c]
             wx = circles[i, 0] - ox
             wy = circles[i, 1] - oy
             r = circles[i, 2]
@@ -270,7 +272,8 @@ def _sonar_body(
             if abs(math.atan2(ly, lx)) > half_aperture + math.asin(r / d):
                 continue
             best = min(best, _ray_circle(lx, ly, r, ex_x, ex_y), _ray_circle(lx, ly, r, ex_x, -ex_y))
-        for i in range(capsules.shape[0]):
+        for c in range(n_capsules):
+            i = capsule_rows[c]
             ax, ay, bx, by = _capsule_in_frame(capsules, i, ox, oy, ch, sh)
             r = capsules[i, 4]
             qx, qy = _closest_on_segment(ax, ay, bx, by)
@@ -284,6 +287,39 @@ def _sonar_body(
             t2 = _ray_capsule(ax, ay, bx, by, r, ex_x, -ex_y)
             best = min(best, t1, t2)
         out[j] = best
+
+
+@numba.njit(cache=True)
+def _near_rows(
+    x: float,
+    y: float,
+    reach: float,
+    circles: np.ndarray,
+    capsules: np.ndarray,
+    skip: int,
+    circle_rows: np.ndarray,
+    capsule_rows: np.ndarray,
+) -> tuple[int, int]:
+    """Rows of the circles and capsules that come within ``reach`` of ``(x, y)`` (circle ``skip`` left out).
+
+    The broad phase of :func:`sonar_ranges_many`: a primitive farther than the sonars' range plus their
+    distance from the body centre cannot echo in any of the body's cones, so leaving it out changes
+    nothing; every sonar then tests only the primitives near its body.
+    """
+    n_c = 0
+    for i in range(circles.shape[0]):
+        if i == skip:
+            continue
+        if math.hypot(circles[i, 0] - x, circles[i, 1] - y) - circles[i, 2] < reach:
+            circle_rows[n_c] = i
+            n_c += 1
+    n_s = 0
+    for i in range(capsules.shape[0]):
+        qx, qy = _closest_on_segment(capsules[i, 0] - x, capsules[i, 1] - y, capsules[i, 2] - x, capsules[i, 3] - y)
+        if math.sqrt(qx * qx + qy * qy) - capsules[i, 4] < reach:
+            capsule_rows[n_s] = i
+            n_s += 1
+    return n_c, n_s
 
 
 @numba.njit(cache=True)
@@ -317,7 +353,9 @@ def sonar_ranges(
         capsules: ``(n_s, 5)`` capsules.
         out: ``(k,)`` output distances (m).
     """
-    _sonar_body(body_x, body_y, body_yaw, mounts, half_aperture, max_range, circles, capsules, -1, out)
+    poses = np.empty((1, 3))
+    poses[0, 0], poses[0, 1], poses[0, 2] = body_x, body_y, body_yaw
+    sonar_ranges_many(poses, mounts, half_aperture, max_range, circles, capsules, np.full(1, -1), out.reshape(1, -1))
 
 
 @numba.njit(cache=True)
@@ -343,9 +381,29 @@ def sonar_ranges_many(
         skip: ``(n,)`` row of ``circles`` that is body ``b`` itself (never sensed by its own sonars), -1: none.
         out: ``(n, k)`` output distances (m).
     """
+    circle_rows = np.empty(circles.shape[0], dtype=np.int64)
+    capsule_rows = np.empty(capsules.shape[0], dtype=np.int64)
+    mount_reach = 0.0
+    for j in range(mounts.shape[0]):
+        mount_reach = max(mount_reach, math.hypot(mounts[j, 0], mounts[j, 1]))
+    reach = max_range + mount_reach + 1e-9
     for b in range(poses.shape[0]):
+        x, y = poses[b, 0], poses[b, 1]
+        n_c, n_s = _near_rows(x, y, reach, circles, capsules, skip[b], circle_rows, capsule_rows)
         _sonar_body(
-            poses[b, 0], poses[b, 1], poses[b, 2], mounts, half_aperture, max_range, circles, capsules, skip[b], out[b]
+            x,
+            y,
+            poses[b, 2],
+            mounts,
+            half_aperture,
+            max_range,
+            circles,
+            capsules,
+            circle_rows,
+            n_c,
+            capsule_rows,
+            n_s,
+            out[b],
         )
 
 

@@ -298,6 +298,67 @@ class World2D:
         robot.w = 0.0
         self._sync(robot, robot.pose)
 
+    def add_disc_robots(self, spec: DiffDriveSpec, poses: np.ndarray, radius: float) -> list[RobotBody]:
+        """Add ``len(poses)`` round robots of one size at once (what :meth:`add_robot` does, in one pass).
+
+        Args:
+            spec: Size and limits, shared by all.
+            poses: ``(n, 3)`` start poses ``(x, y, yaw)``.
+            radius: Disc radius (m), > 0.
+
+        Returns:
+            The new robots, in order.
+
+        Raises:
+            ValueError: For a non-positive radius or poses not of shape ``(n, 3)``.
+        """
+        p = np.asarray(poses, dtype=np.float64)
+        if p.ndim != 2 or p.shape[1] != 3:
+            raise ValueError(f"add_disc_robots: poses must have shape (n, 3), got {p.shape}")
+        if not radius > 0:
+            raise ValueError(f"add_disc_robots: radius must be > 0 (m), got {radius}")
+        if len(p) == 0:
+            return []
+        if len(self.robots) + len(p) < 2:
+            return [self.add_robot(spec, p[0], radius)]
+        first = len(self.robots)
+        new: list[RobotBody] = []
+        bodies: list[pymunk.Body | pymunk.Shape] = []
+        for k in range(len(p)):
+            body = pymunk.Body(body_type=pymunk.Body.KINEMATIC)
+            shape = pymunk.Circle(body, float(radius))
+            shape.filter = pymunk.ShapeFilter(group=_ROBOT_GROUP_BASE + first + k)
+            body.position = (float(p[k, 0]), float(p[k, 1]))
+            body.angle = float(p[k, 2])
+            bodies += (body, shape)
+            new.append(
+                RobotBody(spec=spec, pose=p[k].copy(), v=0.0, w=0.0, body=body, shape=shape, radius=float(radius))
+            )
+        self.space.add(*bodies)
+        self.robots.extend(new)
+        rows: list[list[float]] = []
+        for r in self.robots:  # the first robot of a world gets its row once a second one arrives
+            if r.circle_index < 0:
+                r.circle_index = len(self.circles) + len(rows)
+                outline = r.radius if r.radius > 0 else r.spec.circumradius
+                rows.append([float(r.pose[0]), float(r.pose[1]), outline])
+        self.circles = np.vstack([self.circles, np.array(rows).reshape(-1, 3)])
+        return new
+
+
+    def place_robots(self, robots: Sequence[RobotBody], poses: np.ndarray) -> None:
+        """Put robots at new poses, at rest (a new episode), without making new bodies.
+
+        Args:
+            robots: Robots of this world.
+            poses: ``(n, 3)`` poses ``(x, y, yaw)``.
+        """
+        p = np.asarray(poses, dtype=np.float64).reshape(-1, 3)
+        for robot, pose in zip(robots, p, strict=True):
+            robot.pose = pose.copy()
+            robot.v = robot.w = 0.0
+            self._sync(robot, robot.pose)
+
     def _sync(self, robot: RobotBody, pose: np.ndarray) -> None:
         robot.body.position = (float(pose[0]), float(pose[1]))
         robot.body.angle = float(pose[2])

@@ -150,7 +150,7 @@ class Suite:
 
     @property
     def env_version(self) -> str:
-        """The env's version tag, e.g. ``v1`` (``v0`` for ``robot_chain_v0``)."""
+        """The env's version tag, e.g. ``v1`` (``v1`` for ``robot_chain_v1``)."""
         return agri_envs.env_version(self.env_id)
 
     @property

@@ -3,10 +3,12 @@
 Evaluation never sees them.
 
 They are declared in a hyperparameter block's ``train_wrappers`` (by name, like ``wrappers``) and wrap
-only the training envs: periodic evaluation, ``agri evaluate`` and the leaderboard run the plain env. Each
-has a vector form (:data:`VECTOR_TRAIN_WRAPPERS`, the same names) for the vector envs ``agri train`` drives
-through :class:`~agri_training.learned.vec_env.VectorVecEnv`: it acts per sub-env and draws the same numbers
-as the single-env wrapper on each sub-env would.
+only the training envs: periodic evaluation, ``agri evaluate`` and the leaderboard run the plain env.
+Gymnasium envs take the names of :data:`TRAIN_WRAPPERS`, PettingZoo parallel envs (the robot chain) those of
+:data:`PARALLEL_TRAIN_WRAPPERS`. Each Gymnasium curriculum has a vector form (:data:`VECTOR_TRAIN_WRAPPERS`,
+the same names) for the vector envs ``agri train`` drives through
+:class:`~agri_training.learned.vec_env.VectorVecEnv`: it acts per sub-env and draws the same numbers as the
+single-env wrapper on each sub-env would.
 """
 
 from __future__ import annotations
@@ -17,6 +19,7 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 from gymnasium.vector import VectorEnv, VectorWrapper
+from pettingzoo.utils.wrappers import BaseParallelWrapper
 
 from agri_training.learned.harvest import HarvestLegs
 from agri_training.learned.policy import wrap_by_name
@@ -113,12 +116,100 @@ class CrashCostRamp(CrashShare, gym.Wrapper[Any, Any, Any, Any]):
         return obs, float(reward) + (1.0 - self.share) * penalty, terminated, truncated, info
 
 
+class ShortMissions(BaseParallelWrapper):  # type: ignore[misc]
+    """Start a share of robot_chain's training episodes near the goal; the share shrinks as training goes on.
+
+    A chain that has never arrived cannot learn what arriving pays. Early on, most episodes start with the
+    leader ``goal_distance`` metres from the goal along the free floor (the env's ``reset`` option of that
+    name); the share of such episodes falls linearly from ``start`` to ``end`` over this env copy's first
+    ``ramp_steps`` steps, and the rest of the episodes are the env's own (at least ``min_goal_distance``).
+
+    Args:
+        env: A robot_chain parallel env.
+        goal_distance: ``(lo, hi)`` metres of a short mission.
+        start: Share of short missions at first, in [0, 1].
+        end: Share after ``ramp_steps``, in [0, 1].
+        ramp_steps: Steps of this env copy (parallel steps, every robot once) over which the share goes from
+            ``start`` to ``end``, >= 1.
+    """
+
+    def __init__(
+        self,
+        env: Any,
+        goal_distance: Sequence[float] = (1.0, 3.0),
+        start: float = 1.0,
+        end: float = 0.2,
+        ramp_steps: int = 100_000,
+    ) -> None:
+        lo, hi = (float(v) for v in goal_distance)
+        if not 0.0 <= lo <= hi:
+            raise ValueError(f"ShortMissions: goal_distance must be (lo, hi) with 0 <= lo <= hi, got {goal_distance}")
+        for name, value in (("start", start), ("end", end)):
+            if not 0.0 <= value <= 1.0:
+                raise ValueError(f"ShortMissions: {name} must be in [0, 1], got {value}")
+        if ramp_steps < 1:
+            raise ValueError(f"ShortMissions: ramp_steps must be >= 1, got {ramp_steps}")
+        super().__init__(env)
+        self.goal_distance = (lo, hi)
+        self.start, self.end, self.ramp_steps = float(start), float(end), int(ramp_steps)
+        self.steps = 0
+        self._rng = np.random.default_rng(0)
+
+    @property
+    def share(self) -> float:
+        """The share of short missions now."""
+        return self.start + (self.end - self.start) * min(1.0, self.steps / self.ramp_steps)
+
+    def reset(
+        self, seed: int | None = None, options: dict[str, Any] | None = None
+    ) -> tuple[dict[str, Any], dict[str, Any]]:
+        """Reset, as a short mission with probability :attr:`share`."""
+        if seed is not None:
+            self._rng = np.random.default_rng([seed, 2])
+        options = dict(options or {})
+        if "goal_distance" not in options and self._rng.random() < self.share:
+            options["goal_distance"] = self.goal_distance
+        result: tuple[dict[str, Any], dict[str, Any]] = self.env.reset(seed=seed, options=options or None)
+        return result
+
+    def step(self, actions: dict[str, Any]) -> tuple[Any, Any, Any, Any, Any]:
+        """Step the env and count the step."""
+        self.steps += 1
+        result: tuple[Any, Any, Any, Any, Any] = self.env.step(actions)
+        return result
+
+
 #: Training wrappers a config may declare (by name; nothing is imported from a string).
 TRAIN_WRAPPERS: dict[str, type[gym.Wrapper[Any, Any, Any, Any]]] = {
     "RandomStartWaypoint": RandomStartWaypoint,
     "CrashCostRamp": CrashCostRamp,
     "HarvestLegs": HarvestLegs,
 }
+
+
+#: Training wrappers of PettingZoo parallel envs (the robot chain), likewise by name.
+PARALLEL_TRAIN_WRAPPERS: dict[str, type[Any]] = {"ShortMissions": ShortMissions}
+
+
+def check_wrapper_names(wrappers: Sequence[str | Mapping[str, Any]], allowed: Mapping[str, Any], kind: str) -> None:
+    """Refuse declared wrappers whose names are not in ``allowed`` (before any env is made).
+
+    Raises:
+        ValueError: Naming the wrapper and the allowed names.
+    """
+    for item in wrappers:
+        name = item if isinstance(item, str) else next(iter(item), None) if isinstance(item, Mapping) else None
+        if name not in allowed:
+            raise ValueError(f"{kind} {name!r} is not allowed; allowed: {', '.join(allowed)}")
+
+
+def apply_parallel_train_wrappers(env: Any, wrappers: Sequence[str | Mapping[str, Any]]) -> Any:
+    """Wrap a parallel env in the declared training wrappers, innermost first (:data:`PARALLEL_TRAIN_WRAPPERS`).
+
+    Raises:
+        ValueError: For a wrapper that is not in :data:`PARALLEL_TRAIN_WRAPPERS`, or a malformed entry.
+    """
+    return wrap_by_name(env, wrappers, PARALLEL_TRAIN_WRAPPERS, kind="training wrapper")
 
 
 def apply_train_wrappers(env: gym.Env[Any, Any], wrappers: Sequence[str | Mapping[str, Any]]) -> gym.Env[Any, Any]:

@@ -1,4 +1,4 @@
-"""Report section of robot_chain_v0: formation snapshots (Fig. 8), straightness, the A* path on the map.
+"""Report section of robot_chain_v1: formation snapshots (Fig. 8), straightness, the A* path on the map.
 
 Straightness is compared with and without the elastic strip (the two registered policies).
 """
@@ -10,13 +10,13 @@ from typing import Any
 
 import numpy as np
 
-from agri_envs.chain import robot_chain_v0
+from agri_envs.chain import robot_chain_v1
 from agri_training.report.rover import draw_geometry
 
 
 def _scene(result: dict[str, Any], seed: int) -> Any:
     """The env of a result rebuilt at ``seed`` (the map and the A* path are deterministic)."""
-    env = robot_chain_v0.parallel_env(**result["env_kwargs"])
+    env = robot_chain_v1.parallel_env(**result["env_kwargs"])
     env.reset(seed=seed)
     return env
 
@@ -59,7 +59,7 @@ def report_section(results: list[dict[str, Any]], out_dir: Path) -> str:
     """Plots and a table for the chain results; returns the Markdown section (images saved in ``out_dir``).
 
     Args:
-        results: Evaluation results of robot_chain_v0 (one per policy and scenario level).
+        results: Evaluation results of robot_chain_v1 (one per policy and scenario level).
         out_dir: Report folder; figures go there.
     """
     import matplotlib

@@ -34,7 +34,7 @@ from agri_training.learned import zoo  # noqa: F401  (registers the shipped lear
 ENV_PAGES = (
     ("greenhouse-nav", "agri_envs/GreenhouseNav-v2", ()),
     ("greenhouse-coverage", "agri_envs/GreenhouseCoverage-v0", ()),
-    ("robot-chain", "robot_chain_v0", ()),
+    ("robot-chain", "robot_chain_v1", ()),
     ("grape-harvest", "agri_envs/GrapeHarvest-v1", ("agri_envs/GrapeHarvestReach-v1",)),
 )
 

@@ -48,7 +48,7 @@ from agri_training.learned.zoo import ZOO_DIR
 SECTION_HOOKS: dict[str, str] = {
     "agri_envs/GreenhouseNav-v2": "agri_training.report.rover:report_section",
     "agri_envs/GrapeHarvest-v1": "agri_training.report.arm:report_section",
-    "robot_chain_v0": "agri_training.report.chain:report_section",
+    "robot_chain_v1": "agri_training.report.chain:report_section",
     "agri_envs/GreenhouseCoverage-v0": "agri_training.report.coverage:report_section",
 }
 

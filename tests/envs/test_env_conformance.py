@@ -340,7 +340,7 @@ def test_malformed_actions_are_named_and_leave_the_env_working(env_id):
 
 def test_one_registry_builds_every_env_of_both_kinds():
     ids = agri_envs.env_ids()
-    assert "robot_chain_v0" in ids and set(ENV_IDS) <= set(ids)
+    assert "robot_chain_v1" in ids and set(ENV_IDS) <= set(ids)
     for env_id in ids:
         env = agri_envs.make(env_id)
         try:
@@ -348,7 +348,7 @@ def test_one_registry_builds_every_env_of_both_kinds():
             assert hasattr(env, "possible_agents") == agri_envs.is_parallel_id(env_id)
         finally:
             env.close()
-    with pytest.raises(ValueError, match="unknown env id 'CartPole-v1'.*robot_chain_v0"):
+    with pytest.raises(ValueError, match="unknown env id 'CartPole-v1'.*robot_chain_v1"):
         agri_envs.make("CartPole-v1")
 
 
@@ -358,7 +358,7 @@ PARALLEL_IDS = sorted(agri_envs.PARALLEL_ENVS)
 
 #: Argument sets beyond the defaults, per PettingZoo id (robot counts, scenes, a loaded map).
 PARALLEL_EXTRA_KWARGS: dict[str, list[dict[str, Any]]] = {
-    "robot_chain_v0": [
+    "robot_chain_v1": [
         {"n_robots": 1},
         {"n_robots": 2, "n_dynamic_obstacles": 0},
         {"n_robots": 16, "office_width": 18.0, "office_height": 12.0, "min_goal_distance": 3.0},

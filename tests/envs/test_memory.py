@@ -21,7 +21,7 @@ import agri_envs  # noqa: F401
 
 pytestmark = pytest.mark.skipif(not Path("/proc/self/statm").exists(), reason="reads /proc/self/statm (Linux)")
 
-CHAIN = "robot_chain_v0"
+CHAIN = "robot_chain_v1"
 ENV_IDS = sorted(k for k in gym.registry if k.startswith("agri_envs/")) + [CHAIN]
 
 _PROBE = textwrap.dedent(
@@ -39,10 +39,10 @@ _PROBE = textwrap.dedent(
             return int(f.read().split()[1]) * os.sysconf("SC_PAGE_SIZE") / 2**20
 
     rng = np.random.default_rng(0)
-    if env_id == "robot_chain_v0":
-        from agri_envs.chain import robot_chain_v0
+    if env_id == "robot_chain_v1":
+        from agri_envs.chain import robot_chain_v1
 
-        env = robot_chain_v0.parallel_env()
+        env = robot_chain_v1.parallel_env()
 
         def episode(seed):
             env.reset(seed=seed)

@@ -140,3 +140,24 @@ def test_clearance_matches_brute_force_on_footprint_boundary():
         fast = footprint_clearance(*pose, hl, hw, geometry.circles, geometry.capsules)
         assert fast <= brute + 1e-9
         assert fast == pytest.approx(brute, abs=1e-3)
+
+
+@pytest.mark.parametrize("seed", [5, 6])
+def test_sonars_of_a_team_equal_each_body_alone(seed):
+    # sonar_ranges_many culls, per body, every primitive beyond the sonars' reach: the ranges must be those of
+    # the plain kernel over every primitive, with the body's own circle removed (bit for bit).
+    from agri_envs.sim2d.raycast import sonar_ranges, sonar_ranges_many
+
+    geometry, rng = random_scene(seed)
+    poses = np.array(free_poses(geometry, rng, 12, margin=0.3))
+    bodies = np.column_stack([poses[:, :2], np.full(len(poses), 0.2)])
+    circles = np.vstack([geometry.circles, bodies])
+    rows = len(geometry.circles) + np.arange(len(poses))
+    mounts = np.array([[0.19, 0.0, 0.0], [0.0, 0.19, math.pi / 2], [-0.19, 0.0, math.pi], [0.1, -0.15, -1.0]])
+    many = np.empty((len(poses), len(mounts)))
+    sonar_ranges_many(poses, mounts, 0.4, 3.0, circles, geometry.capsules, rows, many)
+    for b, pose in enumerate(poses):
+        alone = np.empty(len(mounts))
+        sonar_ranges(*pose, mounts, 0.4, 3.0, np.delete(circles, rows[b], axis=0), geometry.capsules, alone)
+        np.testing.assert_array_equal(many[b], alone)
+    assert (many < 3.0).any() and (many == 3.0).any()  # echoes and open space both occur

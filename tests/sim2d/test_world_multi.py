@@ -118,3 +118,42 @@ def test_drive_discs_equals_one_drive_call_per_robot():
         worlds[1].drive_discs(teams[1], np.zeros((5, 2)), 0.1)
     with pytest.raises(ValueError, match="radius"):
         worlds[1].add_robot(DISC, np.zeros(3), radius=0.0)
+
+
+def _other_room():
+    b = GeometryBuilder()
+    for x0, y0, x1, y1 in ((0, 0, 8, 0), (8, 0, 8, 5), (8, 5, 0, 5), (0, 5, 0, 0)):
+        b.capsule(x0, y0, x1, y1, 0.05, Kind.WALL)
+    b.circle(2.0, 2.0, 0.3, Kind.POST)
+    b.circle(6.0, 3.0, 0.1, Kind.POST)
+    b.box(3.0, 0.5, 3.5, 1.5, Kind.OBSTACLE)
+    return b.build((0, 0, 8, 5))
+
+
+def test_a_reused_world_equals_a_fresh_one():
+    # replace_scene + place_robots (a new episode in the same bodies) must leave the world exactly as a world
+    # built from scratch for the new scene with the robots added at the new poses: same sensor arrays, same
+    # motion and contacts.
+    poses_a = np.array([[1.0, 1.0, 0.0], [2.0, 1.0, 0.5], [3.0, 2.5, 1.0]])
+    poses_b = np.array([[1.0, 4.0, -0.3], [5.0, 1.0, 2.0], [4.2, 3.0, 0.0]])
+    reused = World2D(_room(), n_movers=2)
+    robots = reused.add_disc_robots(DISC, poses_a, 0.165)
+    reused.place_mover(1, 9.0, 9.0, 0.2)
+    reused.drive_discs(robots, np.full((3, 2), 0.3), 0.1)
+    geometry = _other_room()
+    reused.set_scene(geometry)
+    reused.place_robots(robots, poses_b)
+    fresh = World2D(geometry, n_movers=2)
+    fresh_robots = fresh.add_disc_robots(DISC, poses_b, 0.165)
+    fresh.place_mover(1, 9.0, 9.0, 0.2)
+    np.testing.assert_array_equal(reused.circles, fresh.circles)
+    np.testing.assert_array_equal(reused.capsules, fresh.capsules)
+    assert [r.circle_index for r in robots] == [r.circle_index for r in fresh_robots]
+    assert reused.max_substep == fresh.max_substep and len(reused.space.shapes) == len(fresh.space.shapes)
+    cmd = np.array([[0.4, 0.0], [0.4, 1.0], [-0.4, 0.3]])
+    for _ in range(30):
+        a = reused.drive_discs(robots, cmd, 0.1)
+        b = fresh.drive_discs(fresh_robots, cmd, 0.1)
+        np.testing.assert_array_equal(a, b)
+        np.testing.assert_array_equal([r.pose for r in robots], [r.pose for r in fresh_robots])
+    assert np.all(reused.circles[:2] == geometry.circles)

@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 import torch
 
+import agri_baselines
 from agri_baselines import PolicySpec, register_policy
 from agri_training import leaderboard as lb
 from agri_training.evaluation import batched, parallel
@@ -81,12 +82,14 @@ def test_traces_and_reruns_match_the_reference_loop(monkeypatch):
         assert len(first["x"]) == doc["episodes"][0]["steps"] + 1 and "slam_x" in first
 
 
-def test_which_policies_run_batched():
-    assert has_batched_form(NAV) and not has_batched_form("agri_envs/GrapeHarvest-v1")
-    assert not has_batched_form("robot_chain_v0") and not has_batched_form("agri_envs/GreenhouseCoverage-v0")
+def test_which_policies_run_batched(monkeypatch):
+    assert has_batched_form(NAV) and has_batched_form("agri_envs/GreenhouseCoverage-v0")
+    assert not has_batched_form("robot_chain_v1") and not has_batched_form("agri_envs/GrapeHarvest-v1")
     assert batchable(NAV, "harik-apf") and batchable(NAV, "ppo-greenhouse-nav")
     assert batchable(NAV, str(ZOO_DIR / "ppo-greenhouse-nav"))  # a run folder: a learned policy
     assert not batchable("agri_envs/GrapeHarvest-v1", "luo-apf") and not batchable(NAV, "no-such-policy")
+    # a registered policy stays for the whole process (the report evaluates every one): registered for this test only
+    monkeypatch.setattr(agri_baselines, "_REGISTRY", dict(agri_baselines._REGISTRY))
     register_policy(PolicySpec("test-reads-the-env", NAV, "agri_baselines.harik_apf:make_harik_apf_gt"))
     assert not batchable(NAV, "test-reads-the-env")  # observation_only is opt-in
 

@@ -314,7 +314,7 @@ def test_failure_labels_of_learned_policies_use_no_controller_words():
 def test_every_env_section_has_a_description_line():
     from agri_training.report.page import _env_blurb
 
-    for env_id in ("robot_chain_v0", "agri_envs/GreenhouseNav-v2", "agri_envs/GrapeHarvest-v1"):
+    for env_id in ("robot_chain_v1", "agri_envs/GreenhouseNav-v2", "agri_envs/GrapeHarvest-v1"):
         assert len(_env_blurb(env_id)) > 40, env_id
 
 

@@ -15,12 +15,13 @@ from agri_training.learned.parameter_sharing import make_shared_vec_env
 from agri_training.learned.policy import LearnedPolicy
 from agri_training.train import TrainRequest, resolve_config, train
 
-ENV_ID = "robot_chain_v0"
+ENV_ID = "robot_chain_v1"
 # A short chain on a small office floor: the run and its evaluation take seconds.
 TINY_ENV = {"n_robots": 3, "office_width": 8.0, "office_height": 6.0, "min_goal_distance": 3.0, "max_cycles": 40}
 TINY_HP = {
     "n_envs": 2,
     "env_kwargs": TINY_ENV,
+    "train_wrappers": [{"ShortMissions": {"goal_distance": [1.0, 2.0], "ramp_steps": 50}}],
     "algo_kwargs": {"n_steps": 32, "batch_size": 64, "n_epochs": 1},
     "policy_kwargs": {"net_arch": {"pi": [16], "vf": [16]}},
     "eval_freq": 10_000,
@@ -68,7 +69,7 @@ def test_max_cycles_is_a_truncation_and_the_chain_resets_whole():
     obs, rewards, dones, infos = venv.step(stay)
     assert dones.all() and rewards.shape == (venv.num_envs,)
     assert all(i["TimeLimit.truncated"] for i in infos)
-    assert all(i["terminal_observation"].shape == (23,) for i in infos)
+    assert all(i["terminal_observation"].shape == (29,) for i in infos)
     assert not np.array_equal(obs[0], infos[0]["terminal_observation"])  # a fresh episode began
 
 
@@ -134,10 +135,36 @@ def test_the_chain_trains_only_a_shared_ppo(tmp_path):
 
 
 @pytest.mark.parametrize(
-    "overrides",
-    [{"wrappers": ["FlattenObservation"]}, {"train_wrappers": ["RandomStartWaypoint"]}, {"action_repeat": 4}],
+    ("overrides", "match"),
+    [
+        ({"wrappers": ["FlattenObservation"]}, "Gymnasium envs only"),
+        ({"action_repeat": 4}, "Gymnasium envs only"),
+        ({"train_wrappers": ["RandomStartWaypoint"]}, "'RandomStartWaypoint' is not allowed; allowed: ShortMissions"),
+    ],
 )
-def test_gymnasium_only_training_keys_are_refused_for_the_chain(overrides, tmp_path):
-    request = TrainRequest("robot_chain_v0", "ppo", tmp_path / "run", overrides=overrides)
-    with pytest.raises(ValueError, match="Gymnasium envs only"):
+def test_gymnasium_only_training_keys_are_refused_for_the_chain(overrides, match, tmp_path):
+    request = TrainRequest("robot_chain_v1", "ppo", tmp_path / "run", overrides=overrides)
+    with pytest.raises(ValueError, match=match):
         resolve_config(request)
+
+
+def test_short_missions_curriculum_draws_short_missions_then_fewer():
+    from agri_training.learned.curricula import ShortMissions
+
+    env = ShortMissions(agri_envs.make(ENV_ID, n_robots=3), goal_distance=(1.0, 2.0), start=1.0, end=0.0, ramp_steps=20)
+    lengths = []
+    for seed in range(4):
+        _, infos = env.reset(seed=seed)
+        lengths.append(infos["robot_0"]["astar_length"])
+    # Early on every mission is short: the leader starts 1-2 m from the goal along the free floor.
+    assert all(1.0 - 0.1 <= d <= 2.0 + 0.1 for d in lengths), lengths
+    assert env.share == 1.0
+    for _ in range(20):
+        env.step({a: np.zeros(2, np.float32) for a in env.agents}) if env.agents else env.reset()
+    assert env.share == 0.0
+    _, infos = env.reset(seed=9)
+    assert infos["robot_0"]["astar_length"] >= env.unwrapped.config.min_goal_distance - 0.1
+    with pytest.raises(ValueError, match="goal_distance"):
+        ShortMissions(agri_envs.make(ENV_ID), goal_distance=(3.0, 1.0))
+    with pytest.raises(ValueError, match="goal_distance"):
+        agri_envs.make(ENV_ID).reset(seed=0, options={"goal_distance": "near"})

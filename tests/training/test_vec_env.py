@@ -345,4 +345,4 @@ def test_vector_path_refusals_name_the_fix(tmp_path):
     with pytest.raises(ValueError, match="set action_repeat, not env_kwargs.frame_skip"):
         make_vector_train_env(config)
     with pytest.raises(ValueError, match="vec_env 'vector' applies to Gymnasium envs only"):
-        resolve_config(TrainRequest("robot_chain_v0", "ppo", tmp_path, overrides={"vec_env": "vector"}))
+        resolve_config(TrainRequest("robot_chain_v1", "ppo", tmp_path, overrides={"vec_env": "vector"}))

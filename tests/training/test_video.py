@@ -23,7 +23,7 @@ def test_record_writes_a_gif_with_several_frames_of_one_size(tmp_path, capsys):
 
 def test_record_shrinks_and_skips_frames_and_runs_the_chain(tmp_path):
     clip = record(
-        ClipRequest("robot_chain_v0", "apoorva-chain", seed=1, out=tmp_path / "c.gif", max_steps=8, every=2, scale=0.5)
+        ClipRequest("robot_chain_v1", "apoorva-chain", seed=1, out=tmp_path / "c.gif", max_steps=8, every=2, scale=0.5)
     )
     assert clip["frames"] == 5 and clip["size"] == (400, 264) and clip["fps"] == 5.0
     assert Image.open(tmp_path / "c.gif").n_frames == 5

@@ -1,12 +1,12 @@
-"""robot_chain_v0: a chain of small round robots led along an A* path (Apoorva, Gautam & Kala 2018).
+"""robot_chain_v1: a chain of small round robots led along an A* path to a goal (Apoorva, Gautam & Kala 2018).
 
 PettingZoo module, like PettingZoo's own ``pistonball_v6``: ``parallel_env`` (the native
 :class:`~agri_envs.chain.env.RobotChainEnv`), ``raw_env`` (its AEC form through ``parallel_to_aec``) and
 ``env`` (the AEC form with PettingZoo's order-enforcing wrapper)::
 
-    from agri_envs.chain import robot_chain_v0
+    from agri_envs.chain import robot_chain_v1
 
-    env = robot_chain_v0.parallel_env(n_robots=4, n_dynamic_obstacles=1)
+    env = robot_chain_v1.parallel_env(n_robots=4, n_dynamic_obstacles=1)
     observations, infos = env.reset(seed=0)
 """
 
