@@ -23,6 +23,7 @@ from gymnasium.vector import VectorEnv, VectorWrapper
 from pettingzoo.utils.wrappers import BaseParallelWrapper
 
 from agri_baselines import make_policy
+from agri_training.learned.harvest import HarvestLegs
 from agri_training.learned.policy import wrap_by_name
 from agri_training.learned.vector import per_env_seeds, reset_rows
 
@@ -253,6 +254,7 @@ TRAIN_WRAPPERS: dict[str, type[gym.Wrapper[Any, Any, Any, Any]]] = {
     "RandomStartWaypoint": RandomStartWaypoint,
     "CrashCostRamp": CrashCostRamp,
     "ExpertStart": ExpertStart,
+    "HarvestLegs": HarvestLegs,
 }
 
 

@@ -20,7 +20,9 @@ of which makes the result a function of the inputs alone:
   variants that differ in the last bit).
 
 Float64 throughout leaves the result within float32 rounding of torch's forward pass (tested), so the
-network acts as trained. The observation is rounded to float32 first, as SB3 feeds it to torch.
+network acts as trained. The observation is rounded to float32 first, as SB3 feeds it to torch. A features
+extractor other than SB3's flattening is covered when it follows the same rules: the goal-error features of
+:mod:`agri_training.learned.goal_features` (``features_extractor_class: GoalErrorExtractor``).
 
 The functions below (:func:`fold_sum`, :func:`linear`, :func:`exp`, :func:`tanh` and the activations) state
 these rules in numpy and are the reference. The network runs them compiled (:func:`dense_layer`, numba): the
@@ -42,6 +44,8 @@ from typing import Any
 import gymnasium as gym
 import numba
 import numpy as np
+
+from agri_training.learned.goal_features import GOAL_ERROR, GOAL_LENGTH, goal_error_features
 
 #: Default activation of each algorithm's policy in SB3 (``policy_kwargs.activation_fn`` overrides it).
 DEFAULT_ACTIVATION = {"ppo": "Tanh", "sac": "ReLU", "td3": "ReLU", "tqc": "ReLU"}
@@ -213,6 +217,9 @@ class PolicyNetwork:
         high: Upper action bounds (float64).
         discrete: Discrete action space: the argmax of the output layer (PPO).
         obs_keys: Keys of a dict observation, concatenated in this order (SB3's ``CombinedExtractor``).
+        obs_ndim: Dimensions of one observation (of the first key of a dict).
+        goal_columns: Where ``achieved_goal`` and ``desired_goal`` start in the flattened observation when the
+            network appends the goal-error features (``GoalErrorExtractor``); None for plain flattening.
     """
 
     hidden: tuple[tuple[np.ndarray, np.ndarray], ...]
@@ -224,6 +231,7 @@ class PolicyNetwork:
     discrete: bool = False
     obs_keys: tuple[str, ...] | None = None
     obs_ndim: int = 1
+    goal_columns: tuple[int, int] | None = None
 
     @classmethod
     def from_state_dict(
@@ -241,9 +249,15 @@ class PolicyNetwork:
         """
         if algo not in ACTOR_LAYERS:
             raise ValueError(f"algo must be one of {', '.join(ACTOR_LAYERS)}, got {algo!r}")
-        for option in ("use_sde", "squash_output", "features_extractor_class", "normalize_images"):
+        for option in ("use_sde", "squash_output", "normalize_images", "features_extractor_kwargs"):
             if policy_kwargs.get(option):
                 raise ValueError(f"policy_kwargs.{option} is not supported by the CPU-independent inference path")
+        extractor = policy_kwargs.get("features_extractor_class")
+        if extractor is not None and str(extractor) != GOAL_ERROR:
+            raise ValueError(
+                f"policy_kwargs.features_extractor_class {extractor!r} is not supported by the CPU-independent "
+                f"inference path (supported: {GOAL_ERROR})"
+            )
         activation = str(policy_kwargs.get("activation_fn", DEFAULT_ACTIVATION[algo]))
         if activation not in ACTIVATION_FUNCTIONS:
             raise ValueError(
@@ -260,12 +274,17 @@ class PolicyNetwork:
         else:
             raise ValueError(f"no layers under {hidden_prefix!r} in the state_dict")
         obs_keys: tuple[str, ...] | None = None
+        goal_columns: tuple[int, int] | None = None
         if isinstance(observation_space, gym.spaces.Dict):
             obs_keys = tuple(observation_space.spaces)
             first = observation_space.spaces[obs_keys[0]]
             if not all(isinstance(s, gym.spaces.Box) for s in observation_space.spaces.values()):
                 raise ValueError(f"observation space {observation_space} is not a Dict of Boxes")
             obs_ndim = len(first.shape or ())
+            if extractor is not None:
+                goal_columns = _goal_columns(observation_space)
+        elif extractor is not None:
+            raise ValueError(f"{GOAL_ERROR} needs a Dict observation, got {observation_space}")
         elif isinstance(observation_space, gym.spaces.Box):
             obs_ndim = len(observation_space.shape)
         else:
@@ -274,12 +293,13 @@ class PolicyNetwork:
             if algo != "ppo":
                 raise ValueError(f"{algo} needs a Box action space")
             none = np.zeros(0)
-            return cls(tuple(hidden), output, activation, False, none, none, True, obs_keys, obs_ndim)
+            return cls(tuple(hidden), output, activation, False, none, none, True, obs_keys, obs_ndim, goal_columns)
         if not isinstance(action_space, gym.spaces.Box):
             raise ValueError(f"action space {action_space} is not a Box or Discrete")
         low = np.asarray(action_space.low, dtype=np.float64).ravel()
         high = np.asarray(action_space.high, dtype=np.float64).ravel()
-        return cls(tuple(hidden), output, activation, algo != "ppo", low, high, False, obs_keys, obs_ndim)
+        squash = algo != "ppo"
+        return cls(tuple(hidden), output, activation, squash, low, high, False, obs_keys, obs_ndim, goal_columns)
 
     @classmethod
     def from_model(cls, model: Any, algo: str, policy_kwargs: Mapping[str, Any]) -> PolicyNetwork:
@@ -301,9 +321,17 @@ class PolicyNetwork:
         rows = [p.reshape(len(p) if batch else 1, -1) for p in parts]
         return np.concatenate(rows, axis=1).astype(np.float64)
 
+    def features(self, observation: Any) -> np.ndarray:
+        """The network's float64 input for a batch of observations: flattened, plus the goal error if it has one."""
+        x = self.flatten(observation)
+        if self.goal_columns is None:
+            return x
+        a, d = self.goal_columns
+        return np.concatenate([x, goal_error_features(x[:, a : a + GOAL_LENGTH], x[:, d : d + GOAL_LENGTH])], axis=1)
+
     def output_layer(self, observation: Any) -> np.ndarray:
         """The float64 output layer for a batch of observations, before squashing or clipping."""
-        x = self.flatten(observation)
+        x = self.features(observation)
         code = ACTIVATION_CODES[self.activation]
         for weight, bias in self.hidden:
             if x.shape[1] != weight.shape[1]:
@@ -345,6 +373,23 @@ class PolicyNetwork:
             raise ValueError("learned policies act deterministically (the mean action); pass deterministic=True")
         actions = self.act(observation)
         return (actions if self.is_batch(observation) else actions[0]), state
+
+
+def _goal_columns(space: gym.spaces.Dict) -> tuple[int, int]:
+    """Where ``achieved_goal`` and ``desired_goal`` start in the flattened observation (keys in space order).
+
+    Raises:
+        ValueError: When the space lacks either goal, or a goal is not 9 numbers.
+    """
+    starts, k = {}, 0
+    for key, sub in space.spaces.items():
+        starts[key] = k
+        k += int(np.prod(sub.shape or (1,)))
+        if key in ("achieved_goal", "desired_goal") and int(np.prod(sub.shape or (1,))) != GOAL_LENGTH:
+            raise ValueError(f"{GOAL_ERROR} needs {GOAL_LENGTH}-number goals, {key} has shape {sub.shape}")
+    if "achieved_goal" not in starts or "desired_goal" not in starts:
+        raise ValueError(f"{GOAL_ERROR} needs achieved_goal and desired_goal in the observation, got {list(starts)}")
+    return starts["achieved_goal"], starts["desired_goal"]
 
 
 def _as_float64(value: Any) -> np.ndarray:

@@ -32,6 +32,7 @@ import numpy as np
 import yaml
 
 import agri_envs
+from agri_training.learned.arm_observation import NearestBoxes
 from agri_training.learned.inference import PolicyNetwork
 from agri_training.learned.parameter_sharing import predict_shared
 
@@ -143,6 +144,7 @@ WRAPPERS: dict[str, type[gym.ObservationWrapper[Any, Any, Any]]] = {
     "FlattenObservation": gym.wrappers.FlattenObservation,
     "FilterObservation": gym.wrappers.FilterObservation,
     "ObservationHistory": ObservationHistory,
+    "NearestBoxes": NearestBoxes,
 }
 
 
@@ -238,10 +240,11 @@ def resolve_algo_kwargs(algo_kwargs: Mapping[str, Any]) -> dict[str, Any]:
 
 
 def resolve_policy_kwargs(policy_kwargs: Mapping[str, Any]) -> dict[str, Any]:
-    """Config ``policy_kwargs`` with ``activation_fn`` given by name turned into the torch class.
+    """Config ``policy_kwargs`` with ``activation_fn`` and ``features_extractor_class`` named, turned into classes.
 
     Raises:
-        ValueError: For an activation that is not in :data:`ACTIVATIONS`.
+        ValueError: For an activation that is not in :data:`ACTIVATIONS`, or a features extractor that is not
+            in :data:`agri_training.learned.extractors.EXTRACTORS`.
     """
     out = dict(policy_kwargs)
     if "activation_fn" in out:
@@ -251,6 +254,15 @@ def resolve_policy_kwargs(policy_kwargs: Mapping[str, Any]) -> dict[str, Any]:
         if name not in ACTIVATIONS:
             raise ValueError(f"policy_kwargs.activation_fn must be one of {', '.join(ACTIVATIONS)}, got {name!r}")
         out["activation_fn"] = getattr(torch.nn, name)
+    if "features_extractor_class" in out:
+        from agri_training.learned.extractors import EXTRACTORS  # needs torch: only where a policy is built
+
+        name = out["features_extractor_class"]
+        if name not in EXTRACTORS:
+            raise ValueError(
+                f"policy_kwargs.features_extractor_class must be one of {', '.join(EXTRACTORS)}, got {name!r}"
+            )
+        out["features_extractor_class"] = EXTRACTORS[name]
     return out
 
 

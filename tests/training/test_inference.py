@@ -3,6 +3,7 @@
 import json
 import math
 from pathlib import Path
+from typing import Any
 
 import gymnasium as gym
 import numpy as np
@@ -10,6 +11,7 @@ import pytest
 import torch
 
 import agri_envs  # noqa: F401  (registers the env ids)
+from agri_training.learned import goal_features
 from agri_training.learned.inference import (
     _EXP_TAYLOR,
     _INV_LN2,
@@ -24,7 +26,7 @@ from agri_training.learned.inference import (
     linear,
     tanh,
 )
-from agri_training.learned.policy import LearnedPolicy, load_weights, read_config
+from agri_training.learned.policy import LearnedPolicy, load_weights, observation_chain, read_config
 from agri_training.learned.zoo import ZOO_DIR
 
 GOLDEN = Path(__file__).parents[1] / "data" / "inference_golden.json"
@@ -55,6 +57,36 @@ def ref_fold(terms: list[float]) -> float:
         h = len(terms) // 2
         terms = [terms[i] + terms[h + i] for i in range(h)] + terms[2 * h :]
     return terms[0]
+
+
+def ref_goal_error(a: list[float], d: list[float]) -> list[float]:
+    """The goal-error features written out one Python float operation at a time (module goal_features)."""
+
+    def clip(v):
+        return min(max(v, -1.0), 1.0)
+
+    def cross(u, v):
+        return [u[1] * v[2] - u[2] * v[1], u[2] * v[0] - u[0] * v[2], u[0] * v[1] - u[1] * v[0]]
+
+    dp = [d[i] - a[i] for i in range(3)]
+    tz, tx = cross(a[3:6], d[3:6]), cross(a[6:9], d[6:9])
+    return (
+        [v * 10.0 for v in dp]
+        + [clip(v * 50.0) for v in dp]
+        + tz
+        + tx
+        + [clip(v * 5.0) for v in tz + tx]
+        + [(a[3] * d[3] + a[4] * d[4]) + a[5] * d[5], (a[6] * d[6] + a[7] * d[7]) + a[8] * d[8]]
+    )
+
+
+def ref_input(net: PolicyNetwork, obs) -> list[float]:
+    """The network's input: the flattened observation, plus the goal error when the network has it."""
+    x = net.flatten(obs)[0].tolist()
+    if net.goal_columns is not None:
+        a, d = net.goal_columns
+        x = x + ref_goal_error(x[a : a + 9], x[d : d + 9])
+    return x
 
 
 def ref_output_layer(net: PolicyNetwork, x: list[float]) -> list[float]:
@@ -167,12 +199,20 @@ def _sb3_model(algo, obs_space, act_space, seed, **policy_kwargs):
     return cls(policy, DummyVecEnv([Spaces]), seed=seed, device="cpu", policy_kwargs=policy_kwargs, **kwargs)
 
 
-def _toy_network(algo, activation, obs_space, act_space, seed):
-    model = _sb3_model(algo, obs_space, act_space, seed, net_arch=[24, 17], activation_fn=getattr(torch.nn, activation))
+def _toy_network(algo, activation, obs_space, act_space, seed, extractor=None):
+    from agri_training.learned.extractors import EXTRACTORS
+
+    kwargs = {} if extractor is None else {"features_extractor_class": EXTRACTORS[extractor]}
+    model = _sb3_model(
+        algo, obs_space, act_space, seed, net_arch=[24, 17], activation_fn=getattr(torch.nn, activation), **kwargs
+    )
     with torch.no_grad():  # larger weights than the initialisation, so that the activations saturate too
         for p in model.policy.parameters():
             p.mul_(3.0)
-    net = PolicyNetwork.from_model(model, algo, {"activation_fn": activation})
+    config_kwargs = {"activation_fn": activation} | (
+        {} if extractor is None else {"features_extractor_class": extractor}
+    )
+    net = PolicyNetwork.from_model(model, algo, config_kwargs)
     return model, net
 
 
@@ -184,23 +224,48 @@ DICT = gym.spaces.Dict(
         "achieved_goal": gym.spaces.Box(-5, 5, (3,), np.float32),
     }
 )
+#: Goals of 9 numbers (position, two unit axes) for the goal-error features; a goal near the achieved one as
+#: often as not, so that the fine (clipped) features are exercised on both sides of their knee.
+GOALS = gym.spaces.Dict(
+    {
+        "observation": gym.spaces.Box(-2, 2, (5,), np.float32),
+        "desired_goal": gym.spaces.Box(-1, 1, (9,), np.float32),
+        "achieved_goal": gym.spaces.Box(-1, 1, (9,), np.float32),
+    }
+)
 ACT = gym.spaces.Box(np.array([-1, -2, 0.5], np.float32), np.array([1, 3, 2.5], np.float32))
 
 
+def _near_goals(batch):
+    rng = np.random.default_rng(5)
+    for obs in batch[::2]:
+        obs["desired_goal"] = (obs["achieved_goal"] + rng.normal(0, 0.01, 9)).astype(np.float32)
+    return batch
+
+
 @pytest.mark.parametrize(
-    ("algo", "activation", "obs_space"),
-    [("ppo", "Tanh", BOX), ("ppo", "ReLU", BOX), ("sac", "ReLU", DICT), ("td3", "ReLU", BOX), ("sac", "Tanh", BOX)],
+    ("algo", "activation", "obs_space", "extractor"),
+    [
+        ("ppo", "Tanh", BOX, None),
+        ("ppo", "ReLU", BOX, None),
+        ("sac", "ReLU", DICT, None),
+        ("td3", "ReLU", BOX, None),
+        ("sac", "Tanh", BOX, None),
+        ("sac", "ReLU", GOALS, goal_features.GOAL_ERROR),
+    ],
 )
-def test_actions_match_torch_within_float32_and_the_reference_exactly(algo, activation, obs_space):
-    model, net = _toy_network(algo, activation, obs_space, ACT, seed=7)
+def test_actions_match_torch_within_float32_and_the_reference_exactly(algo, activation, obs_space, extractor):
+    model, net = _toy_network(algo, activation, obs_space, ACT, seed=7, extractor=extractor)
     obs_space.seed(3)
-    batch = [obs_space.sample() for _ in range(20)]
+    batch = (
+        _near_goals([obs_space.sample() for _ in range(20)]) if extractor else [obs_space.sample() for _ in range(20)]
+    )
     for obs in batch:
         ours, _ = net.predict(obs)
         theirs, _ = model.predict(obs, deterministic=True)
         assert ours.dtype == np.float32 and ours.shape == ACT.shape
         np.testing.assert_allclose(ours, theirs, rtol=2e-5, atol=2e-5)
-        x = net.flatten(obs)[0].tolist()
+        x = ref_input(net, obs)
         assert net.output_layer(obs)[0].tolist() == ref_output_layer(net, x)  # float64, bit for bit
         np.testing.assert_array_equal(ours, np.float32(ref_forward(net, x)))
     stacked = (
@@ -223,6 +288,12 @@ def test_what_the_path_cannot_compute_is_refused():
         PolicyNetwork.from_state_dict(state, "ppo", {"activation_fn": "GELU"}, BOX, ACT)
     with pytest.raises(ValueError, match="use_sde"):
         PolicyNetwork.from_state_dict(state, "ppo", {"use_sde": True}, BOX, ACT)
+    with pytest.raises(ValueError, match="NatureCNN"):
+        PolicyNetwork.from_state_dict(state, "ppo", {"features_extractor_class": "NatureCNN"}, BOX, ACT)
+    with pytest.raises(ValueError, match="needs a Dict"):
+        PolicyNetwork.from_state_dict(state, "ppo", {"features_extractor_class": goal_features.GOAL_ERROR}, BOX, ACT)
+    with pytest.raises(ValueError, match="9-number goals"):
+        PolicyNetwork.from_state_dict(state, "ppo", {"features_extractor_class": goal_features.GOAL_ERROR}, DICT, ACT)
     with pytest.raises(ValueError, match="algo"):
         PolicyNetwork.from_state_dict(state, "a2c", {}, BOX, ACT)
     net = PolicyNetwork.from_state_dict(state, "ppo", {}, BOX, ACT)
@@ -232,10 +303,27 @@ def test_what_the_path_cannot_compute_is_refused():
         net.predict(np.zeros(12))
 
 
-def _golden_inputs(net: PolicyNetwork, n: int = 8) -> np.ndarray:
-    """Normalised-looking inputs, the same on every machine (numpy's PCG64 stream is platform-independent)."""
+def _golden_inputs(net: PolicyNetwork, n: int = 8) -> Any:
+    """Normalised-looking inputs, the same on every machine (numpy's PCG64 stream is platform-independent).
+
+    A network with goal-error features gets dict observations (the goals near each other in half the rows).
+    """
     width = net.hidden[0][0].shape[1]
-    return np.random.default_rng(2026).normal(0.0, 1.5, size=(n, width)).astype(np.float32)
+    if net.goal_columns is None:
+        return np.random.default_rng(2026).normal(0.0, 1.5, size=(n, width)).astype(np.float32)
+    flat = np.random.default_rng(2026).normal(0.0, 0.5, size=(n, width - goal_features.N_GOAL_ERROR_FEATURES))
+    a, d = net.goal_columns
+    flat[::2, d : d + 9] = flat[::2, a : a + 9] + 0.01 * flat[::2, d : d + 9]
+    obs, k = {}, 0
+    for key, size in zip(net.obs_keys, _key_sizes(net, flat.shape[1]), strict=True):
+        obs[key] = flat[:, k : k + size].astype(np.float32)
+        k += size
+    return obs
+
+
+def _key_sizes(net: PolicyNetwork, total: int) -> list[int]:
+    """Sizes of the dict keys in flattening order: the two goals are 9 numbers, the observation the rest."""
+    return [9 if key in ("achieved_goal", "desired_goal") else total - 18 for key in net.obs_keys]
 
 
 def golden_actions() -> dict[str, list[list[str]]]:
@@ -248,8 +336,13 @@ def golden_actions() -> dict[str, list[list[str]]]:
         unit = gym.spaces.Box(
             -1.0, 1.0, (n_actions,), np.float32
         )  # spaces matter only for the bounds and the dict keys
-        obs = gym.spaces.Box(-np.inf, np.inf, (1,))
-        net = PolicyNetwork.from_state_dict(state, config["algo"], config.get("policy_kwargs", {}), obs, unit)
+        policy_kwargs = config.get("policy_kwargs", {})
+        if policy_kwargs.get("features_extractor_class"):  # its features read the goals: the real dict space
+            obs = observation_chain(gym.make(config["env_id"], **config["env_kwargs"]), config["wrappers"])[0]
+            obs = obs.observation_space
+        else:
+            obs = gym.spaces.Box(-np.inf, np.inf, (1,))
+        net = PolicyNetwork.from_state_dict(state, config["algo"], policy_kwargs, obs, unit)
         x = _golden_inputs(net)
         out[folder.name] = [[float(v).hex() for v in row] for row in net.output_layer(x)]
     return out
