@@ -81,6 +81,7 @@ from agri_training.learned.policy import (
     CONFIG_FILE,
     NORMALIZE_FILE,
     WEIGHTS_FILE,
+    WRAPPERS,
     ActionRepeat,
     HeldActions,
     ObservationReplay,
@@ -93,7 +94,7 @@ from agri_training.learned.policy import (
     resolve_policy_kwargs,
 )
 from agri_training.learned.pretrain import PretrainSpec, pretrain_from_baseline
-from agri_training.learned.vector import apply_vector_wrappers, make_sync_vector_env
+from agri_training.learned.vector import VECTOR_WRAPPERS, apply_vector_wrappers, make_sync_vector_env
 
 HYPERPARAMS_DIR = Path(__file__).parent / "hyperparams"
 #: Seeds from here on are reserved for held-out evaluation suites; training never uses them.
@@ -242,13 +243,12 @@ def resolve_config(request: TrainRequest) -> dict[str, Any]:
     algo_kwargs = dict(hp.get("algo_kwargs", {}) or {})
     her = dict(hp.get("her", {}) or {}) if request.her else None
     if vec_env == "vector":  # refused here, before anything is written
-        for item in hp.get("train_wrappers", []) or []:
-            name = item if isinstance(item, str) else next(iter(item), None)
-            if name in TRAIN_WRAPPERS and name not in VECTOR_TRAIN_WRAPPERS:
-                raise ValueError(
-                    f"train_wrappers: {name} has no vector form (it drives one env alone before an episode starts); "
-                    "train with vec_env: dummy or subproc"
-                )
+        forms = (("wrappers", WRAPPERS, VECTOR_WRAPPERS), ("train_wrappers", TRAIN_WRAPPERS, VECTOR_TRAIN_WRAPPERS))
+        for key, single, vector in forms:
+            for item in hp.get(key, []) or []:
+                name = item if isinstance(item, str) else next(iter(item), None)
+                if name in single and name not in vector:
+                    raise ValueError(f"{key}: {name} has no vector form; train with vec_env: dummy or subproc")
     if hp.get("pretrain"):
         PretrainSpec.from_config(hp["pretrain"])  # refused here, before anything is written
         if request.algo != "ppo" or agri_envs.is_parallel_id(request.env_id):

@@ -277,10 +277,15 @@ def test_split_info_keeps_masks_and_gives_python_scalars():
     assert type(out[1]["end"]) is int
 
 
-def test_every_wrapper_has_a_vector_form_but_expert_start(tmp_path):
-    assert set(VECTOR_WRAPPERS) == set(WRAPPERS)
-    # ExpertStart lets a baseline drive one env alone before the episode: no vector form, refused up front
-    assert set(VECTOR_TRAIN_WRAPPERS) == set(TRAIN_WRAPPERS) - {"ExpertStart"}
+def test_wrappers_without_a_vector_form_are_refused_on_the_vector_path(tmp_path):
+    # the arm's wrappers serve GrapeHarvest, which has no batched form; ExpertStart lets a baseline drive one env
+    # alone before the episode. None has a vector form, and the vector path refuses each up front.
+    assert set(VECTOR_WRAPPERS) == set(WRAPPERS) - {"NearestBoxes"}
+    assert set(VECTOR_TRAIN_WRAPPERS) == set(TRAIN_WRAPPERS) - {"ExpertStart", "HarvestLegs"}
+    vector = {"vec_env": "vector"}
+    grape = TrainRequest("agri_envs/GrapeHarvest-v1", "sac", tmp_path, scenario="table2", her=True, overrides=vector)
+    with pytest.raises(ValueError, match="wrappers: NearestBoxes has no vector form"):
+        resolve_config(grape)
     hp = {"vec_env": "vector", "train_wrappers": [{"ExpertStart": {"policy": "gonzalez-pseudo-reactive"}}]}
     with pytest.raises(ValueError, match="ExpertStart has no vector form.*vec_env: dummy"):
         resolve_config(TrainRequest("agri_envs/GreenhouseCoverage-v1", "ppo", tmp_path, overrides=hp))
