@@ -32,7 +32,7 @@ from agri_training.core.stats import (
     stratified_bootstrap_ci,
     wilson_interval,
 )
-from agri_training.learned.policy import WEIGHTS_FILE
+from agri_training.learned.policy import WEIGHTS_FILE, read_config
 from agri_training.learned.zoo import ZOO_DIR
 
 #: The worst share of episodes the section averages (CVaR level).
@@ -142,6 +142,16 @@ def seed_spread(doc: Mapping[str, Any]) -> list[str]:
     return lines
 
 
+def trained_on_distribution(name: str, zoo_dir: Path = ZOO_DIR) -> bool:
+    """Whether the shipped policy ``name`` trained on its env's scene distribution (its config's training envs)."""
+    folder = zoo_dir / name
+    if not (folder / "config.yaml").is_file():
+        return False
+    config = read_config(folder)
+    kwargs = {**config.get("env_kwargs", {}), **(config.get("train_env_kwargs") or {})}
+    return kwargs.get("scene_distribution") not in (None, "off")
+
+
 def generalization_section(
     env_id: str, entries: Sequence[tuple[lb.Suite, Mapping[str, Any]]], zoo_dir: Path = ZOO_DIR
 ) -> list[str]:
@@ -176,11 +186,19 @@ def generalization_section(
             rows.append(_row(f"training distribution (seeds {first}-{first + count - 1})", "inside", records, None))
             if not _weights_match(doc, name, zoo_dir):
                 out += [f"**`{VALIDATION_FILE}` chose other weights than the ones shipped in `zoo/{name}`.**", ""]
+        on_distribution = trained_on_distribution(name, zoo_dir)
+        if not on_distribution:
+            out += [
+                f"`{name}` trained on fixed scenes, not on the env's training distribution: *scenes* is left "
+                "blank, since inside or outside that distribution says nothing about what this policy saw.",
+                "",
+            ]
         for suite, entry in mine:
             if entry["policy"]["name"] != name:
                 continue
             records = [r for level in entry["levels"] for r in level["episodes"]]
-            rows.append(_row(f"{suite.name} (v{suite.version})", scenes_verdict(suite), records, reference))
+            scenes = scenes_verdict(suite) if on_distribution else "—"
+            rows.append(_row(f"{suite.name} (v{suite.version})", scenes, records, reference))
         out += [*header, *rows, ""]
         if doc is not None:
             out += ["Spread across training seeds (the recipe's runs, each at its best weights on validation seeds; "

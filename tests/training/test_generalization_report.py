@@ -53,6 +53,8 @@ def zoo(tmp_path):
         "episodes": {"runs/a": _records(10, 8, seed=20000), "runs/b/checkpoints/step_1000": _records(10, 6)},
     }
     (folder / "validation.json").write_text(json.dumps(doc))
+    config = {"env_id": NAV, "env_kwargs": {}, "train_env_kwargs": {"scene_distribution": "training"}}
+    (folder / "config.yaml").write_text(json.dumps(config))
     return tmp_path
 
 
@@ -88,7 +90,9 @@ def test_section_warns_when_the_shipped_weights_are_not_the_chosen_ones(zoo):
 def test_without_validation_the_suites_still_show(tmp_path):
     loop = lb.find_suite("greenhouse-sim-loop")
     text = "\n".join(generalization_section(NAV, [(loop, _entry("ppo-y", _records(20, 20)))], zoo_dir=tmp_path))
-    assert "No validation on its training distribution recorded" in text and "| inside | 20 | 1.00 [" in text
+    assert "No validation on its training distribution recorded" in text and "| — | 20 | 1.00 [" in text
+    # a policy that did not train on the distribution (no config naming it): no inside / outside verdicts
+    assert "trained on fixed scenes" in text and "| inside |" not in text and "| outside" not in text
     none = generalization_section(NAV, [], zoo_dir=tmp_path)
     assert none == ["No learned policy of this env has leaderboard entries."]
 
