@@ -18,9 +18,13 @@ from agri_training.learned.policy import LearnedPolicy
 ZOO_DIR = Path(__file__).resolve().parent.parent / "zoo"
 
 
+#: Registered names whose weights live in another policy's folder: one network, used two ways.
+SHARED_FOLDERS = {"sac-her-grape-vine-eq11": "sac-her-grape-vine"}
+
+
 def zoo_path(name: str) -> Path:
-    """Folder of a committed trained policy."""
-    return ZOO_DIR / name
+    """Folder of a committed trained policy (its own, or the one it shares: :data:`SHARED_FOLDERS`)."""
+    return ZOO_DIR / SHARED_FOLDERS.get(name, name)
 
 
 def load_zoo_policy(env: Any, name: str) -> LearnedPolicy:
@@ -54,5 +58,41 @@ register_policy(
         learned=True,
         algo="ppo",
         train_command="agri train --env agri_envs/GreenhouseNav-v2 --algo ppo --seed 0 --out runs/nav-ppo",
+    )
+)
+
+#: What the arm's whole-vine reach needs of the env: end-effector actions of the size it was trained with.
+_GRAPE_EE = {"control": "ee", "max_ee_step": 0.04, "max_ee_rotation": 0.2}
+#: How the whole-vine reach was trained (its zoo folder's command.txt has the run's exact line).
+_GRAPE_VINE_COMMAND = (
+    "agri train --env agri_envs/GrapeHarvest-v1 --scenario table2 --algo sac --her --seed SEED --out runs/vine-sSEED"
+)
+
+register_policy(
+    PolicySpec(
+        name="sac-her-grape-vine",
+        env_id="agri_envs/GrapeHarvest-v1",
+        entry_point="agri_training.learned.zoo:load_zoo_policy",
+        env_kwargs=dict(_GRAPE_EE),
+        description="Learned (SAC + HER, agri_training/zoo/sac-her-grape-vine): one goal-conditioned reach, trained "
+        "leg by leg over whole vines at the evaluation tolerances, drives every step; scripted: the env's target "
+        "order (the unharvested cluster nearest the clamp, then home)",
+        learned=True,
+        algo="sac",
+        train_command=_GRAPE_VINE_COMMAND,
+    )
+)
+
+register_policy(
+    PolicySpec(
+        name="sac-her-grape-vine-eq11",
+        env_id="agri_envs/GrapeHarvest-v1",
+        entry_point="agri_training.learned.harvest:load_zoo_harvester",
+        env_kwargs=dict(_GRAPE_EE),
+        description="The learned reach of sac-her-grape-vine drives every step; scripted: the cluster order of Luo "
+        "eq. 11 (as luo-apf), then home",
+        learned=True,
+        algo="sac",
+        train_command=_GRAPE_VINE_COMMAND,
     )
 )

@@ -96,12 +96,13 @@ API_PAGES = (
     (
         "learned",
         "agri_training.learned and training",
-        "Training with SB3, the CPU-independent inference of learned policies, the zoo.",
+        "Training with SB3, the CPU-independent inference of learned policies, the zoo, the learned harvester.",
         (
             "agri_training.train",
             "agri_training.learned.policy",
             "agri_training.learned.inference",
             "agri_training.learned.zoo",
+            "agri_training.learned.harvest",
         ),
     ),
 )
