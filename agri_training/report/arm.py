@@ -121,8 +121,12 @@ def _equal_axes(ax: Any, points: np.ndarray) -> None:
     ax.set_box_aspect((1.0, 1.0, 1.0))
 
 
-def plot_planned_path(result: dict[str, Any], seed: int, out_dir: Path, stem: str) -> list[str]:
-    """Plan the episode ``seed`` again with luo-apf and draw it in 3D (Fig. 6); also save a camera frame."""
+def plot_planned_path(result: dict[str, Any], seed: int, out_dir: Path, stem: str) -> tuple[str, str] | None:
+    """Plan the episode ``seed`` again with the result's planner and draw it in 3D (Fig. 6); also save a camera frame.
+
+    Returns:
+        The 3D figure's and the frame's file names, or None for a policy that makes no plan (a learned one).
+    """
     import matplotlib
 
     matplotlib.use("Agg")
@@ -133,6 +137,9 @@ def plot_planned_path(result: dict[str, Any], seed: int, out_dir: Path, stem: st
     )
     obs, _ = env.reset(seed=seed)
     policy = make_policy(result["policy"], env)
+    if not hasattr(policy, "plans"):  # a learned policy acts step by step: there is no whole path to draw
+        env.close()
+        return None
     policy.predict(obs, episode_start=np.array([True]))
     plan = policy.plans[0]
     unwrapped: Any = env.unwrapped
@@ -184,7 +191,7 @@ def plot_planned_path(result: dict[str, Any], seed: int, out_dir: Path, stem: st
         )
         fig.savefig(out_dir / frame_name, dpi=100, bbox_inches="tight")
         plt.close(fig)
-    return [name, frame_name]
+    return name, frame_name
 
 
 def _slug(text: str) -> str:
@@ -224,13 +231,15 @@ def report_section(results: list[dict[str, Any]], out_dir: Path) -> str:
             parts += ["", units_note(result), ""]
             if eps:
                 stem = f"grape_{_slug(label)}_{result['policy']}"
-                path3d, frame = plot_planned_path(result, int(eps[0]["seed"]), out_dir, stem)
-                parts.append(f"![{path3d}]({path3d})")
-                if frame in shown:
-                    parts.append(f"(The scene of seed {eps[0]['seed']} is pictured above.)")
-                else:
-                    shown.add(frame)
-                    parts.append(f"![{frame}]({frame})")
+                drawn = plot_planned_path(result, int(eps[0]["seed"]), out_dir, stem)
+                if drawn is not None:
+                    path3d, frame = drawn
+                    parts.append(f"![{path3d}]({path3d})")
+                    if frame in shown:
+                        parts.append(f"(The scene of seed {eps[0]['seed']} is pictured above.)")
+                    else:
+                        shown.add(frame)
+                        parts.append(f"![{frame}]({frame})")
         fails = [e for e in eps if not e["is_success"]]
         if fails:
             parts.append(

@@ -345,6 +345,9 @@ def test_grape_figures_name_their_policy_and_the_scene_is_drawn_once(tmp_path, m
     assert titles[0].startswith("luo-apf on grape-table2") and titles[2].startswith("luo-apf-attract-only on")
     assert "the scene at reset" in titles[1] and len(titles) == 3  # one scene picture for both policies
     assert files[0][1] == files[1][1] and files[0][0] != files[1][0]
+    ee = {"control": "ee", "max_ee_step": 0.04, "max_ee_rotation": 0.2}
+    learned = {**result, "policy": "sac-her-grape-vine", "env_kwargs": {**suite.env_kwargs, **ee}}
+    assert plot_planned_path(learned, 100000, tmp_path, "grape_learned") is None  # it acts step by step: no plan
 
 
 def test_learning_curves_across_seeds_show_the_mean_and_an_interval(tmp_path):
