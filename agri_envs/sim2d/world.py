@@ -347,17 +347,9 @@ class World2D:
 
 
     def place_robots(self, robots: Sequence[RobotBody], poses: np.ndarray) -> None:
-        """Put robots at new poses, at rest (a new episode), without making new bodies.
-
-        Args:
-            robots: Robots of this world.
-            poses: ``(n, 3)`` poses ``(x, y, yaw)``.
-        """
-        p = np.asarray(poses, dtype=np.float64).reshape(-1, 3)
-        for robot, pose in zip(robots, p, strict=True):
-            robot.pose = pose.copy()
-            robot.v = robot.w = 0.0
-            self._sync(robot, robot.pose)
+        """:meth:`place_robot` for several robots: ``poses`` is ``(n, 3)``, one ``(x, y, yaw)`` per robot."""
+        for robot, pose in zip(robots, np.asarray(poses, dtype=np.float64).reshape(-1, 3), strict=True):
+            self.place_robot(robot, pose)
 
     def _sync(self, robot: RobotBody, pose: np.ndarray) -> None:
         robot.body.position = (float(pose[0]), float(pose[1]))
