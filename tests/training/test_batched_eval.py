@@ -14,19 +14,11 @@ from agri_training.evaluation.batched import batchable, has_batched_form
 from agri_training.evaluation.evaluate import episode_jobs, evaluate_many
 from agri_training.evaluation.parallel import EpisodeError, EpisodeJob, run_episodes
 from agri_training.evaluation.policies import EvalRequest, resolve_env_kwargs
+from agri_training.leaderboard.entries import compare_documents
 from agri_training.learned.policy import LearnedPolicy
 from agri_training.learned.zoo import ZOO_DIR
 
 NAV = "agri_envs/GreenhouseNav-v2"
-TIMINGS = ("wall_time_s", "planning_time_ms", "plan_time_ms")
-
-
-def _without_wall_time(doc):
-    if isinstance(doc, dict):
-        return {k: _without_wall_time(v) for k, v in doc.items() if not any(t in k for t in TIMINGS)}
-    if isinstance(doc, list):
-        return [_without_wall_time(v) for v in doc]
-    return doc
 
 
 def _entry(suite: str, policy: str) -> dict:
@@ -53,8 +45,8 @@ def test_batched_episodes_are_the_committed_entry(suite, policy, episodes):
         s.env_id, lb.policy_argument(entry["policy"]), episodes, s.seed_start, env_kwargs=dict(level["env_kwargs"])
     )
     together, alone = (evaluate_many([request], progress=False, batch=b)[0] for b in (16, 1))
-    assert _without_wall_time(together["episodes"]) == _without_wall_time(level["episodes"][:episodes])
-    assert _without_wall_time(together) == _without_wall_time(alone)
+    assert compare_documents(together["episodes"], level["episodes"][:episodes]) == []
+    assert compare_documents(together, alone) == []
     assert all(e["wall_time_s"] > 0 for e in together["episodes"])
 
 
@@ -76,7 +68,7 @@ def test_traces_and_reruns_match_the_reference_loop(monkeypatch):
         reruns.clear()
         doc = evaluate_many([request], progress=False, batch=6)[0]
         assert bool(reruns) == rerun
-        assert _without_wall_time(doc) == _without_wall_time(reference)
+        assert compare_documents(doc, reference) == []
         assert [t["seed"] for t in doc["traces"]] == list(range(40, 46))
         first = doc["traces"][0]["data"]
         assert len(first["x"]) == doc["episodes"][0]["steps"] + 1 and "slam_x" in first

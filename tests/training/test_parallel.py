@@ -1,4 +1,3 @@
-
 """Episodes on worker processes and Ray tasks give the serial run's records; failures name their seed."""
 
 import json
@@ -14,23 +13,11 @@ from agri_training.evaluation.episode import run_episode
 from agri_training.evaluation.evaluate import evaluate, evaluate_many
 from agri_training.evaluation.parallel import EpisodeError, EpisodeJob, run_episodes, run_job
 from agri_training.evaluation.policies import EvalRequest, load_policy, resolve_env_kwargs
+from agri_training.leaderboard.entries import compare_documents
 
 NAV = "agri_envs/GreenhouseNav-v2"
 GRAPE = "agri_envs/GrapeHarvest-v1"
 SMALL_NAV = {"n_rows": 1, "row_length": 3}
-
-
-# wall-clock measurements: the only numbers allowed to differ
-TIMINGS = ("wall_time_s", "planning_time_ms", "plan_time_ms")
-
-
-def _without_wall_time(doc):
-    """The document without wall-clock timings (records, and their means and intervals in summaries)."""
-    if isinstance(doc, dict):
-        return {k: _without_wall_time(v) for k, v in doc.items() if not any(t in k for t in TIMINGS)}
-    if isinstance(doc, list):
-        return [_without_wall_time(v) for v in doc]
-    return doc
 
 
 def _requests():
@@ -48,7 +35,7 @@ def test_pool_documents_equal_serial():
     pooled = evaluate_many(_requests(), progress=False, workers=2)
     assert [[e["seed"] for e in d["episodes"]] for d in pooled[:3]] == [[7, 8, 9, 10], [2, 3, 4], [0, 1, 2]]
     assert [lv["label"] for lv in pooled[3]["levels"]] == [lv["label"] for lv in serial[3]["levels"]]
-    assert _without_wall_time(pooled) == _without_wall_time(serial)
+    assert compare_documents(pooled, serial) == []
     # the traces came back too, and are the first episodes' ones
     assert [t["seed"] for t in pooled[0]["traces"]] == [7, 8] and len(pooled[2]["traces"]) == 3
     assert all(e["wall_time_s"] > 0 for d in pooled[:3] for e in d["episodes"])
@@ -96,7 +83,7 @@ def test_reused_env_equals_fresh_one(spec):
             fresh = run_episode(env, load_policy(spec.name, env), seed, keys)
         finally:
             env.close()
-        assert _without_wall_time(r["outs"][0]) == _without_wall_time(fresh)
+        assert compare_documents(r["outs"][0], fresh) == []
 
 
 def test_episode_error_names_seed_and_exception(monkeypatch):
@@ -174,7 +161,7 @@ def test_ray_local_equals_serial():
     requests = _requests()[:2]
     serial = evaluate_many(requests, progress=False, workers=1)
     on_ray = evaluate_many(requests, progress=False, workers=2, ray="local")
-    assert _without_wall_time(on_ray) == _without_wall_time(serial)
+    assert compare_documents(on_ray, serial) == []
     import ray
 
     assert not ray.is_initialized()  # the private instance was shut down
