@@ -636,9 +636,22 @@ def anchor_corridors(
     Returns:
         The plan with its corridor stretches moved (stretches with fewer than ``degree + 2`` two-sided bins
         are left as they were).
+
+    Raises:
+        ValueError: For echoes that are not ``(n, 2)`` finite positions, or an argument out of its range.
     """
+    pts = np.asarray(echoes, dtype=np.float64)
+    if pts.size and (pts.ndim != 2 or pts.shape[1] != 2 or not np.isfinite(pts).all()):
+        raise ValueError(f"anchor_corridors: echoes must be (n, 2) finite positions, got shape {pts.shape}")
+    for name, value in (("reach", reach), ("depth", depth), ("bin_length", bin_length)):
+        if not value > 0:
+            raise ValueError(f"anchor_corridors: {name} must be > 0 (m), got {value}")
+    if not 0.0 < face_quantile < 1.0:
+        raise ValueError(f"anchor_corridors: face_quantile must be in (0, 1), got {face_quantile}")
+    if not (0 <= degree <= 4 and blend >= 0):
+        raise ValueError(f"anchor_corridors: degree must be in [0, 4] and blend >= 0 (m), got {degree}, {blend}")
+    pts = pts.reshape(-1, 2)
     path = plan.path.copy()
-    pts = np.asarray(echoes, dtype=np.float64).reshape(-1, 2)
     s_path = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(plan.path, axis=0).T))])
     for lo, hi in corridor_runs(plan.part):
         run = plan.path[lo:hi]

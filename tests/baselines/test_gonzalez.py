@@ -443,6 +443,24 @@ def test_anchor_corridors_leaves_a_corridor_without_echoes_on_both_sides():
     assert np.array_equal(anchor_corridors(plan, np.zeros((0, 2))).path, plan.path)
 
 
+@pytest.mark.parametrize(
+    "kw, match",
+    [
+        ({"echoes": np.zeros((4, 3))}, "echoes"),
+        ({"echoes": np.array([[0.0, np.nan]])}, "echoes"),
+        ({"depth": 0.0}, "depth"),
+        ({"bin_length": -0.5}, "bin_length"),
+        ({"face_quantile": 1.0}, "face_quantile"),
+        ({"degree": 7}, "degree"),
+    ],
+)
+def test_anchor_corridors_bad_input(kw, match):
+    plan = _wavy_corridor_plan(lambda x: 0.0 * x)
+    args = {"echoes": np.zeros((0, 2)), **kw}
+    with pytest.raises(ValueError, match=match):
+        anchor_corridors(plan, **args)
+
+
 def test_hybrid_plans_its_second_run_on_the_first_runs_map():
     from agri_training.evaluation.episode import run_episode
 
