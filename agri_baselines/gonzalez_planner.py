@@ -597,6 +597,78 @@ def corridor_runs(part: np.ndarray) -> list[tuple[int, int]]:
     return [(int(a), int(b)) for a, b in zip(edges[::2], edges[1::2], strict=True)]
 
 
+def _row_faces(
+    run: np.ndarray, pts: np.ndarray, reach: float, depth: float, extent: float
+) -> tuple[np.ndarray, np.ndarray, list[np.ndarray], np.ndarray, np.ndarray, np.ndarray] | None:
+    """The echoes of the two row faces beside a corridor stretch ``run`` of a plan (None: a side has none).
+
+    Echoes from 0 to ``extent`` metres along the stretch's chord and within ``reach`` across it are split
+    into the two sides of the planned line; on each side only those from the row's face (where the nearest
+    tenth of the side's echoes lie) to ``depth`` beyond it count (deeper ones are the far side of the row or
+    the next corridor's).
+
+    Returns:
+        ``(a, c, (left, right), a_run, c_run, n)``: the echoes' distances along the chord and across from the
+        planned line, the masks of each side's face echoes, the stretch's own coordinates along and across
+        the chord, and the chord's left normal.
+    """
+    chord = run[-1] - run[0]
+    u = chord / float(np.hypot(*chord))
+    n = np.array([-u[1], u[0]])
+    a_run, c_run = (run - run[0]) @ u, (run - run[0]) @ n
+    a, c = (pts - run[0]) @ u, (pts - run[0]) @ n
+    inside = (a >= 0) & (a <= extent) & (np.abs(c) <= reach)
+    a, c = a[inside], c[inside] - np.interp(a[inside], a_run, c_run)
+    sides = []
+    for sign in (1.0, -1.0):
+        d = sign * c
+        on_side = d > 0
+        if not on_side.any():
+            return None
+        sides.append(on_side & (d <= np.quantile(d[on_side], 0.1) + depth))
+    return a, c, sides, a_run, c_run, n
+
+
+def row_ends(
+    plan: CoveragePlan, echoes: np.ndarray, reach: float = 3.0, depth: float = 0.4, past: float = 2.0, gap: float = 0.5
+) -> list[tuple[int, int, np.ndarray]]:
+    """Where the rows beside each corridor stretch of a plan end, on the echoes of a sensory map.
+
+    The face echoes of each side (as :func:`anchor_corridors` picks them, up to ``past`` metres beyond the
+    stretch's end) are walked along the stretch's chord from their median on: the row ends at the last echo
+    before a gap longer than ``gap`` (an echo beyond such a gap is a post or a stray).
+
+    Args:
+        plan: A plan from :func:`plan_coverage`.
+        echoes: ``(n, 2)`` echo positions in the plan's frame (m).
+        reach: Echoes farther than this across from the chord are not of this corridor's rows (m).
+        depth: Echoes deeper than this behind a row's face are the far side of the row or beyond (m).
+        past: How far beyond the stretch's end a row may end (m).
+        gap: A longer stretch without echoes ends a row (m).
+
+    Returns:
+        Per corridor stretch ``(first, last + 1, ends)``: its index range in ``plan.path`` and the distances
+        along its chord (from its first point, in the driving direction) at which its left and right rows
+        end (m; NaN where a side has no face echoes).
+    """
+    pts = np.asarray(echoes, dtype=np.float64).reshape(-1, 2)
+    out = []
+    for lo, hi in corridor_runs(plan.part):
+        run = plan.path[lo:hi]
+        length = float(np.hypot(*(run[-1] - run[0])))
+        ends = np.full(2, np.nan)
+        faces = _row_faces(run, pts, reach, depth, length + past) if length > 0 and len(pts) else None
+        if faces is not None:
+            a, _, sides, _, _, _ = faces
+            for k, side in enumerate(sides):
+                along = np.sort(a[side])
+                start = len(along) // 2
+                breaks = np.flatnonzero(np.diff(along[start:]) > gap)
+                ends[k] = along[start + breaks[0]] if len(breaks) else along[-1]
+        out.append((lo, hi, ends))
+    return out
+
+
 def anchor_corridors(
     plan: CoveragePlan,
     echoes: np.ndarray,
@@ -659,23 +731,10 @@ def anchor_corridors(
         length = float(np.hypot(*chord))
         if length < 2 * bin_length or len(pts) == 0:
             continue
-        u = chord / length
-        n = np.array([-u[1], u[0]])
-        a_run, c_run = (run - run[0]) @ u, (run - run[0]) @ n
-        a, c = (pts - run[0]) @ u, (pts - run[0]) @ n
-        inside = (a >= 0) & (a <= length) & (np.abs(c) <= reach)
-        a, c = a[inside], c[inside] - np.interp(a[inside], a_run, c_run)  # offsets from the planned line
-        # Each side's echoes from its row's face to ``depth`` beyond it; the face is where the nearest tenth
-        # of the side's echoes lie (deeper echoes are the far side of the row or the next corridor's).
-        sides = []
-        for sign in (1.0, -1.0):
-            d = sign * c
-            on_side = d > 0
-            if not on_side.any():
-                break
-            sides.append(on_side & (d <= np.quantile(d[on_side], 0.1) + depth))
-        if len(sides) < 2:
+        faces = _row_faces(run, pts, reach, depth, length)
+        if faces is None:
             continue
+        a, c, sides, a_run, c_run, n = faces
         edges = np.arange(0.0, length + bin_length, bin_length)
         k = np.digitize(a, edges) - 1
         mids, centres = [], []

@@ -18,6 +18,7 @@ from agri_baselines.gonzalez_planner import (
     anchor_corridors,
     corridor_runs,
     plan_coverage,
+    row_ends,
 )
 from agri_envs.scenes.greenhouse import LayoutParams, generate_layout
 from agri_envs.sim2d.gridmap import rasterize
@@ -443,6 +444,20 @@ def test_anchor_corridors_leaves_a_corridor_without_echoes_on_both_sides():
     assert np.array_equal(anchor_corridors(plan, np.zeros((0, 2))).path, plan.path)
 
 
+def test_row_ends_finds_where_the_row_stops_not_the_wall_or_a_stray_post():
+    rng = np.random.default_rng(5)
+    plan = _wavy_corridor_plan(lambda x: 0.0 * x)  # a stretch from x = 0 to 8, driven toward +x
+    row = np.column_stack([rng.uniform(-0.5, 6.5, 500), 0.7 + np.abs(rng.normal(0.0, 0.05, 500))])
+    post = np.array([[7.6, 0.75], [7.65, 0.72]])  # beyond a gap: not the row
+    wall = np.column_stack([np.linspace(-1.0, 9.5, 200), np.full(200, -0.7)])  # runs on past the stretch
+    ((lo, hi, ends),) = row_ends(plan, np.vstack([row, post, wall]))
+    assert (lo, hi) == corridor_runs(plan.part)[0]
+    x0 = plan.path[lo, 0]  # the ends are measured from the stretch's first point
+    assert ends[0] == pytest.approx(6.5 - x0, abs=0.05) and ends[1] == pytest.approx(9.5 - x0, abs=0.05)
+    ((_, _, none),) = row_ends(plan, row)  # no echoes on the right: neither end is known
+    assert np.isnan(none).all()
+
+
 @pytest.mark.parametrize(
     "kw, match",
     [
@@ -500,6 +515,27 @@ def test_hybrid_later_runs_keep_to_the_true_corridors_with_a_large_encoder_scale
         assert later["episode_time"] < first["episode_time"]
         worst.append(later["max_cross_track"])
     assert max(worst) < 0.10 and np.mean(worst) < 0.08
+
+
+def test_hybrid_later_runs_rescale_their_odometry_at_the_rows_ends():
+    """Encoders that err 5 % (std) per run: a later run whose odometry reads short of the first run's would
+    overshoot the first corridor's end into the wall; measured at the rows' ends, the scale is corrected."""
+    from agri_training.evaluation.episode import run_episode
+
+    for layout in (5, 6, 7):  # three greenhouses where later runs crash without the correction
+        env = gym.make(
+            "agri_envs/GreenhouseCoverage-v1",
+            localization="odometry",
+            n_rows=2,
+            row_length=8.0,
+            encoder_scale_std=0.05,
+            layout_seed=layout,
+        )
+        policy = make_policy("gonzalez-hybrid", env)
+        runs = [run_episode(env, policy, layout + k, None)["record"] for k in range(3)]
+        for later in runs[1:]:
+            assert later["is_success"] and later["other_contacts"] == 0 and later["crop_contacts"] == 0
+            assert later["max_cross_track"] < 0.15 and abs(later["odometry_scale"] - 1.0) < 0.2
 
 
 def test_report_section_writes_the_figures(tmp_path):
