@@ -492,25 +492,29 @@ def test_hybrid_plans_its_second_run_on_the_first_runs_map():
     assert second["max_cross_track"] < 0.15 and second["mean_cross_track"] < 0.05
 
 
+def _hybrid_campaign(layout, runs, row_length, encoder_scale_std):
+    """The records of ``runs`` runs of one gonzalez-hybrid in the two-row greenhouse ``layout`` (seeds layout, ...)."""
+    from agri_training.evaluation.episode import run_episode
+
+    env = gym.make(
+        "agri_envs/GreenhouseCoverage-v1",
+        localization="odometry",
+        n_rows=2,
+        row_length=row_length,
+        encoder_scale_std=encoder_scale_std,
+        layout_seed=layout,
+    )
+    policy = make_policy("gonzalez-hybrid", env)
+    return [run_episode(env, policy, layout + k, None)["record"] for k in range(runs)]
+
+
 def test_hybrid_later_runs_keep_to_the_true_corridors_with_a_large_encoder_scale_error():
     """Four two-run campaigns in small greenhouses whose encoders err three times the default: the later runs,
     planned on the first run's drifted sensory map, keep within 10 cm of the true centre lines (each run's
     odometry drifts its own way; the plan's corridors are re-anchored on the rows the sonars saw)."""
-    from agri_training.evaluation.episode import run_episode
-
     worst = []
     for layout in range(4):
-        env = gym.make(
-            "agri_envs/GreenhouseCoverage-v1",
-            localization="odometry",
-            n_rows=2,
-            row_length=6.0,
-            encoder_scale_std=0.03,
-            layout_seed=layout,
-        )
-        policy = make_policy("gonzalez-hybrid", env)
-        first = run_episode(env, policy, layout, None)["record"]
-        later = run_episode(env, policy, layout + 1, None)["record"]
+        first, later = _hybrid_campaign(layout, 2, 6.0, 0.03)
         assert first["is_success"] and later["is_success"] and later["hybrid_deliberative"] == 1
         assert later["episode_time"] < first["episode_time"]
         worst.append(later["max_cross_track"])
@@ -520,20 +524,8 @@ def test_hybrid_later_runs_keep_to_the_true_corridors_with_a_large_encoder_scale
 def test_hybrid_later_runs_rescale_their_odometry_at_the_rows_ends():
     """Encoders that err 5 % (std) per run: a later run whose odometry reads short of the first run's would
     overshoot the first corridor's end into the wall; measured at the rows' ends, the scale is corrected."""
-    from agri_training.evaluation.episode import run_episode
-
     for layout in (5, 6, 7):  # three greenhouses where later runs crash without the correction
-        env = gym.make(
-            "agri_envs/GreenhouseCoverage-v1",
-            localization="odometry",
-            n_rows=2,
-            row_length=8.0,
-            encoder_scale_std=0.05,
-            layout_seed=layout,
-        )
-        policy = make_policy("gonzalez-hybrid", env)
-        runs = [run_episode(env, policy, layout + k, None)["record"] for k in range(3)]
-        for later in runs[1:]:
+        for later in _hybrid_campaign(layout, 3, 8.0, 0.05)[1:]:
             assert later["is_success"] and later["other_contacts"] == 0 and later["crop_contacts"] == 0
             assert later["max_cross_track"] < 0.15 and abs(later["odometry_scale"] - 1.0) < 0.2
 
