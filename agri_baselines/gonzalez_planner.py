@@ -588,3 +588,180 @@ def coverage_path(occupancy: np.ndarray, resolution: float, start: tuple[float, 
         ValueError: See :func:`plan_coverage`.
     """
     return plan_coverage(occupancy, resolution, start).path
+
+
+def corridor_runs(part: np.ndarray) -> list[tuple[int, int]]:
+    """``(first, last + 1)`` index ranges of the plan's contiguous :data:`CORRIDOR` stretches, in driving order."""
+    inside = np.concatenate([[False], np.asarray(part) == CORRIDOR, [False]])
+    edges = np.flatnonzero(np.diff(inside.astype(np.int8)))
+    return [(int(a), int(b)) for a, b in zip(edges[::2], edges[1::2], strict=True)]
+
+
+def _row_faces(
+    run: np.ndarray, pts: np.ndarray, reach: float, depth: float, extent: float
+) -> tuple[np.ndarray, np.ndarray, list[np.ndarray], np.ndarray, np.ndarray, np.ndarray] | None:
+    """The echoes of the two row faces beside a corridor stretch ``run`` of a plan (None: a side has none).
+
+    Echoes from 0 to ``extent`` metres along the stretch's chord and within ``reach`` across it are split
+    into the two sides of the planned line; on each side only those from the row's face (where the nearest
+    tenth of the side's echoes lie) to ``depth`` beyond it count (deeper ones are the far side of the row or
+    the next corridor's).
+
+    Returns:
+        ``(a, c, (left, right), a_run, c_run, n)``: the echoes' distances along the chord and across from the
+        planned line, the masks of each side's face echoes, the stretch's own coordinates along and across
+        the chord, and the chord's left normal.
+    """
+    chord = run[-1] - run[0]
+    u = chord / float(np.hypot(*chord))
+    n = np.array([-u[1], u[0]])
+    a_run, c_run = (run - run[0]) @ u, (run - run[0]) @ n
+    a, c = (pts - run[0]) @ u, (pts - run[0]) @ n
+    inside = (a >= 0) & (a <= extent) & (np.abs(c) <= reach)
+    a, c = a[inside], c[inside] - np.interp(a[inside], a_run, c_run)
+    sides = []
+    for sign in (1.0, -1.0):
+        d = sign * c
+        on_side = d > 0
+        if not on_side.any():
+            return None
+        sides.append(on_side & (d <= np.quantile(d[on_side], 0.1) + depth))
+    return a, c, sides, a_run, c_run, n
+
+
+def row_ends(
+    plan: CoveragePlan, echoes: np.ndarray, reach: float = 3.0, depth: float = 0.4, past: float = 2.0, gap: float = 0.5
+) -> list[tuple[int, int, np.ndarray]]:
+    """Where the rows beside each corridor stretch of a plan end, on the echoes of a sensory map.
+
+    The face echoes of each side (as :func:`anchor_corridors` picks them, up to ``past`` metres beyond the
+    stretch's end) are walked along the stretch's chord from their median on: the row ends at the last echo
+    before a gap longer than ``gap`` (an echo beyond such a gap is a post or a stray).
+
+    Args:
+        plan: A plan from :func:`plan_coverage`.
+        echoes: ``(n, 2)`` echo positions in the plan's frame (m).
+        reach: Echoes farther than this across from the chord are not of this corridor's rows (m).
+        depth: Echoes deeper than this behind a row's face are the far side of the row or beyond (m).
+        past: How far beyond the stretch's end a row may end (m).
+        gap: A longer stretch without echoes ends a row (m).
+
+    Returns:
+        Per corridor stretch ``(first, last + 1, ends)``: its index range in ``plan.path`` and the distances
+        along its chord (from its first point, in the driving direction) at which its left and right rows
+        end (m; NaN where a side has no face echoes).
+    """
+    pts = np.asarray(echoes, dtype=np.float64).reshape(-1, 2)
+    out = []
+    for lo, hi in corridor_runs(plan.part):
+        run = plan.path[lo:hi]
+        length = float(np.hypot(*(run[-1] - run[0])))
+        ends = np.full(2, np.nan)
+        faces = _row_faces(run, pts, reach, depth, length + past) if length > 0 and len(pts) else None
+        if faces is not None:
+            a, _, sides, _, _, _ = faces
+            for k, side in enumerate(sides):
+                along = np.sort(a[side])
+                start = len(along) // 2
+                breaks = np.flatnonzero(np.diff(along[start:]) > gap)
+                ends[k] = along[start + breaks[0]] if len(breaks) else along[-1]
+        out.append((lo, hi, ends))
+    return out
+
+
+def anchor_corridors(
+    plan: CoveragePlan,
+    echoes: np.ndarray,
+    reach: float = 3.0,
+    depth: float = 0.4,
+    bin_length: float = 0.5,
+    degree: int = 2,
+    blend: float = 1.0,
+    face_quantile: float = 0.25,
+) -> CoveragePlan:
+    """Re-anchor each corridor of a plan on the mid-line of its two rows, fitted to the echoes beside it.
+
+    On a sensory map (eq. 2) the Voronoi mid-line of a corridor follows every leaf that reaches into it and
+    every echo that slipped through a row from the next corridor, so it wavers by several centimetres, and
+    beside a wall it lies toward the row (the sonars see into the row between the plants, not into the wall).
+    For each corridor stretch of the plan this fits the rows instead. The echoes within ``reach`` of the
+    stretch's chord are split into the two sides of the planned line; on each side only those from the row's
+    face (where the nearest tenth of the side's echoes lie) to ``depth`` beyond it count. Per
+    ``bin_length`` bin along the chord, each side's face is the ``face_quantile`` of its echoes' distances
+    from the line, and the bins seen on both sides give a mid-point. A polynomial of ``degree`` in the
+    distance along the chord is fitted to the mid-points (least squares, refitted without the bins more than
+    2.5 robust standard deviations off), and the stretch's points are moved across onto it. The ``blend``
+    metres of path before and after the stretch are shifted by a share of its end's move that falls off
+    linearly, so the turns join the re-anchored corridor without a step.
+
+    Args:
+        plan: A plan from :func:`plan_coverage`.
+        echoes: ``(n, 2)`` echo positions in the plan's frame (m).
+        reach: Echoes farther than this across from the chord are not of this corridor's rows (m).
+        depth: Echoes deeper than this behind a row's face are the far side of the row or beyond (m).
+        bin_length: Length of the bins along the corridor (m).
+        degree: Degree of the fitted mid-line (2: a row bowed at mid-length).
+        blend: Length of path over which a turn joins the moved corridor (m).
+        face_quantile: Share of a bin's echoes on one side that lie nearer the line than its face (echoes
+            that slip into the foliage read long; leaves reach out between the plants).
+
+    Returns:
+        The plan with its corridor stretches moved (stretches with fewer than ``degree + 2`` two-sided bins
+        are left as they were).
+
+    Raises:
+        ValueError: For echoes that are not ``(n, 2)`` finite positions, or an argument out of its range.
+    """
+    pts = np.asarray(echoes, dtype=np.float64)
+    if pts.size and (pts.ndim != 2 or pts.shape[1] != 2 or not np.isfinite(pts).all()):
+        raise ValueError(f"anchor_corridors: echoes must be (n, 2) finite positions, got shape {pts.shape}")
+    for name, value in (("reach", reach), ("depth", depth), ("bin_length", bin_length)):
+        if not value > 0:
+            raise ValueError(f"anchor_corridors: {name} must be > 0 (m), got {value}")
+    if not 0.0 < face_quantile < 1.0:
+        raise ValueError(f"anchor_corridors: face_quantile must be in (0, 1), got {face_quantile}")
+    if not (0 <= degree <= 4 and blend >= 0):
+        raise ValueError(f"anchor_corridors: degree must be in [0, 4] and blend >= 0 (m), got {degree}, {blend}")
+    pts = pts.reshape(-1, 2)
+    path = plan.path.copy()
+    s_path = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(plan.path, axis=0).T))])
+    for lo, hi in corridor_runs(plan.part):
+        run = plan.path[lo:hi]
+        chord = run[-1] - run[0]
+        length = float(np.hypot(*chord))
+        if length < 2 * bin_length or len(pts) == 0:
+            continue
+        faces = _row_faces(run, pts, reach, depth, length)
+        if faces is None:
+            continue
+        a, c, sides, a_run, c_run, n = faces
+        edges = np.arange(0.0, length + bin_length, bin_length)
+        k = np.digitize(a, edges) - 1
+        mids, centres = [], []
+        for b in range(len(edges) - 1):
+            left, right = c[(k == b) & sides[0]], c[(k == b) & sides[1]]
+            if len(left) and len(right):
+                centre = 0.5 * (edges[b] + edges[b + 1])
+                faces = np.quantile(left, face_quantile) + np.quantile(right, 1.0 - face_quantile)
+                mids.append(0.5 * faces + np.interp(centre, a_run, c_run))
+                centres.append(centre)
+        if len(mids) < degree + 2:
+            continue
+        x, y = np.array(centres), np.array(mids)
+        keep = np.ones(len(x), dtype=bool)
+        for _ in range(2):
+            coef = np.polyfit(x[keep], y[keep], degree)
+            resid = y - np.polyval(coef, x)
+            scale = 1.4826 * float(np.median(np.abs(resid[keep]))) + 1e-3
+            keep = np.abs(resid) <= 2.5 * scale
+            if keep.sum() < degree + 2:
+                break
+        move = np.polyval(coef, np.clip(a_run, x.min(), x.max())) - c_run
+        path[lo:hi] += move[:, None] * n[None, :]
+        for end, shift, side in ((lo, move[0], -1), (hi - 1, move[-1], 1)):
+            k_out = np.arange(end + side, -1 if side < 0 else len(path), side)
+            k_out = k_out[np.abs(s_path[k_out] - s_path[end]) < blend]
+            k_out = k_out[plan.part[k_out] != CORRIDOR]
+            weight = 1.0 - np.abs(s_path[k_out] - s_path[end]) / blend
+            path[k_out] += (weight * shift)[:, None] * n[None, :]
+    return dataclasses.replace(plan, path=path)

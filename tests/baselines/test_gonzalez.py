@@ -9,7 +9,17 @@ import pytest
 import agri_envs  # noqa: F401
 from agri_baselines import coverage_path, make_policy
 from agri_baselines.gonzalez import MouthDetector, PeakFilter, PurePursuit, SensoryMap, path_curvature, peak_filter
-from agri_baselines.gonzalez_planner import APPROACH, CORRIDOR, TURN, CoveragePlannerParams, plan_coverage
+from agri_baselines.gonzalez_planner import (
+    APPROACH,
+    CORRIDOR,
+    TURN,
+    CoveragePlan,
+    CoveragePlannerParams,
+    anchor_corridors,
+    corridor_runs,
+    plan_coverage,
+    row_ends,
+)
 from agri_envs.scenes.greenhouse import LayoutParams, generate_layout
 from agri_envs.sim2d.gridmap import rasterize
 
@@ -392,6 +402,80 @@ def test_pseudo_reactive_solves_preset_and_returns_its_sensory_map():
     assert np.mean(dist[ij[:, 0], ij[:, 1]] < 0.3) > 0.8
 
 
+def _wavy_corridor_plan(midline):
+    """A plan: 1 m of approach, an 8 m corridor stretch along x that wavers 6 cm about ``midline(x)``, a turn."""
+    x = np.arange(-1.0, 8.0 + 1e-9, 0.1)
+    y = midline(np.clip(x, 0.0, 8.0)) + np.where(x >= 0, 0.06 * np.sin(1.7 * x), 0.0)
+    a = np.linspace(0.1, np.pi, 20)
+    turn = np.column_stack([8.0 + 0.8 * np.sin(a), y[-1] + 0.8 - 0.8 * np.cos(a)])
+    path = np.vstack([np.column_stack([x, y]), turn])
+    part = np.concatenate([np.where(x < 0, APPROACH, CORRIDOR), np.full(len(turn), TURN)])
+    return CoveragePlan(path, part, np.zeros((1, 1), bool), 0.05, [], 0.0)
+
+
+def test_anchor_corridors_puts_a_wavering_corridor_on_the_mid_line_of_its_rows():
+    rng = np.random.default_rng(3)
+    midline = lambda x: 0.5 + 0.02 * x - 0.004 * x * (8.0 - x)  # noqa: E731  inclined and bowed
+    plan = _wavy_corridor_plan(midline)
+    xs = rng.uniform(0.0, 8.0, 900)
+    # Left: a row whose face (0.65 m from the middle) is seen with some depth, plus echoes slipped deep into
+    # it; right: a wall, seen exactly; a few echoes that slipped through from the next corridor land inside.
+    depth = np.abs(rng.normal(0.0, 0.1, len(xs)))  # between the plants the sonar sees into the row
+    slipped = rng.random(len(xs)) < 0.15
+    depth[slipped] += rng.uniform(0.1, 0.9, slipped.sum())
+    left = np.column_stack([xs, midline(xs) + 0.65 + depth])
+    wall = np.column_stack([xs[:400], midline(xs[:400]) - 0.65])
+    strays = np.column_stack([rng.uniform(1.0, 7.0, 8), midline(4.0) + rng.uniform(-0.4, 0.4, 8)])
+    anchored = anchor_corridors(plan, np.vstack([left, wall, strays]))
+    (lo, hi), = corridor_runs(plan.part)
+    before = np.abs(plan.path[lo:hi, 1] - midline(plan.path[lo:hi, 0]))
+    after = np.abs(anchored.path[lo:hi, 1] - midline(anchored.path[lo:hi, 0]))
+    assert before.max() > 0.05 and after.max() < 0.025
+    # the approach and the turn join the moved stretch without a step; the far ends are not moved
+    steps = np.hypot(*np.diff(anchored.path, axis=0).T) - np.hypot(*np.diff(plan.path, axis=0).T)
+    assert np.abs(steps).max() < 0.02 and np.allclose(anchored.path[[0, -1]], plan.path[[0, -1]])
+    assert np.array_equal(anchored.part, plan.part)
+
+
+def test_anchor_corridors_leaves_a_corridor_without_echoes_on_both_sides():
+    plan = _wavy_corridor_plan(lambda x: 0.0 * x)
+    one_side = np.column_stack([np.linspace(0, 8, 100), np.full(100, 0.7)])
+    assert np.array_equal(anchor_corridors(plan, one_side).path, plan.path)
+    assert np.array_equal(anchor_corridors(plan, np.zeros((0, 2))).path, plan.path)
+
+
+def test_row_ends_finds_where_the_row_stops_not_the_wall_or_a_stray_post():
+    rng = np.random.default_rng(5)
+    plan = _wavy_corridor_plan(lambda x: 0.0 * x)  # a stretch from x = 0 to 8, driven toward +x
+    row = np.column_stack([rng.uniform(-0.5, 6.5, 500), 0.7 + np.abs(rng.normal(0.0, 0.05, 500))])
+    post = np.array([[7.6, 0.75], [7.65, 0.72]])  # beyond a gap: not the row
+    wall = np.column_stack([np.linspace(-1.0, 9.5, 200), np.full(200, -0.7)])  # runs on past the stretch
+    ((lo, hi, ends),) = row_ends(plan, np.vstack([row, post, wall]))
+    assert (lo, hi) == corridor_runs(plan.part)[0]
+    x0 = plan.path[lo, 0]  # the ends are measured from the stretch's first point
+    assert ends[0] == pytest.approx(6.5 - x0, abs=0.05) and ends[1] == pytest.approx(9.5 - x0, abs=0.05)
+    ((_, _, none),) = row_ends(plan, row)  # no echoes on the right: neither end is known
+    assert np.isnan(none).all()
+
+
+@pytest.mark.parametrize(
+    "kw, match",
+    [
+        ({"echoes": np.zeros((4, 3))}, "echoes"),
+        ({"echoes": np.array([[0.0, np.nan]])}, "echoes"),
+        ({"depth": 0.0}, "depth"),
+        ({"bin_length": -0.5}, "bin_length"),
+        ({"face_quantile": 1.0}, "face_quantile"),
+        ({"degree": 7}, "degree"),
+    ],
+)
+def test_anchor_corridors_bad_input(kw, match):
+    plan = _wavy_corridor_plan(lambda x: 0.0 * x)
+    args = {"echoes": np.zeros((0, 2)), **kw}
+    with pytest.raises(ValueError, match=match):
+        anchor_corridors(plan, **args)
+
+
 def test_hybrid_plans_its_second_run_on_the_first_runs_map():
     from agri_training.evaluation.episode import run_episode
 
@@ -406,6 +490,44 @@ def test_hybrid_plans_its_second_run_on_the_first_runs_map():
     assert first["cross_track_corridors_max"] is None and second["cross_track_corridors_max"] < 0.10
     # the second run's plan lies in its odometry frame, and its sonars keep it on the true corridors
     assert second["max_cross_track"] < 0.15 and second["mean_cross_track"] < 0.05
+
+
+def _hybrid_campaign(layout, runs, row_length, encoder_scale_std):
+    """The records of ``runs`` runs of one gonzalez-hybrid in the two-row greenhouse ``layout`` (seeds layout, ...)."""
+    from agri_training.evaluation.episode import run_episode
+
+    env = gym.make(
+        "agri_envs/GreenhouseCoverage-v1",
+        localization="odometry",
+        n_rows=2,
+        row_length=row_length,
+        encoder_scale_std=encoder_scale_std,
+        layout_seed=layout,
+    )
+    policy = make_policy("gonzalez-hybrid", env)
+    return [run_episode(env, policy, layout + k, None)["record"] for k in range(runs)]
+
+
+def test_hybrid_later_runs_keep_to_the_true_corridors_with_a_large_encoder_scale_error():
+    """Four two-run campaigns in small greenhouses whose encoders err three times the default: the later runs,
+    planned on the first run's drifted sensory map, keep within 10 cm of the true centre lines (each run's
+    odometry drifts its own way; the plan's corridors are re-anchored on the rows the sonars saw)."""
+    worst = []
+    for layout in range(4):
+        first, later = _hybrid_campaign(layout, 2, 6.0, 0.03)
+        assert first["is_success"] and later["is_success"] and later["hybrid_deliberative"] == 1
+        assert later["episode_time"] < first["episode_time"]
+        worst.append(later["max_cross_track"])
+    assert max(worst) < 0.10 and np.mean(worst) < 0.08
+
+
+def test_hybrid_later_runs_rescale_their_odometry_at_the_rows_ends():
+    """Encoders that err 5 % (std) per run: a later run whose odometry reads short of the first run's would
+    overshoot the first corridor's end into the wall; measured at the rows' ends, the scale is corrected."""
+    for layout in (5, 6, 7):  # three greenhouses where later runs crash without the correction
+        for later in _hybrid_campaign(layout, 3, 8.0, 0.05)[1:]:
+            assert later["is_success"] and later["other_contacts"] == 0 and later["crop_contacts"] == 0
+            assert later["max_cross_track"] < 0.15 and abs(later["odometry_scale"] - 1.0) < 0.2
 
 
 def test_report_section_writes_the_figures(tmp_path):
