@@ -12,6 +12,7 @@ from pathlib import Path
 from typing import Any
 
 from agri_baselines import PolicySpec, register_policy
+from agri_envs.arm.presets import REACH_PRESET
 from agri_training.learned.policy import LearnedPolicy
 
 #: Where the committed trained policies live (one folder per registered name).
@@ -58,6 +59,21 @@ register_policy(
         learned=True,
         algo="ppo",
         train_command="agri train --env agri_envs/GreenhouseNav-v2 --algo ppo --seed 0 --out runs/nav-ppo",
+    )
+)
+
+register_policy(
+    PolicySpec(
+        name="sac-her-grape-reach-strict",
+        env_id="agri_envs/GrapeHarvest-v1",
+        entry_point="agri_training.learned.zoo:load_zoo_policy",
+        env_kwargs={**REACH_PRESET, "position_tolerance": 0.01, "orientation_tolerance": 0.2},
+        description="Learned (SAC + HER, 100k steps, agri_training/zoo/sac-her-grape-reach-strict): one cluster "
+        "anywhere in reach cut at 1 cm / 0.2 rad, the tolerance tightened from 3 cm / 0.35 rad in training",
+        learned=True,
+        algo="sac",
+        train_command="agri train --env agri_envs/GrapeHarvest-v1 --scenario reach-strict --algo sac --her --seed 0 "
+        "--out runs/reach-strict-s0",
     )
 )
 
