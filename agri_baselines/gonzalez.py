@@ -265,6 +265,18 @@ def peak_filter(series: np.ndarray, n: int = 5, eps: float = 0.3) -> np.ndarray:
     return np.array([f(v) for v in np.asarray(series, dtype=np.float64).reshape(-1)])
 
 
+def sonar_echo(
+    x: float, y: float, heading: float, mount: np.ndarray | tuple[float, float, float], d: float
+) -> tuple[float, float]:
+    """Eq. 2: where an echo at range ``d`` lies, seen from the robot's pose ``(x, y, heading)``.
+
+    ``mount`` is the sonar's ``(x, y, yaw)`` in the body frame; range 0 gives the sonar's own position.
+    """
+    mx, my, myaw = (float(v) for v in mount)
+    c, s = math.cos(heading), math.sin(heading)
+    return x + c * mx - s * my + d * math.cos(heading + myaw), y + s * mx + c * my + d * math.sin(heading + myaw)
+
+
 class SensoryMap:
     """The sensory map of eq. 2: sonar echoes placed in the odometry frame along the way.
 
@@ -290,13 +302,11 @@ class SensoryMap:
     def add(self, x: float, y: float, heading: float, ranges: np.ndarray, valid: np.ndarray | None = None) -> None:
         """Add the echoes of one set of readings taken at pose ``(x, y, heading)`` (eq. 2)."""
         self.trajectory.append((x, y))
-        c, s = math.cos(heading), math.sin(heading)
-        for k, (mx, my, myaw) in enumerate(self.mounts):
+        for k, mount in enumerate(self.mounts):
             d = float(ranges[k])
             if d >= self.max_range - 1e-6 or (valid is not None and not valid[k]):
                 continue
-            px = x + c * mx - s * my + d * math.cos(heading + myaw)
-            py = y + s * mx + c * my + d * math.sin(heading + myaw)
+            px, py = sonar_echo(x, y, heading, mount, d)
             key = (int(math.floor(px / self.cell)), int(math.floor(py / self.cell)))
             if key not in self._cells:
                 self._cells.add(key)

@@ -36,6 +36,7 @@ from agri_baselines.gonzalez import (
     PseudoReactiveController,
     PseudoReactiveParams,
     PurePursuit,
+    sonar_echo,
 )
 from agri_baselines.gonzalez_planner import (
     CORRIDOR,
@@ -476,22 +477,19 @@ class GonzalezHybridPolicy(GonzalezPseudoReactivePolicy):
         also moves the next corridors sideways by what the encoders' scales disagree over the headland turns.
         """
         s = self.follower.tracker.progress if self.follower is not None else 0.0
-        c, si = math.cos(pose[2]), math.sin(pose[2])
-        rot = np.array([[c, -si], [si, c]])
         for end in self.row_ends:
             if end.done or not end.s_lo <= s <= end.s_hi + 2.0:
                 continue
             for side, sonars in ((0, (LF, LM, LR)), (1, (RF, RM, RR))):
                 for k in sonars:
                     if self._sees_row(k, filtered):
-                        mx, my, myaw = self.mounts[k]
-                        ray = np.array([math.cos(pose[2] + myaw), math.sin(pose[2] + myaw)])
-                        echo = pose[:2] + rot @ (mx, my) + filtered[k] * ray
+                        echo = np.array(sonar_echo(pose[0], pose[1], pose[2], self.mounts[k], float(filtered[k])))
                         end.seen[side] = max(end.seen[side], float(np.dot(echo - end.origin, end.u)))
             if np.isnan(end.ends).all():
                 continue
             rows = [k for k in (0, 1) if end.ends[k] <= np.nanmin(end.ends) + 0.5]
-            middle = float(np.dot(pose[:2] + rot @ self.mounts[LM, :2] - end.origin, end.u))
+            at_lm = np.array(sonar_echo(pose[0], pose[1], pose[2], self.mounts[LM], 0.0))  # the sonar itself
+            middle = float(np.dot(at_lm - end.origin, end.u))
             if all(np.isfinite(end.seen[k]) and middle > end.seen[k] + self.end_gap for k in rows):
                 errors = [end.ends[k] - end.seen[k] for k in rows]
                 if all(abs(e) <= self.end_window for e in errors):
