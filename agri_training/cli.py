@@ -121,7 +121,7 @@ def _add_clip_arguments(parser: argparse.ArgumentParser, out_required: bool) -> 
     parser.add_argument("--policy", required=True, help="registered policy name (agri list) or an `agri train` run")
     parser.add_argument("--seed", type=int, default=0, help="seed of the first episode (default 0)")
     parser.add_argument("--scenario", default=None, help="named preset of env arguments (agri list)")
-    parser.add_argument("--env-kwargs", nargs="*", metavar="KEY=VALUE", help="extra env arguments")
+    parser.add_argument("--env-kwargs", nargs="*", action="extend", metavar="KEY=VALUE", help="extra env arguments")
     parser.add_argument("--episodes", type=int, default=1, help="episodes, one after another (default 1)")
     parser.add_argument("--max-steps", type=int, default=None, help="stop each episode after N steps (a short clip)")
     parser.add_argument("--every", type=int, default=1, help="keep every k-th frame (default 1: all)")
@@ -368,7 +368,7 @@ def build_parser() -> argparse.ArgumentParser:
         default=0,
         help="seed of the first episode; episode i runs seed S+i (default 0; held-out suites use 100000 and up)",
     )
-    ev.add_argument("--env-kwargs", nargs="*", metavar="KEY=VALUE", help="extra env arguments")
+    ev.add_argument("--env-kwargs", nargs="*", action="extend", metavar="KEY=VALUE", help="extra env arguments")
     ev.add_argument("--traces", type=int, default=1, help="episodes (campaigns) that record per-step traces")
     ev.add_argument(
         "--campaign-runs",
@@ -419,7 +419,9 @@ def build_parser() -> argparse.ArgumentParser:
     tr.add_argument("--seed", type=int, default=None, help="training seed, below 100000 (default 0)")
     tr.add_argument("--out", required=True, help="run directory to create")
     tr.add_argument("--hyperparams", default=None, help="YAML to use instead of agri_training/hyperparams/ALGO.yml")
-    tr.add_argument("--hp", nargs="*", metavar="KEY=VALUE", help="override hyperparameters (YAML values)")
+    tr.add_argument(
+        "--hp", nargs="*", action="extend", metavar="KEY=VALUE", help="override hyperparameters (YAML values)"
+    )
     tr.add_argument("--quiet", action="store_true", help="no progress bar")
     sw = tr.add_argument_group("sweep", "many runs, each one CPU: OUT/<run>/ per run, OUT/summary.md|csv, sweep.json")
     sw.add_argument("--seeds", type=int, nargs="+", default=None, metavar="S", help="train once per seed")
@@ -457,7 +459,9 @@ def build_parser() -> argparse.ArgumentParser:
         help="what the search maximises: the final periodic evaluation's (default mean_return)",
     )
     tu.add_argument("--search-seed", type=int, default=0, help="seed of the search algorithm")
-    tu.add_argument("--hp", nargs="*", metavar="KEY=VALUE", help="hyperparameters every trial shares (YAML values)")
+    tu.add_argument(
+        "--hp", nargs="*", action="extend", metavar="KEY=VALUE", help="hyperparameters every trial shares (YAML values)"
+    )
     tu.add_argument("--hyperparams", default=None, help="YAML to use instead of agri_training/hyperparams/ALGO.yml")
     tu.add_argument("--out", required=True, help="search folder: trials/<id>/ run folders, best.yaml, trials.csv")
     tu.add_argument("--workers", type=_workers, default=None, help="CPUs of a --ray local instance (default: all)")

@@ -18,7 +18,7 @@ evaluated. The keys:
 | ``wrappers`` | observation wrappers by name, innermost first (see ``learned.WRAPPERS``) |
 | ``action_repeat`` | env steps per action (1: every step); evaluation holds actions the same way |
 | ``train_wrappers`` | training-only curricula by name, inside ``wrappers`` (see ``curricula.TRAIN_WRAPPERS``) |
-| ``pretrain`` | PPO only: behaviour cloning of a baseline before the first rollout (see ``learned.pretrain``) |
+| ``pretrain`` | PPO only: behaviour cloning (and DAgger) of a baseline before the first rollout (see ``learned.pretrain``) |
 | ``normalize`` | ``false`` or ``VecNormalize`` arguments (``norm_obs``, ``norm_reward``, ``clip_obs``, ...) |
 | ``algo_kwargs`` | the algorithm's arguments (``learning_rate`` may be ``lin_3e-4``: linear decay) |
 | ``policy_kwargs`` | ``net_arch``, ``activation_fn`` (a name), ... |
@@ -251,8 +251,8 @@ def resolve_config(request: TrainRequest) -> dict[str, Any]:
                     raise ValueError(f"{key}: {name} has no vector form; train with vec_env: dummy or subproc")
     if hp.get("pretrain"):
         PretrainSpec.from_config(hp["pretrain"])  # refused here, before anything is written
-        if request.algo != "ppo" or agri_envs.is_parallel_id(request.env_id):
-            raise ValueError("pretrain clones a baseline into a single-agent PPO policy: --algo ppo on a Gymnasium env")
+        if request.algo != "ppo" or request.her:
+            raise ValueError("pretrain clones a baseline into a PPO policy: --algo ppo, without --her")
     if agri_envs.is_parallel_id(request.env_id):  # one parameter-shared policy for every agent (see parameter_sharing)
         if request.algo != "ppo" or request.her:
             raise ValueError(f"{request.env_id} trains a parameter-shared PPO: --algo ppo, without --her")

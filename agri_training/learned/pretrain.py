@@ -14,7 +14,18 @@ Before PPO's first rollout, :func:`pretrain_from_baseline`
 2. sets ``VecNormalize``'s observation and return statistics from these decisions;
 3. fits the policy's mean action to the baseline's actions (mean squared error) and its value function to
    the demonstrations' discounted, normalised returns, ``epochs`` passes with Adam. The action noise (the
-   log standard deviation) keeps its configured value, so PPO still explores from there.
+   log standard deviation) keeps its configured value, so PPO still explores from there;
+4. with ``dagger_rounds: R`` (DAgger, Ross, Gordon & Bagnell 2011), R times: the policy's mean action
+   drives ``dagger_episodes`` episodes while the baseline, run beside it on the same observations, says
+   what it would have done; these decisions join the demonstrations and the fit is repeated
+   (``dagger_epochs`` passes over all of them). Cloning alone trains only on the states the baseline
+   visits, and a small error then leads the clone where it has never been shown what to do; DAgger
+   shows it. The baseline must act from its observations alone (the baseline's own memory, such as a
+   chain's recorded trails, is built from them), which holds for every baseline that drives the learner's env.
+
+A PettingZoo env (the robot chain) is cloned the same way into the parameter-shared policy: every agent's
+decision is one sample, each agent's decisions one trajectory for the returns, and the baseline is the
+multi-agent policy that commands every agent at once (``apoorva-chain``).
 
 PPO then fine-tunes on the env's reward. The policy stays a learned one: what it may observe is the run's
 observation, never the baseline's extra inputs (the baseline's privileges show only in the actions it
@@ -24,12 +35,13 @@ demonstrated, and the policy's registration says which baseline that was).
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping, Sequence
 from typing import Any
 
 import gymnasium as gym
 import numpy as np
 
+import agri_envs
 from agri_baselines import make_policy, policy_spec
 from agri_training.learned.policy import ObservationReplay, observation_chain
 
@@ -45,6 +57,10 @@ class PretrainSpec:
         seed: First demonstration seed (``seed .. seed + episodes - 1``), below 100000.
         learning_rate: Adam's step size.
         batch_size: Decisions per gradient step.
+        dagger_rounds: DAgger rounds after the first fit (0: cloning alone).
+        dagger_episodes: Episodes the policy drives in each round; round ``r`` (from 0) runs seeds
+            ``seed + episodes + r * dagger_episodes ..``.
+        dagger_epochs: Passes over all decisions after each round.
     """
 
     policy: str
@@ -53,12 +69,22 @@ class PretrainSpec:
     seed: int = 50_000
     learning_rate: float = 1e-3
     batch_size: int = 256
+    dagger_rounds: int = 0
+    dagger_episodes: int = 50
+    dagger_epochs: int = 10
 
     def __post_init__(self) -> None:
         if self.episodes < 1 or self.epochs < 1 or self.batch_size < 1:
             raise ValueError(f"pretrain: episodes, epochs and batch_size must be >= 1, got {self}")
-        if not 0 <= self.seed or self.seed + self.episodes > 100_000:
-            raise ValueError(f"pretrain: seeds {self.seed}..{self.seed + self.episodes - 1} must lie below 100000")
+        if self.dagger_rounds < 0 or self.dagger_episodes < 1 or self.dagger_epochs < 1:
+            raise ValueError(f"pretrain: dagger_rounds must be >= 0, dagger_episodes and dagger_epochs >= 1, got {self}")
+        if not 0 <= self.seed or self.last_seed >= 100_000:
+            raise ValueError(f"pretrain: seeds {self.seed}..{self.last_seed} must lie below 100000")
+
+    @property
+    def last_seed(self) -> int:
+        """The last seed the demonstrations and every DAgger round run."""
+        return self.seed + self.episodes + self.dagger_rounds * self.dagger_episodes - 1
 
     @classmethod
     def from_config(cls, block: Mapping[str, Any]) -> PretrainSpec:
@@ -95,14 +121,42 @@ class Demonstrations:
     episodes: int
 
 
+#: A learner acting: a batch of learner observations (wrapped, not normalised) -> its actions, one row each.
+Learner = Callable[[Any], np.ndarray]
+
+
 def _stack(frames: list[Any]) -> Any:
     if isinstance(frames[0], Mapping):
         return {k: np.stack([f[k] for f in frames]).astype(np.float32) for k in frames[0]}
     return np.stack(frames).astype(np.float32)
 
 
-def demonstrate(spec: PretrainSpec, config: Mapping[str, Any]) -> Demonstrations:
+def _join(first: Demonstrations, second: Demonstrations) -> Demonstrations:
+    """The decisions of both, first's before second's."""
+    if isinstance(first.observations, Mapping):
+        observations: Any = {k: np.concatenate([v, second.observations[k]]) for k, v in first.observations.items()}
+    else:
+        observations = np.concatenate([first.observations, second.observations])
+    return Demonstrations(
+        observations,
+        np.concatenate([first.actions, second.actions]),
+        np.concatenate([first.rewards, second.rewards]),
+        np.concatenate([first.episode_ends, second.episode_ends]),
+        first.successes + second.successes,
+        first.episodes + second.episodes,
+    )
+
+
+def demonstrate(
+    spec: PretrainSpec, config: Mapping[str, Any], seeds: Sequence[int] | None = None, learner: Learner | None = None
+) -> Demonstrations:
     """Run the baseline on the training env and record the learner's decisions (step 1 of the module doc).
+
+    Args:
+        spec: The ``pretrain`` block.
+        config: The resolved training config.
+        seeds: Episode seeds; default ``spec.seed .. spec.seed + spec.episodes - 1``.
+        learner: When given, the learner drives and the baseline only labels each decision (a DAgger round).
 
     Raises:
         ValueError: When the baseline drives another env or needs arguments the training env contradicts.
@@ -117,6 +171,9 @@ def demonstrate(spec: PretrainSpec, config: Mapping[str, Any]) -> Demonstrations
             raise ValueError(
                 f"pretrain: {spec.policy} needs {key}={value!r}, the training env has {learner_kwargs[key]!r}"
             )
+    seeds = range(spec.seed, spec.seed + spec.episodes) if seeds is None else seeds
+    if agri_envs.is_parallel_id(env_id):
+        return _demonstrate_agents(spec, env_id, {**learner_kwargs, **baseline.env_kwargs}, seeds, learner)
     learner_env = gym.make(env_id, **learner_kwargs)
     space = learner_env.observation_space
     keys = list(space.spaces) if isinstance(space, gym.spaces.Dict) else None
@@ -127,8 +184,8 @@ def demonstrate(spec: PretrainSpec, config: Mapping[str, Any]) -> Demonstrations
     repeat = int(config.get("action_repeat", 1))
     observations, actions, rewards, ends = [], [], [], []
     successes = 0
-    for episode in range(spec.episodes):
-        obs, info = env.reset(seed=spec.seed + episode)
+    for seed in seeds:
+        obs, info = env.reset(seed=int(seed))
         step, done = 0, False
         while not done:
             action, _ = expert.predict(obs, episode_start=np.array([step == 0]), deterministic=True)
@@ -138,7 +195,9 @@ def demonstrate(spec: PretrainSpec, config: Mapping[str, Any]) -> Demonstrations
                 actions.append(np.clip(np.asarray(action, dtype=np.float32), -1.0, 1.0))
                 rewards.append(0.0)
                 ends.append(False)
-            obs, reward, terminated, truncated, info = env.step(action)
+                if learner is not None:  # held for the action_repeat periods until its next decision
+                    driven = learner(_stack(observations[-1:]))[0]
+            obs, reward, terminated, truncated, info = env.step(action if learner is None else driven)
             rewards[-1] += float(reward)
             step += 1
             done = terminated or truncated
@@ -147,7 +206,54 @@ def demonstrate(spec: PretrainSpec, config: Mapping[str, Any]) -> Demonstrations
     env.close()
     learner_env.close()
     return Demonstrations(
-        _stack(observations), np.stack(actions), np.array(rewards), np.array(ends), successes, spec.episodes
+        _stack(observations), np.stack(actions), np.array(rewards), np.array(ends), successes, len(seeds)
+    )
+
+
+def _demonstrate_agents(
+    spec: PretrainSpec, env_id: str, env_kwargs: Mapping[str, Any], seeds: Sequence[int], learner: Learner | None
+) -> Demonstrations:
+    """:func:`demonstrate` on a PettingZoo env: one sample per agent and decision, agent by agent per episode.
+
+    Raises:
+        ValueError: When an agent leaves before its episode ends (parameter sharing needs every agent).
+    """
+    env = agri_envs.make(env_id, **env_kwargs)
+    expert = make_policy(spec.policy, env)
+    agents = list(env.possible_agents)
+    observations, actions, rewards, ends = [], [], [], []
+    successes = 0
+    for seed in seeds:
+        obs, infos = env.reset(seed=int(seed))
+        seen, advised, paid = [], [], []
+        while env.agents:
+            if sorted(obs) != sorted(agents):
+                raise ValueError("pretrain: every agent must stay until the episode ends")
+            advice, _ = expert.predict(obs, episode_start=np.array([not seen]), deterministic=True)
+            batch = np.stack([obs[a] for a in agents]).astype(np.float32)
+            label = np.clip(np.stack([np.asarray(advice[a], dtype=np.float32) for a in agents]), -1.0, 1.0)
+            acting = label if learner is None else learner(batch)
+            obs, reward, _, _, infos = env.step({a: acting[k] for k, a in enumerate(agents)})
+            seen.append(batch)
+            advised.append(label)
+            paid.append([float(reward[a]) for a in agents])
+        steps = len(seen)
+        # (agents, steps, ...): each agent's decisions one trajectory, its last one ending the episode.
+        observations.append(np.swapaxes(np.stack(seen), 0, 1).reshape(len(agents) * steps, -1))
+        actions.append(np.swapaxes(np.stack(advised), 0, 1).reshape(len(agents) * steps, -1))
+        rewards.append(np.array(paid).T.ravel())
+        episode_ends = np.zeros((len(agents), steps), dtype=bool)
+        episode_ends[:, -1] = True
+        ends.append(episode_ends.ravel())
+        successes += int(bool(infos[agents[0]].get("is_success", False)))
+    env.close()
+    return Demonstrations(
+        np.concatenate(observations),
+        np.concatenate(actions),
+        np.concatenate(rewards),
+        np.concatenate(ends),
+        successes,
+        len(seeds),
     )
 
 
@@ -194,6 +300,17 @@ def _targets(venv: Any, demos: Demonstrations, gamma: float) -> tuple[Any, np.nd
     return obs, _discounted(rewards, demos.episode_ends, gamma)
 
 
+def _mean_action(model: Any, venv: Any) -> Learner:
+    """The policy's mean action on a batch of learner observations (normalised as PPO will see them)."""
+
+    def act(batch: Any) -> np.ndarray:
+        obs = venv.normalize_obs(batch) if venv is not None else batch
+        actions, _ = model.predict(obs, deterministic=True)
+        return np.asarray(actions, dtype=np.float32)
+
+    return act
+
+
 def pretrain_from_baseline(model: Any, venv: Any, config: Mapping[str, Any]) -> dict[str, Any]:
     """Clone the declared baseline into ``model`` before it trains (see the module doc).
 
@@ -203,27 +320,66 @@ def pretrain_from_baseline(model: Any, venv: Any, config: Mapping[str, Any]) -> 
         config: The resolved training config (its ``pretrain`` block).
 
     Returns:
-        A summary for ``meta.json``: decisions, the baseline's success on its demonstrations, losses.
+        A summary for ``meta.json``: decisions, the baseline's success on its demonstrations, losses, and
+        per DAgger round the policy's own success on the episodes it drove.
     """
     import torch
 
     spec = PretrainSpec.from_config(config["pretrain"])
     gamma = float(config["algo_kwargs"].get("gamma", 0.99))
     demos = demonstrate(spec, config)
+    baseline_success = demos.successes / demos.episodes
     if venv is not None:
         _set_statistics(venv, demos, gamma)
-    obs, returns = _targets(venv, demos, gamma)
     policy = model.policy
     optimizer = torch.optim.Adam(policy.parameters(), lr=spec.learning_rate)  # no loss term reaches log_std
-    n = len(demos.actions)
     rng = np.random.default_rng(int(config["seed"]))
+    losses = [_fit(policy, optimizer, venv, demos, gamma, spec.epochs, spec.batch_size, rng)]
+    rounds = []
+    for r in range(spec.dagger_rounds):
+        first = spec.seed + spec.episodes + r * spec.dagger_episodes
+        seeds = range(first, first + spec.dagger_episodes)
+        driven = demonstrate(spec, config, seeds, learner=_mean_action(model, venv))
+        rounds.append(
+            {"seeds": [seeds[0], seeds[-1]], "policy_success_rate": driven.successes / driven.episodes}
+        )
+        demos = _join(demos, driven)
+        losses.append(_fit(policy, optimizer, venv, demos, gamma, spec.dagger_epochs, spec.batch_size, rng))
+    return {
+        "policy": spec.policy,
+        "episodes": spec.episodes,
+        "seeds": [spec.seed, spec.seed + spec.episodes - 1],
+        "baseline_success_rate": baseline_success,
+        "decisions": len(demos.actions),
+        "epochs": spec.epochs,
+        "action_mse_first_last": [losses[0][0][0], losses[-1][1][0]],
+        "value_mse_first_last": [losses[0][0][1], losses[-1][1][1]],
+        "dagger_rounds": rounds,
+    }
+
+
+def _fit(
+    policy: Any,
+    optimizer: Any,
+    venv: Any,
+    demos: Demonstrations,
+    gamma: float,
+    epochs: int,
+    batch_size: int,
+    rng: np.random.Generator,
+) -> tuple[tuple[float, float], tuple[float, float]]:
+    """``epochs`` passes of step 3 over ``demos``; the (action, value) losses of the first and last batch."""
+    import torch
+
+    obs, returns = _targets(venv, demos, gamma)
+    n = len(demos.actions)
     actions = torch.as_tensor(demos.actions)
     targets = torch.as_tensor(returns, dtype=torch.float32)
     first = last = None
-    for _ in range(spec.epochs):
+    for _ in range(epochs):
         order = rng.permutation(n)
-        for start in range(0, n, spec.batch_size):
-            batch = order[start : start + spec.batch_size]
+        for start in range(0, n, batch_size):
+            batch = order[start : start + batch_size]
             x = {k: torch.as_tensor(v[batch]) for k, v in obs.items()} if isinstance(obs, dict) else obs[batch]
             x = torch.as_tensor(x) if not isinstance(x, dict) else x
             mean = policy.get_distribution(x).distribution.mean
@@ -236,14 +392,4 @@ def pretrain_from_baseline(model: Any, venv: Any, config: Mapping[str, Any]) -> 
             last = (float(action_loss), float(value_loss))
             first = first or last
     assert first is not None and last is not None
-    return {
-        "policy": spec.policy,
-        "episodes": spec.episodes,
-        "seeds": [spec.seed, spec.seed + spec.episodes - 1],
-        "baseline_success_rate": demos.successes / demos.episodes,
-        "decisions": n,
-        "epochs": spec.epochs,
-        "action_mse_first_last": [first[0], last[0]],
-        "value_mse_first_last": [first[1], last[1]],
-    }
-
+    return first, last

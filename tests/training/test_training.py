@@ -276,5 +276,5 @@ def test_pretrain_clones_a_baseline_before_ppo(tmp_path):
     with pytest.raises(ValueError, match="pretrain: unknown keys"):
         bad = {**hp, "pretrain": {"policy": "a", "n": 1}}
         resolve_config(TrainRequest(ENV_ID, "ppo", tmp_path / "x", overrides=bad))
-    with pytest.raises(ValueError, match="single-agent PPO"):
+    with pytest.raises(ValueError, match="clones a baseline into a PPO policy"):
         resolve_config(TrainRequest(ENV_ID, "sac", tmp_path / "y", overrides=hp))
