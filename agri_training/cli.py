@@ -390,9 +390,7 @@ def build_parser() -> argparse.ArgumentParser:
         "their training distribution",
     )
     va.add_argument("runs", nargs="+", help="`agri train` run directories (or their best/ or checkpoint folders)")
-    va.add_argument(
-        "--checkpoints", action="store_true", help="also every run's best/ and checkpoints/step_N folders"
-    )
+    va.add_argument("--checkpoints", action="store_true", help="also every run's best/ and checkpoints/step_N folders")
     va.add_argument("--episodes", type=int, default=100, help="episodes per candidate (default 100)")
     va.add_argument(
         "--seed",

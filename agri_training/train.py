@@ -18,7 +18,7 @@ evaluated. The keys:
 | ``wrappers`` | observation wrappers by name, innermost first (see ``learned.WRAPPERS``) |
 | ``action_repeat`` | env steps per action (1: every step); evaluation holds actions the same way |
 | ``train_wrappers`` | training-only curricula by name, inside ``wrappers`` (see ``curricula.TRAIN_WRAPPERS``) |
-| ``pretrain`` | PPO only: behaviour cloning (and DAgger) of a baseline before the first rollout (see ``learned.pretrain``) |
+| ``pretrain`` | PPO only: cloning a baseline (and DAgger) before the first rollout (see ``learned.pretrain``) |
 | ``normalize`` | ``false`` or ``VecNormalize`` arguments (``norm_obs``, ``norm_reward``, ``clip_obs``, ...) |
 | ``algo_kwargs`` | the algorithm's arguments (``learning_rate`` may be ``lin_3e-4``: linear decay) |
 | ``policy_kwargs`` | ``net_arch``, ``activation_fn`` (a name), ... |

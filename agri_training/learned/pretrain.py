@@ -77,7 +77,7 @@ class PretrainSpec:
         if self.episodes < 1 or self.epochs < 1 or self.batch_size < 1:
             raise ValueError(f"pretrain: episodes, epochs and batch_size must be >= 1, got {self}")
         if self.dagger_rounds < 0 or self.dagger_episodes < 1 or self.dagger_epochs < 1:
-            raise ValueError(f"pretrain: dagger_rounds must be >= 0, dagger_episodes and dagger_epochs >= 1, got {self}")
+            raise ValueError(f"pretrain: dagger_rounds must be >= 0, dagger_episodes and dagger_epochs >= 1: {self}")
         if not 0 <= self.seed or self.last_seed >= 100_000:
             raise ValueError(f"pretrain: seeds {self.seed}..{self.last_seed} must lie below 100000")
 
@@ -340,9 +340,7 @@ def pretrain_from_baseline(model: Any, venv: Any, config: Mapping[str, Any]) -> 
         first = spec.seed + spec.episodes + r * spec.dagger_episodes
         seeds = range(first, first + spec.dagger_episodes)
         driven = demonstrate(spec, config, seeds, learner=_mean_action(model, venv))
-        rounds.append(
-            {"seeds": [seeds[0], seeds[-1]], "policy_success_rate": driven.successes / driven.episodes}
-        )
+        rounds.append({"seeds": [seeds[0], seeds[-1]], "policy_success_rate": driven.successes / driven.episodes})
         demos = _join(demos, driven)
         losses.append(_fit(policy, optimizer, venv, demos, gamma, spec.dagger_epochs, spec.batch_size, rng))
     return {
@@ -389,7 +387,7 @@ def _fit(
             optimizer.zero_grad()
             loss.backward()
             optimizer.step()
-            last = (float(action_loss), float(value_loss))
+            last = (action_loss.item(), value_loss.item())
             first = first or last
     assert first is not None and last is not None
     return first, last

@@ -1,4 +1,3 @@
-
 """Parameter-shared PPO for the robot chain: the SuperSuit vector env, a tiny run, weights-only reloading."""
 
 import json
@@ -117,8 +116,9 @@ def test_the_reloaded_shared_policy_acts_like_the_model_in_memory(tmp_path):
     obs, _ = env.reset(seed=4)
     for _ in range(5):
         ours, _ = policy.predict(obs, deterministic=True)
-        theirs = {a: model.predict(venv.normalize_obs(np.asarray(obs[a], np.float32)), deterministic=True)[0]
-                  for a in obs}
+        theirs = {
+            a: model.predict(venv.normalize_obs(np.asarray(obs[a], np.float32)), deterministic=True)[0] for a in obs
+        }
         assert set(ours) == set(env.agents)
         for agent in env.agents:
             np.testing.assert_allclose(ours[agent], theirs[agent], rtol=1e-5, atol=1e-6)
@@ -168,3 +168,80 @@ def test_short_missions_curriculum_draws_short_missions_then_fewer():
         ShortMissions(agri_envs.make(ENV_ID), goal_distance=(3.0, 1.0))
     with pytest.raises(ValueError, match="goal_distance"):
         agri_envs.make(ENV_ID).reset(seed=0, options={"goal_distance": "near"})
+
+
+def _cloning_config(tmp_path, **pretrain):
+    block = {"policy": "apoorva-chain", "episodes": 2, "epochs": 2, "seed": 50_000, **pretrain}
+    hp = {**TINY_HP, "train_wrappers": [], "pretrain": block}
+    return resolve_config(TrainRequest(ENV_ID, "ppo", tmp_path / "run", seed=2, overrides=hp))
+
+
+def test_demonstrations_are_every_robots_decisions_one_trajectory_per_robot(tmp_path):
+    from agri_baselines import make_policy
+    from agri_training.learned.pretrain import PretrainSpec, demonstrate
+
+    config = _cloning_config(tmp_path)
+    demos = demonstrate(PretrainSpec.from_config(config["pretrain"]), config, seeds=[50_000])
+    n = TINY_ENV["n_robots"]
+    assert demos.episodes == 1 and len(demos.actions) % n == 0 and demos.episode_ends.sum() == n
+    steps = len(demos.actions) // n
+    # Robot k's decisions are rows k * steps .. (k + 1) * steps - 1, its last one ending the episode.
+    assert np.flatnonzero(demos.episode_ends).tolist() == [k * steps + steps - 1 for k in range(n)]
+    env = agri_envs.make(ENV_ID, **TINY_ENV)
+    expert = make_policy("apoorva-chain", env)
+    obs, _ = env.reset(seed=50_000)
+    advice, _ = expert.predict(obs, episode_start=np.array([True]))
+    for k, agent in enumerate(env.possible_agents):
+        np.testing.assert_array_equal(demos.observations[k * steps], obs[agent])
+        np.testing.assert_allclose(demos.actions[k * steps], np.clip(advice[agent], -1, 1), rtol=1e-6)
+    # The cooperative reward: every robot is paid the same each step.
+    rewards = demos.rewards.reshape(n, steps)
+    np.testing.assert_array_equal(rewards, np.repeat(rewards[:1], n, axis=0))
+
+
+def test_in_a_dagger_round_the_learner_drives_and_apoorva_chain_labels(tmp_path):
+    from agri_training.learned.pretrain import PretrainSpec, demonstrate
+
+    config = _cloning_config(tmp_path)
+    spec = PretrainSpec.from_config(config["pretrain"])
+    expert = demonstrate(spec, config, seeds=[50_000])
+    standing = demonstrate(spec, config, seeds=[50_000], learner=lambda batch: np.zeros((len(batch), 2), np.float32))
+    n = TINY_ENV["n_robots"]
+    xy = standing.observations[:, 8:10].reshape(n, -1, 2)
+    # The learner stands still (so does the chain, until the time limit), while the labels are what
+    # apoorva-chain would do there: drive off. The baseline's own run moves.
+    assert len(standing.actions) == n * TINY_ENV["max_cycles"] and standing.successes == 0
+    np.testing.assert_allclose(xy, np.repeat(xy[:, :1], xy.shape[1], axis=1), atol=1e-9)
+    assert np.abs(standing.actions).max() > 0.1
+    moved = expert.observations[:, 8:10].reshape(n, -1, 2)
+    assert np.abs(moved - moved[:, :1]).max() > 1e-3
+    np.testing.assert_allclose(standing.actions[0], expert.actions[0])  # the same first decision
+
+
+def test_pretraining_the_chain_with_dagger_rounds(tmp_path):
+    hp = {
+        **TINY_HP,
+        "train_wrappers": [],
+        "policy_kwargs": {"net_arch": {"pi": [64, 64], "vf": [16]}},
+        "pretrain": {
+            "policy": "apoorva-chain",
+            "episodes": 2,
+            "epochs": 80,
+            "seed": 50_000,
+            "dagger_rounds": 2,
+            "dagger_episodes": 1,
+            "dagger_epochs": 40,
+        },
+    }
+    out = tmp_path / "cloned"
+    train(TrainRequest(ENV_ID, "ppo", out, seed=1, timesteps=64, overrides=hp, progress=False), "test")
+    meta = json.loads((out / "meta.json").read_text())["pretrain"]
+    assert [r["seeds"] for r in meta["dagger_rounds"]] == [[50_002, 50_002], [50_003, 50_003]]
+    # Every robot's decisions of the 2 demonstrations and the 2 rounds, each episode at most max_cycles long.
+    n = TINY_ENV["n_robots"]
+    assert meta["decisions"] % n == 0 and 4 * n <= meta["decisions"] <= 4 * n * TINY_ENV["max_cycles"]
+    assert meta["action_mse_first_last"][1] < 0.5 * meta["action_mse_first_last"][0]
+    assert (out / "checkpoints" / "step_0" / "policy.pt").is_file()
+    with pytest.raises(ValueError, match="must lie below 100000"):
+        late = {**hp, "pretrain": {**hp["pretrain"], "seed": 99_998}}  # its second round would run seed 100001
+        resolve_config(TrainRequest(ENV_ID, "ppo", tmp_path / "x", overrides=late))

@@ -226,6 +226,7 @@ def test_eval_env_kwargs_reach_the_periodic_evaluation_and_validation(tiny_run, 
     assert doc["env_kwargs"]["growth"] == 0.5 and doc["seeds"] == {"start": VALIDATION_SEED, "episodes": 2}
     assert [row["path"] for row in doc["candidates"]] == [str(p) for p in found]
     assert all(row["summary"]["episodes"] == 2 and row["seed"] == 2 for row in doc["candidates"])
+
     # The chosen candidate ranks first by success, then fewer collisions, then return.
     def score(row):
         s = row["summary"]
@@ -278,3 +279,23 @@ def test_pretrain_clones_a_baseline_before_ppo(tmp_path):
         resolve_config(TrainRequest(ENV_ID, "ppo", tmp_path / "x", overrides=bad))
     with pytest.raises(ValueError, match="clones a baseline into a PPO policy"):
         resolve_config(TrainRequest(ENV_ID, "sac", tmp_path / "y", overrides=hp))
+
+
+def test_in_a_dagger_round_the_learner_drives_and_the_baseline_labels(tmp_path):
+    import math
+
+    from agri_training.learned.pretrain import PretrainSpec, demonstrate
+
+    hp = {**TINY_HP, "pretrain": {"policy": "harik-apf-gt", "episodes": 1, "seed": 50000}}
+    config = resolve_config(TrainRequest(ENV_ID, "ppo", tmp_path / "run", seed=4, overrides=hp))
+    spec = PretrainSpec.from_config(config["pretrain"])
+    driven = demonstrate(spec, config)
+    standing = demonstrate(spec, config, learner=lambda batch: np.zeros((len(batch), 2), np.float32))
+    # Standing still, the robot never arrives: every decision until the step limit is labelled with what
+    # harik-apf-gt would do there (drive on), the first one as in the baseline's own run.
+    assert len(standing.actions) == math.ceil(TINY_ENV["max_episode_steps"] / config["action_repeat"])
+    assert standing.successes == 0 and np.all(standing.actions[:, 0] > 0.1)
+    np.testing.assert_allclose(standing.actions[0], driven.actions[0])
+    np.testing.assert_allclose(standing.observations[0], driven.observations[0])
+    last = min(len(driven.actions), len(standing.actions)) - 1
+    assert not np.allclose(standing.observations[last], driven.observations[last])
