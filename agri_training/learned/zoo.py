@@ -64,6 +64,21 @@ register_policy(
 
 register_policy(
     PolicySpec(
+        name="ppo-chain",
+        env_id="robot_chain_v1",
+        entry_point="agri_training.learned.zoo:load_zoo_policy",
+        env_kwargs={},
+        description="Learned (agri_training/zoo/ppo-chain): one network shared by every robot, from its own 29 "
+        "observations (sonars, pose, neighbours, slot, ghost, goal); cloned from apoorva-chain with 4 DAgger "
+        "rounds, then 1M robot-steps of PPO on the env's reward; trained with 4 robots",
+        learned=True,
+        algo="ppo",
+        train_command="agri train --env robot_chain_v1 --algo ppo --seed 0 --out runs/chain-dagger-s0",
+    )
+)
+
+register_policy(
+    PolicySpec(
         name="sac-her-grape-reach-strict",
         env_id="agri_envs/GrapeHarvest-v1",
         entry_point="agri_training.learned.zoo:load_zoo_policy",
