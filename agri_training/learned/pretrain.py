@@ -20,8 +20,8 @@ Before PPO's first rollout, :func:`pretrain_from_baseline`
    what it would have done; these decisions join the demonstrations and the fit is repeated
    (``dagger_epochs`` passes over all of them). Cloning alone trains only on the states the baseline
    visits, and a small error then leads the clone where it has never been shown what to do; DAgger
-   shows it. The baseline must act from its observations alone (the baseline's own memory, such as a
-   chain's recorded trails, is built from them), which holds for every baseline that drives the learner's env.
+   shows it. The baseline keeps the memory it builds from what it is shown (a chain's recorded trails, a
+   state machine's phase), so its labels answer the learner's run, as the baseline would go on from there.
 
 A PettingZoo env (the robot chain) is cloned the same way into the parameter-shared policy: every agent's
 decision is one sample, each agent's decisions one trajectory for the returns, and the baseline is the

@@ -64,6 +64,23 @@ register_policy(
 
 register_policy(
     PolicySpec(
+        name="ppo-greenhouse-nav-general",
+        env_id="agri_envs/GreenhouseNav-v2",
+        entry_point="agri_training.learned.zoo:load_zoo_policy",
+        env_kwargs={"localization": "ground_truth"},
+        description="Learned (agri_training/zoo/ppo-greenhouse-nav-general): the inputs of ppo-greenhouse-nav, "
+        "trained on the env's training distribution of greenhouses and office corridors: harik-apf-gt cloned "
+        "with 4 DAgger rounds, then 2M decisions of PPO",
+        privileged=True,
+        learned=True,
+        algo="ppo",
+        train_command="agri train --env agri_envs/GreenhouseNav-v2 --algo ppo --hyperparams "
+        "agri_training/hyperparams/ppo_generalization.yml --seed 1 --out runs/nav-dagger-s1",
+    )
+)
+
+register_policy(
+    PolicySpec(
         name="ppo-chain",
         env_id="robot_chain_v1",
         entry_point="agri_training.learned.zoo:load_zoo_policy",
