@@ -225,7 +225,9 @@ def _demonstrate_agents(
     successes = 0
     for seed in seeds:
         obs, infos = env.reset(seed=int(seed))
-        seen, advised, paid = [], [], []
+        seen: list[np.ndarray] = []
+        advised: list[np.ndarray] = []
+        paid: list[list[float]] = []
         while env.agents:
             if sorted(obs) != sorted(agents):
                 raise ValueError("pretrain: every agent must stay until the episode ends")
