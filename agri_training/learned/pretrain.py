@@ -173,7 +173,13 @@ def demonstrate(
             )
     seeds = range(spec.seed, spec.seed + spec.episodes) if seeds is None else seeds
     if agri_envs.is_parallel_id(env_id):
-        return _demonstrate_agents(spec, env_id, {**learner_kwargs, **baseline.env_kwargs}, seeds, learner)
+        # One env serves baseline and learner (no observation wrappers), so the baseline may add no argument.
+        extra = sorted(set(baseline.env_kwargs) - set(learner_kwargs))
+        if extra:
+            raise ValueError(
+                f"pretrain: {spec.policy} needs {extra} set on {env_id}; add them to the training env_kwargs"
+            )
+        return _demonstrate_agents(spec, env_id, learner_kwargs, seeds, learner)
     learner_env = gym.make(env_id, **learner_kwargs)
     space = learner_env.observation_space
     keys = list(space.spaces) if isinstance(space, gym.spaces.Dict) else None
@@ -345,6 +351,8 @@ def pretrain_from_baseline(model: Any, venv: Any, config: Mapping[str, Any]) -> 
         rounds.append({"seeds": [seeds[0], seeds[-1]], "policy_success_rate": driven.successes / driven.episodes})
         demos = _join(demos, driven)
         losses.append(_fit(policy, optimizer, venv, demos, gamma, spec.dagger_epochs, spec.batch_size, rng))
+    (first_action, first_value), _ = losses[0]  # the first batch of the first fit
+    _, (last_action, last_value) = losses[-1]  # the last batch of the last fit
     return {
         "policy": spec.policy,
         "episodes": spec.episodes,
@@ -352,8 +360,8 @@ def pretrain_from_baseline(model: Any, venv: Any, config: Mapping[str, Any]) -> 
         "baseline_success_rate": baseline_success,
         "decisions": len(demos.actions),
         "epochs": spec.epochs,
-        "action_mse_first_last": [losses[0][0][0], losses[-1][1][0]],
-        "value_mse_first_last": [losses[0][0][1], losses[-1][1][1]],
+        "action_mse_first_last": [first_action, last_action],
+        "value_mse_first_last": [first_value, last_value],
         "dagger_rounds": rounds,
     }
 

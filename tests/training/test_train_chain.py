@@ -245,3 +245,17 @@ def test_pretraining_the_chain_with_dagger_rounds(tmp_path):
     with pytest.raises(ValueError, match="must lie below 100000"):
         late = {**hp, "pretrain": {**hp["pretrain"], "seed": 99_998}}  # its second round would run seed 100001
         resolve_config(TrainRequest(ENV_ID, "ppo", tmp_path / "x", overrides=late))
+
+
+def test_a_chain_baseline_that_needs_other_env_arguments_is_refused(tmp_path, monkeypatch):
+    import dataclasses
+
+    import agri_training.learned.pretrain as pretrain
+
+    config = _cloning_config(tmp_path)
+    spec = pretrain.PretrainSpec.from_config(config["pretrain"])
+    needs = dataclasses.replace(pretrain.policy_spec("apoorva-chain"), env_kwargs={"sonar_range": 5.0})
+    monkeypatch.setattr(pretrain, "policy_spec", lambda name: needs)
+    # The learner would see the baseline's 5 m sonars in training and 3 m ones when evaluated.
+    with pytest.raises(ValueError, match=r"needs \['sonar_range'\]"):
+        pretrain.demonstrate(spec, config, seeds=[50_000])
