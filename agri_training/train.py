@@ -7,7 +7,7 @@ evaluated. The keys:
 
 | key | meaning |
 |---|---|
-| ``n_timesteps`` | training steps when ``--timesteps`` is not given |
+| ``n_timesteps`` | training steps when ``--timesteps`` is not given (0 with ``pretrain``: imitation only) |
 | ``policy`` | SB3 policy name (``MlpPolicy``, ``MultiInputPolicy``) |
 | ``n_envs`` | parallel envs |
 | ``vec_env`` | ``dummy`` (one process), ``subproc`` (one process per env) or ``vector`` (one process: the |
@@ -160,8 +160,8 @@ class TrainRequest:
             raise ValueError(f"algo must be one of {', '.join(ALGORITHMS)}, got {self.algo!r}")
         if not 0 <= self.seed < HELD_OUT_SEED:
             raise ValueError(f"seed must be in [0, {HELD_OUT_SEED}) (held-out suites start at {HELD_OUT_SEED})")
-        if self.timesteps is not None and self.timesteps < 1:
-            raise ValueError(f"timesteps must be >= 1, got {self.timesteps}")
+        if self.timesteps is not None and self.timesteps < 0:
+            raise ValueError(f"timesteps must be >= 0 (0: imitation only, with a pretrain block), got {self.timesteps}")
         if self.her and self.algo == "ppo":
             raise ValueError("--her needs an off-policy algorithm (sac, td3, tqc), not ppo")
 
@@ -249,6 +249,9 @@ def resolve_config(request: TrainRequest) -> dict[str, Any]:
                 name = item if isinstance(item, str) else next(iter(item), None)
                 if name in single and name not in vector:
                     raise ValueError(f"{key}: {name} has no vector form; train with vec_env: dummy or subproc")
+    timesteps = int(request.timesteps if request.timesteps is not None else hp.get("n_timesteps", 100_000))
+    if timesteps < 1 and not hp.get("pretrain"):
+        raise ValueError(f"timesteps must be >= 1 without a pretrain block (0 trains nothing), got {timesteps}")
     if hp.get("pretrain"):
         PretrainSpec.from_config(hp["pretrain"])  # refused here, before anything is written
         if request.algo != "ppo" or request.her:
@@ -277,7 +280,7 @@ def resolve_config(request: TrainRequest) -> dict[str, Any]:
         "algo": request.algo,
         "her": her,
         "seed": request.seed,
-        "timesteps": int(request.timesteps if request.timesteps is not None else hp.get("n_timesteps", 100_000)),
+        "timesteps": timesteps,
         "policy": hp.get("policy", "MultiInputPolicy" if request.her else "MlpPolicy"),
         "n_envs": n_envs,
         "vec_env": vec_env,
@@ -742,6 +745,11 @@ def train(
             pretrained = pretrain_from_baseline(model, model.get_vec_normalize_env(), config)
             pretrained["wall_time_s"] = round(time.perf_counter() - t0, 1)
             save_weights(model, run_dir / "checkpoints" / "step_0")
+        normalizer = model.get_vec_normalize_env()
+        if planned == 0 and normalizer is not None:
+            # Imitation only: learn() still resets the envs, and a training VecNormalize would fold those first
+            # observations into the clone's statistics. The run's weights are the clone's, unchanged.
+            normalizer.training = False
         model.learn(total_timesteps=planned, callback=callback, tb_log_name="run")
     except KeyboardInterrupt:  # Ctrl-C or SIGTERM: keep what was learned, write a complete run directory
         stopped_early = True

@@ -140,11 +140,75 @@ class ObservationHistory(gym.ObservationWrapper[np.ndarray, Any, np.ndarray]):
 
 
 #: Observation wrappers a config may declare (by name; nothing is imported from a string).
+def proximity_space(space: gym.spaces.Dict, lengths: Mapping[str, float]) -> gym.spaces.Dict:
+    """``space`` with a ``<key>_proximity`` Box beside each range key of ``lengths`` (see :class:`Proximity`).
+
+    Raises:
+        ValueError: For a space that is not a Dict, a key it lacks or that is not a non-negative Box, or a
+            length that is not positive.
+    """
+    if not isinstance(space, gym.spaces.Dict):
+        raise ValueError(f"Proximity needs a Dict observation (put it before FlattenObservation), got {space}")
+    if not lengths:
+        raise ValueError("Proximity needs at least one key: {key: length}")
+    spaces = dict(space.spaces)
+    for key, length in lengths.items():
+        box = spaces.get(key)
+        if not isinstance(box, gym.spaces.Box) or not np.all(box.low >= 0.0):
+            raise ValueError(f"Proximity: {key!r} must be a Box of ranges (>= 0) in {list(spaces)}")
+        if not float(length) > 0.0:
+            raise ValueError(f"Proximity: the length of {key!r} must be > 0, got {length}")
+        x = np.float32(length)
+        spaces[f"{key}_proximity"] = gym.spaces.Box(
+            (x / (x + box.high.astype(np.float32))), (x / (x + box.low.astype(np.float32))), dtype=np.float32
+        )
+    return gym.spaces.Dict(spaces)
+
+
+def add_proximity(observation: Mapping[str, Any], lengths: Mapping[str, float]) -> dict[str, Any]:
+    """``observation`` with ``<key>_proximity = length / (length + range)`` beside each key of ``lengths``.
+
+    Works on one observation or a batch alike; float32 division and addition only, so every CPU and every
+    batch size computes the same bits.
+    """
+    out = dict(observation)
+    for key, length in lengths.items():
+        x = np.float32(length)
+        out[f"{key}_proximity"] = x / (x + np.asarray(observation[key], dtype=np.float32))
+    return out
+
+
+class Proximity(gym.ObservationWrapper[dict[str, Any], Any, dict[str, Any]]):
+    """Range keys read again as proximity, ``length / (length + range)``: resolution where obstacles are near.
+
+    A range scaled to [0, 1] by the sensor's reach (GreenhouseNav's LIDAR: 10 m) spends 0.035 of its span
+    on the 35 cm in front of the body in which harik-apf-gt's safety stop acts, and normalisation keeps that
+    spread small beside the metres of a free corridor. The proximity of a range key rises from
+    ``length / (1 + length)`` far away to 1 at contact, and halves at ``range == length`` (in the key's
+    units). The range keys stay as they are; each gains a ``<key>_proximity`` key beside it. Stateless.
+    Put it before ``FlattenObservation``; in a config: ``{Proximity: {lidar: 0.05, sonar: 0.1}}``.
+
+    Raises:
+        ValueError: See :func:`proximity_space`.
+    """
+
+    def __init__(self, env: gym.Env[Any, Any], **lengths: float) -> None:
+        space = proximity_space(env.observation_space, lengths)  # type: ignore[arg-type]
+        super().__init__(env)
+        self.lengths = {key: float(length) for key, length in lengths.items()}
+        self.observation_space = space
+
+    def observation(self, observation: dict[str, Any]) -> dict[str, Any]:
+        """The observation with its proximity keys."""
+        return add_proximity(observation, self.lengths)
+
+
 WRAPPERS: dict[str, type[gym.ObservationWrapper[Any, Any, Any]]] = {
     "FlattenObservation": gym.wrappers.FlattenObservation,
     "FilterObservation": gym.wrappers.FilterObservation,
     "ObservationHistory": ObservationHistory,
     "NearestBoxes": NearestBoxes,
+    "Proximity": Proximity,
 }
 
 

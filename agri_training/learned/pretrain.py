@@ -61,6 +61,10 @@ class PretrainSpec:
         dagger_episodes: Episodes the policy drives in each round; round ``r`` (from 0) runs seeds
             ``seed + episodes + r * dagger_episodes ..``.
         dagger_epochs: Passes over all decisions after each round.
+        emphasize: Optional ``{action: i, below: x, weight: w}``: the decisions in which the baseline's action
+            component ``i`` is below ``x`` count ``w`` times in the action loss. A rare, decisive action (a
+            safety stop's step back: about 1 % of harik-apf-gt's decisions) is otherwise smoothed away by the
+            mean-squared fit.
     """
 
     policy: str
@@ -72,14 +76,35 @@ class PretrainSpec:
     dagger_rounds: int = 0
     dagger_episodes: int = 50
     dagger_epochs: int = 10
+    emphasize: Mapping[str, float] | None = None
 
     def __post_init__(self) -> None:
+        if self.emphasize is not None:
+            given = dict(self.emphasize)
+            if sorted(given) != ["action", "below", "weight"]:
+                raise ValueError(f"pretrain: emphasize needs exactly the keys action, below, weight; got {given}")
+            if int(given["action"]) != given["action"] or int(given["action"]) < 0 or not float(given["weight"]) > 0:
+                raise ValueError(f"pretrain: emphasize needs an action index >= 0 and a weight > 0; got {given}")
         if self.episodes < 1 or self.epochs < 1 or self.batch_size < 1:
             raise ValueError(f"pretrain: episodes, epochs and batch_size must be >= 1, got {self}")
         if self.dagger_rounds < 0 or self.dagger_episodes < 1 or self.dagger_epochs < 1:
             raise ValueError(f"pretrain: dagger_rounds must be >= 0, dagger_episodes and dagger_epochs >= 1: {self}")
         if not 0 <= self.seed or self.last_seed >= 100_000:
             raise ValueError(f"pretrain: seeds {self.seed}..{self.last_seed} must lie below 100000")
+
+    def loss_weights(self, actions: np.ndarray) -> np.ndarray | None:
+        """Each decision's weight in the action loss (``emphasize``), or None when all weigh the same.
+
+        Raises:
+            ValueError: When the action index lies outside the actions.
+        """
+        if self.emphasize is None:
+            return None
+        index = int(self.emphasize["action"])
+        if index >= actions.shape[1]:
+            raise ValueError(f"pretrain: emphasize action {index}, but the actions have {actions.shape[1]} components")
+        rare = actions[:, index] < float(self.emphasize["below"])
+        return np.where(rare, float(self.emphasize["weight"]), 1.0).astype(np.float32)
 
     @property
     def last_seed(self) -> int:
@@ -342,7 +367,8 @@ def pretrain_from_baseline(model: Any, venv: Any, config: Mapping[str, Any]) -> 
     policy = model.policy
     optimizer = torch.optim.Adam(policy.parameters(), lr=spec.learning_rate)  # no loss term reaches log_std
     rng = np.random.default_rng(int(config["seed"]))
-    losses = [_fit(policy, optimizer, venv, demos, gamma, spec.epochs, spec.batch_size, rng)]
+    weights = spec.loss_weights(demos.actions)
+    losses = [_fit(policy, optimizer, venv, demos, gamma, spec.epochs, spec.batch_size, rng, weights)]
     rounds = []
     for r in range(spec.dagger_rounds):
         first = spec.seed + spec.episodes + r * spec.dagger_episodes
@@ -350,7 +376,9 @@ def pretrain_from_baseline(model: Any, venv: Any, config: Mapping[str, Any]) -> 
         driven = demonstrate(spec, config, seeds, learner=_mean_action(model, venv))
         rounds.append({"seeds": [seeds[0], seeds[-1]], "policy_success_rate": driven.successes / driven.episodes})
         demos = _join(demos, driven)
-        losses.append(_fit(policy, optimizer, venv, demos, gamma, spec.dagger_epochs, spec.batch_size, rng))
+        weights = spec.loss_weights(demos.actions)
+        losses.append(_fit(policy, optimizer, venv, demos, gamma, spec.dagger_epochs, spec.batch_size, rng, weights))
+    weights = spec.loss_weights(demos.actions)
     (first_action, first_value), _ = losses[0]  # the first batch of the first fit
     _, (last_action, last_value) = losses[-1]  # the last batch of the last fit
     return {
@@ -363,7 +391,21 @@ def pretrain_from_baseline(model: Any, venv: Any, config: Mapping[str, Any]) -> 
         "action_mse_first_last": [first_action, last_action],
         "value_mse_first_last": [first_value, last_value],
         "dagger_rounds": rounds,
+        **({} if weights is None else {"emphasized_share": float(np.mean(weights > 1.0))}),
     }
+
+
+def action_loss_of(mean: Any, target: Any, weights: Any = None) -> Any:
+    """The mean squared error of ``mean`` against ``target`` (torch tensors, one row per decision).
+
+    With ``weights`` (one per row) a row of weight w counts as w copies of it would.
+    """
+    import torch
+
+    squared = (mean - target) ** 2
+    if weights is None:
+        return torch.mean(squared)
+    return torch.sum(weights[:, None] * squared) / (torch.sum(weights) * squared.shape[1])
 
 
 def _fit(
@@ -375,13 +417,18 @@ def _fit(
     epochs: int,
     batch_size: int,
     rng: np.random.Generator,
+    loss_weights: np.ndarray | None = None,
 ) -> tuple[tuple[float, float], tuple[float, float]]:
-    """``epochs`` passes of step 3 over ``demos``; the (action, value) losses of the first and last batch."""
+    """``epochs`` passes of step 3 over ``demos``; the (action, value) losses of the first and last batch.
+
+    ``loss_weights`` (one per decision, :meth:`PretrainSpec.loss_weights`) weigh the action loss.
+    """
     import torch
 
     obs, returns = _targets(venv, demos, gamma)
     n = len(demos.actions)
     actions = torch.as_tensor(demos.actions)
+    weights = None if loss_weights is None else torch.as_tensor(loss_weights)
     targets = torch.as_tensor(returns, dtype=torch.float32)
     first = last = None
     for _ in range(epochs):
@@ -391,7 +438,7 @@ def _fit(
             x = {k: torch.as_tensor(v[batch]) for k, v in obs.items()} if isinstance(obs, dict) else obs[batch]
             x = torch.as_tensor(x) if not isinstance(x, dict) else x
             mean = policy.get_distribution(x).distribution.mean
-            action_loss = torch.mean((mean - actions[batch]) ** 2)
+            action_loss = action_loss_of(mean, actions[batch], None if weights is None else weights[batch])
             value_loss = torch.mean((policy.predict_values(x).flatten() - targets[batch]) ** 2)
             loss = action_loss + 0.5 * value_loss
             optimizer.zero_grad()

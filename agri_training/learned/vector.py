@@ -28,7 +28,7 @@ import numpy as np
 from gymnasium.vector import AutoresetMode, SyncVectorEnv, VectorEnv, VectorWrapper
 from gymnasium.vector.utils import concatenate
 
-from agri_training.learned.policy import wrap_by_name
+from agri_training.learned.policy import add_proximity, proximity_space, wrap_by_name
 
 
 def per_env_seeds(seed: int | Sequence[int | None] | None, num_envs: int) -> list[int | None]:
@@ -192,10 +192,26 @@ class VectorObservationHistory(VectorWrapper[Any, Any, Any, Any, Any]):
 
 
 #: Vector forms of :data:`agri_training.learned.policy.WRAPPERS`, by the same names.
+class VectorProximity(gym.vector.VectorObservationWrapper[Any, Any, Any, Any]):
+    """:class:`~agri_training.learned.policy.Proximity` for a whole batch: the same keys, the same bits."""
+
+    def __init__(self, env: VectorEnv[Any, Any, Any], **lengths: float) -> None:
+        single = proximity_space(env.single_observation_space, lengths)  # type: ignore[arg-type]
+        super().__init__(env)
+        self.lengths = {key: float(length) for key, length in lengths.items()}
+        self.single_observation_space = single
+        self.observation_space = gym.vector.utils.batch_space(single, self.num_envs)
+
+    def observations(self, observations: Any) -> dict[str, Any]:
+        """The batch with its proximity keys."""
+        return add_proximity(observations, self.lengths)
+
+
 VECTOR_WRAPPERS: dict[str, Callable[..., VectorEnv[Any, Any, Any]]] = {
     "FlattenObservation": vector_flatten,
     "FilterObservation": gym.wrappers.vector.FilterObservation,
     "ObservationHistory": VectorObservationHistory,
+    "Proximity": VectorProximity,
 }
 
 

@@ -299,3 +299,47 @@ def test_in_a_dagger_round_the_learner_drives_and_the_baseline_labels(tmp_path):
     np.testing.assert_allclose(standing.observations[0], driven.observations[0])
     last = min(len(driven.actions), len(standing.actions)) - 1
     assert not np.allclose(standing.observations[last], driven.observations[last])
+
+
+def test_emphasized_decisions_count_as_copies_in_the_action_loss():
+    from agri_training.learned.pretrain import PretrainSpec, action_loss_of
+
+    spec = PretrainSpec.from_config({"policy": "harik-apf-gt", "emphasize": {"action": 0, "below": 0.0, "weight": 3}})
+    actions = np.array([[0.8, 0.1], [-0.3, 0.0], [0.5, -0.2], [-0.1, 0.4]], np.float32)
+    weights = spec.loss_weights(actions)
+    np.testing.assert_array_equal(weights, [1.0, 3.0, 1.0, 3.0])  # the two step-backs
+    assert PretrainSpec.from_config({"policy": "harik-apf-gt"}).loss_weights(actions) is None
+    rng = np.random.default_rng(0)
+    mean = torch.as_tensor(rng.normal(size=actions.shape).astype(np.float32))
+    weighted = action_loss_of(mean, torch.as_tensor(actions), torch.as_tensor(weights))
+    copies = np.repeat(np.arange(len(actions)), weights.astype(int))  # oracle: each step-back three times
+    repeated = action_loss_of(mean[copies], torch.as_tensor(actions[copies]))
+    assert abs(float(weighted) - float(repeated)) < 1e-6
+    assert abs(float(weighted) - float(action_loss_of(mean, torch.as_tensor(actions)))) > 1e-3
+    with pytest.raises(ValueError, match="action, below, weight"):
+        PretrainSpec.from_config({"policy": "harik-apf-gt", "emphasize": {"action": 0, "weight": 3}})
+    with pytest.raises(ValueError, match="weight > 0"):
+        PretrainSpec.from_config({"policy": "harik-apf-gt", "emphasize": {"action": 0, "below": 0, "weight": 0}})
+    with pytest.raises(ValueError, match="2 components"):
+        PretrainSpec.from_config(
+            {"policy": "harik-apf-gt", "emphasize": {"action": 2, "below": 0, "weight": 2}}
+        ).loss_weights(actions)
+
+
+def test_zero_timesteps_with_pretrain_ships_the_clone(tmp_path):
+    hp = {**TINY_HP, "pretrain": {"policy": "harik-apf-gt", "episodes": 1, "epochs": 2, "seed": 50000}}
+    out = tmp_path / "clone"
+    train(TrainRequest(ENV_ID, "ppo", out, seed=4, timesteps=0, overrides=hp, progress=False), "test")
+    meta = json.loads((out / "meta.json").read_text())
+    assert meta["timesteps_done"] == 0 and meta["pretrain"]["decisions"] > 0
+    final = torch.load(out / "policy.pt", weights_only=True)
+    cloned = torch.load(out / "checkpoints" / "step_0" / "policy.pt", weights_only=True)
+    assert all(torch.equal(final[k], cloned[k]) for k in final)  # no RL step moved the weights
+    stats = (out / "checkpoints" / "step_0" / "normalize.json").read_text()
+    assert (out / "normalize.json").read_text() == stats  # nor the observation statistics
+    curve = (out / "curve.csv").read_text().splitlines()
+    assert len(curve) == 2 and curve[1].startswith("0,")  # one evaluation, of the clone
+    with pytest.raises(ValueError, match="without a pretrain block"):
+        resolve_config(TrainRequest(ENV_ID, "ppo", tmp_path / "x", timesteps=0, overrides=TINY_HP))
+    with pytest.raises(ValueError, match="timesteps must be >= 0"):
+        TrainRequest(ENV_ID, "ppo", tmp_path / "y", timesteps=-1)
