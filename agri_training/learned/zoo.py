@@ -81,6 +81,23 @@ register_policy(
 
 register_policy(
     PolicySpec(
+        name="dagger-greenhouse-nav",
+        env_id="agri_envs/GreenhouseNav-v2",
+        entry_point="agri_training.learned.zoo:load_zoo_policy",
+        env_kwargs={"localization": "ground_truth"},
+        description="Learned by imitation (agri_training/zoo/dagger-greenhouse-nav): the inputs of "
+        "ppo-greenhouse-nav, its ranges also read as proximity; harik-apf-gt cloned on the env's training "
+        "distribution with 8 DAgger rounds, no PPO steps",
+        privileged=True,
+        learned=True,
+        algo="ppo",
+        train_command="agri train --env agri_envs/GreenhouseNav-v2 --algo ppo --hyperparams "
+        "agri_training/hyperparams/dagger_generalization.yml --seed 1 --out runs/nav-imitation-s1",
+    )
+)
+
+register_policy(
+    PolicySpec(
         name="ppo-chain",
         env_id="robot_chain_v1",
         entry_point="agri_training.learned.zoo:load_zoo_policy",
