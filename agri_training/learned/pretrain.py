@@ -378,7 +378,6 @@ def pretrain_from_baseline(model: Any, venv: Any, config: Mapping[str, Any]) -> 
         demos = _join(demos, driven)
         weights = spec.loss_weights(demos.actions)
         losses.append(_fit(policy, optimizer, venv, demos, gamma, spec.dagger_epochs, spec.batch_size, rng, weights))
-    weights = spec.loss_weights(demos.actions)
     (first_action, first_value), _ = losses[0]  # the first batch of the first fit
     _, (last_action, last_value) = losses[-1]  # the last batch of the last fit
     return {
