@@ -250,8 +250,8 @@ def resolve_config(request: TrainRequest) -> dict[str, Any]:
                 if name in single and name not in vector:
                     raise ValueError(f"{key}: {name} has no vector form; train with vec_env: dummy or subproc")
     timesteps = int(request.timesteps if request.timesteps is not None else hp.get("n_timesteps", 100_000))
-    if timesteps < 1 and not hp.get("pretrain"):
-        raise ValueError(f"timesteps must be >= 1 without a pretrain block (0 trains nothing), got {timesteps}")
+    if timesteps < 0 or (timesteps < 1 and not hp.get("pretrain")):
+        raise ValueError(f"timesteps must be >= 1, or 0 with a pretrain block (imitation only), got {timesteps}")
     if hp.get("pretrain"):
         PretrainSpec.from_config(hp["pretrain"])  # refused here, before anything is written
         if request.algo != "ppo" or request.her:

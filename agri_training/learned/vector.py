@@ -191,7 +191,6 @@ class VectorObservationHistory(VectorWrapper[Any, Any, Any, Any, Any]):
         return self._history.reshape(self.num_envs, -1).copy()
 
 
-#: Vector forms of :data:`agri_training.learned.policy.WRAPPERS`, by the same names.
 class VectorProximity(gym.vector.VectorObservationWrapper[Any, Any, Any, Any]):
     """:class:`~agri_training.learned.policy.Proximity` for a whole batch: the same keys, the same bits."""
 
@@ -207,6 +206,7 @@ class VectorProximity(gym.vector.VectorObservationWrapper[Any, Any, Any, Any]):
         return add_proximity(observations, self.lengths)
 
 
+#: Vector forms of :data:`agri_training.learned.policy.WRAPPERS`, by the same names.
 VECTOR_WRAPPERS: dict[str, Callable[..., VectorEnv[Any, Any, Any]]] = {
     "FlattenObservation": vector_flatten,
     "FilterObservation": gym.wrappers.vector.FilterObservation,

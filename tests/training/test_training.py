@@ -339,7 +339,9 @@ def test_zero_timesteps_with_pretrain_ships_the_clone(tmp_path):
     assert (out / "normalize.json").read_text() == stats  # nor the observation statistics
     curve = (out / "curve.csv").read_text().splitlines()
     assert len(curve) == 2 and curve[1].startswith("0,")  # one evaluation, of the clone
-    with pytest.raises(ValueError, match="without a pretrain block"):
+    with pytest.raises(ValueError, match="or 0 with a pretrain block"):
         resolve_config(TrainRequest(ENV_ID, "ppo", tmp_path / "x", timesteps=0, overrides=TINY_HP))
+    with pytest.raises(ValueError, match="or 0 with a pretrain block"):  # a negative count from the YAML
+        resolve_config(TrainRequest(ENV_ID, "ppo", tmp_path / "z", overrides={**hp, "n_timesteps": -8}))
     with pytest.raises(ValueError, match="timesteps must be >= 0"):
         TrainRequest(ENV_ID, "ppo", tmp_path / "y", timesteps=-1)
