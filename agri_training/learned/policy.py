@@ -139,7 +139,6 @@ class ObservationHistory(gym.ObservationWrapper[np.ndarray, Any, np.ndarray]):
         return np.concatenate(self._history).astype(self.observation_space.dtype, copy=False)
 
 
-#: Observation wrappers a config may declare (by name; nothing is imported from a string).
 def proximity_space(space: gym.spaces.Dict, lengths: Mapping[str, float]) -> gym.spaces.Dict:
     """``space`` with a ``<key>_proximity`` Box beside each range key of ``lengths`` (see :class:`Proximity`).
 
@@ -203,6 +202,7 @@ class Proximity(gym.ObservationWrapper[dict[str, Any], Any, dict[str, Any]]):
         return add_proximity(observation, self.lengths)
 
 
+#: Observation wrappers a config may declare (by name; nothing is imported from a string).
 WRAPPERS: dict[str, type[gym.ObservationWrapper[Any, Any, Any]]] = {
     "FlattenObservation": gym.wrappers.FlattenObservation,
     "FilterObservation": gym.wrappers.FilterObservation,

@@ -390,7 +390,7 @@ def pretrain_from_baseline(model: Any, venv: Any, config: Mapping[str, Any]) -> 
         "action_mse_first_last": [first_action, last_action],
         "value_mse_first_last": [first_value, last_value],
         "dagger_rounds": rounds,
-        **({} if weights is None else {"emphasized_share": float(np.mean(weights > 1.0))}),
+        **({} if weights is None else {"emphasized_share": float(np.mean(weights != 1.0))}),
     }
 
 

@@ -81,13 +81,16 @@ def test_a_loaded_policy_replays_the_proximity_keys():
 
 
 @pytest.mark.parametrize(
-    "lengths, match",
-    [({"lidar": 0.0}, "must be > 0"), ({"camera": 0.1}, "'camera' must be a Box of ranges"), ({}, "at least one key")],
+    "wrap, lengths, match",
+    [
+        (False, {"lidar": 0.0}, "must be > 0"),
+        (False, {"camera": 0.1}, "'camera' must be a Box of ranges"),
+        (False, {"velocity": 0.1}, "'velocity' must be a Box of ranges"),  # velocity reaches -1: not a range
+        (False, {}, "at least one key"),
+        (True, {"lidar": 0.05}, "Dict observation"),  # after FlattenObservation: nothing to name
+    ],
 )
-def test_proximity_refuses_what_it_cannot_read(lengths, match):
+def test_proximity_refuses_what_it_cannot_read(wrap, lengths, match):
+    env = gym.make(ENV_ID, **SMALL)
     with pytest.raises(ValueError, match=match):
-        Proximity(gym.make(ENV_ID, **SMALL), **lengths)
-    with pytest.raises(ValueError, match="Dict observation"):
-        Proximity(gym.wrappers.FlattenObservation(gym.make(ENV_ID, **SMALL)), lidar=0.05)
-    with pytest.raises(ValueError, match="Box of ranges"):  # velocity reaches -1: not a range
-        Proximity(gym.make(ENV_ID, **SMALL), velocity=0.1)
+        Proximity(gym.wrappers.FlattenObservation(env) if wrap else env, **lengths)
