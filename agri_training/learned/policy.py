@@ -35,6 +35,7 @@ import agri_envs
 from agri_training.learned.arm_observation import NearestBoxes
 from agri_training.learned.inference import PolicyNetwork
 from agri_training.learned.parameter_sharing import predict_shared
+from agri_training.learned.range_features import Differences, Ramp
 
 #: Algorithms ``agri train`` knows: name -> (module, class).
 ALGORITHMS: dict[str, tuple[str, str]] = {
@@ -209,6 +210,8 @@ WRAPPERS: dict[str, type[gym.ObservationWrapper[Any, Any, Any]]] = {
     "ObservationHistory": ObservationHistory,
     "NearestBoxes": NearestBoxes,
     "Proximity": Proximity,
+    "Differences": Differences,
+    "Ramp": Ramp,
 }
 
 

@@ -29,6 +29,13 @@ from gymnasium.vector import AutoresetMode, SyncVectorEnv, VectorEnv, VectorWrap
 from gymnasium.vector.utils import concatenate
 
 from agri_training.learned.policy import add_proximity, proximity_space, wrap_by_name
+from agri_training.learned.range_features import (
+    add_differences,
+    add_ramps,
+    differences_space,
+    ramp_bounds,
+    ramp_space,
+)
 
 
 def per_env_seeds(seed: int | Sequence[int | None] | None, num_envs: int) -> list[int | None]:
@@ -206,12 +213,43 @@ class VectorProximity(gym.vector.VectorObservationWrapper[Any, Any, Any, Any]):
         return add_proximity(observations, self.lengths)
 
 
+class VectorDifferences(gym.vector.VectorObservationWrapper[Any, Any, Any, Any]):
+    """:class:`~agri_training.learned.range_features.Differences` for a whole batch: the same keys, the same bits."""
+
+    def __init__(self, env: VectorEnv[Any, Any, Any], **pairs: Sequence[Sequence[int]]) -> None:
+        single = differences_space(env.single_observation_space, pairs)  # type: ignore[arg-type]
+        super().__init__(env)
+        self.pairs = {key: [[int(i), int(j)] for i, j in key_pairs] for key, key_pairs in pairs.items()}
+        self.single_observation_space = single
+        self.observation_space = gym.vector.utils.batch_space(single, self.num_envs)
+
+    def observations(self, observations: Any) -> dict[str, Any]:
+        """The batch with its difference keys."""
+        return add_differences(observations, self.pairs)
+
+
+class VectorRamp(gym.vector.VectorObservationWrapper[Any, Any, Any, Any]):
+    """:class:`~agri_training.learned.range_features.Ramp` for a whole batch: the same keys, the same bits."""
+
+    def __init__(self, env: VectorEnv[Any, Any, Any], **bounds: Mapping[str, float | Sequence[float]]) -> None:
+        self.bounds = ramp_bounds(env.single_observation_space, bounds)  # type: ignore[arg-type]
+        super().__init__(env)
+        self.single_observation_space = ramp_space(env.single_observation_space, self.bounds)  # type: ignore[arg-type]
+        self.observation_space = gym.vector.utils.batch_space(self.single_observation_space, self.num_envs)
+
+    def observations(self, observations: Any) -> dict[str, Any]:
+        """The batch with its ramp keys."""
+        return add_ramps(observations, self.bounds)
+
+
 #: Vector forms of :data:`agri_training.learned.policy.WRAPPERS`, by the same names.
 VECTOR_WRAPPERS: dict[str, Callable[..., VectorEnv[Any, Any, Any]]] = {
     "FlattenObservation": vector_flatten,
     "FilterObservation": gym.wrappers.vector.FilterObservation,
     "ObservationHistory": VectorObservationHistory,
     "Proximity": VectorProximity,
+    "Differences": VectorDifferences,
+    "Ramp": VectorRamp,
 }
 
 

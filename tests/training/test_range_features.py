@@ -1,0 +1,131 @@
+"""Differences and Ramp: width-free readings of range keys, the same bits on one env and on a batch."""
+
+import functools
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+import agri_envs  # noqa: F401
+from agri_training.learned.policy import ObservationReplay, apply_wrappers, observation_chain
+from agri_training.learned.range_features import Differences, Ramp
+from agri_training.learned.vector import apply_vector_wrappers, make_sync_vector_env
+
+ENV_ID = "agri_envs/GreenhouseCoverage-v1"
+SMALL = {"n_rows": 1, "row_length": 4.0, "max_episode_steps": 40}
+PAIRS = {"sonar": [[1, 4], [2, 5], [3, 6]]}  # left minus right: front, middle, rear
+BOUNDS = {"sonar": {"low": [0.0] + [0.25] * 6, "high": [1.0] + [0.75] * 6}}
+WRAPPERS = [
+    {"Differences": PAIRS},
+    {"Ramp": BOUNDS},
+    {"FilterObservation": {"filter_keys": ["sonar_difference", "sonar_ramp", "compass"]}},
+    "FlattenObservation",
+]
+
+
+def _drive(env, seed, steps=25):
+    obs, _ = env.reset(seed=seed)
+    out = [obs]
+    for _ in range(steps):
+        out.append(env.step(np.array([1.0, 0.3], np.float32))[0])
+    return out
+
+
+def test_differences_are_left_minus_right_and_leave_the_ranges_alone():
+    raw = _drive(gym.make(ENV_ID, **SMALL), 4)
+    env = Differences(gym.make(ENV_ID, **SMALL), **PAIRS)
+    for first, obs in zip(raw, _drive(env, 4), strict=True):
+        np.testing.assert_array_equal(obs["sonar"], first["sonar"])
+        x = first["sonar"].astype(np.float64)  # the float64 difference of two float32 is exact: one rounding
+        expected = np.float32([x[1] - x[4], x[2] - x[5], x[3] - x[6]])
+        np.testing.assert_array_equal(obs["sonar_difference"], expected)
+        assert env.observation_space.contains(obs)
+    box = env.observation_space["sonar_difference"]
+    np.testing.assert_array_equal([box.low.min(), box.high.max()], [-1.0, 1.0])
+
+
+def test_a_centred_robot_reads_zero_difference_in_any_corridor_width():
+    readings = {width: np.float32([1.0, width, width, width, width, width, width]) for width in (0.1, 0.125)}
+    env = Differences(gym.make(ENV_ID, **SMALL), **PAIRS)
+    obs, _ = gym.make(ENV_ID, **SMALL).reset(seed=0)
+    for sonar in readings.values():
+        np.testing.assert_array_equal(env.observation({**obs, "sonar": sonar})["sonar_difference"], 0.0)
+    offset = env.observation({**obs, "sonar": np.float32([1, 0.05, 0.05, 0.05, 0.2, 0.2, 0.2])})
+    np.testing.assert_allclose(offset["sonar_difference"], -0.15, rtol=1e-6)  # nearer the left row
+
+
+def test_the_ramp_is_flat_below_low_and_above_high_and_linear_between():
+    env = Ramp(gym.make(ENV_ID, **SMALL), **BOUNDS)
+    obs, _ = gym.make(ENV_ID, **SMALL).reset(seed=0)
+    sides = np.float32([0.1, 0.25, 0.3, 0.5, 0.7, 0.75, 1.0])
+    ramp = env.observation({**obs, "sonar": sides})["sonar_ramp"]
+    assert ramp[0] == np.float32(0.1)  # the front's ramp spans its whole range: the reading itself
+    np.testing.assert_allclose(ramp[1:], [0.0, 0.1, 0.5, 0.9, 1.0, 1.0], rtol=1e-6)
+    for obs in _drive(env, 2):
+        assert env.observation_space.contains(obs)
+        assert obs["sonar_ramp"].dtype == np.float32
+
+
+def test_one_number_bounds_every_element():
+    env = Ramp(gym.make(ENV_ID, **SMALL), sonar={"low": 0.25, "high": 0.75})
+    obs, _ = gym.make(ENV_ID, **SMALL).reset(seed=0)
+    ramp = env.observation({**obs, "sonar": np.full(7, 0.5, np.float32)})["sonar_ramp"]
+    np.testing.assert_array_equal(ramp, np.full(7, 0.5, np.float32))
+
+
+def test_the_batch_forms_give_each_sub_env_the_single_envs_bits():
+    kwargs = [{**SMALL, "max_episode_steps": 15 + 9 * i} for i in range(3)]
+    single = [apply_wrappers(gym.make(ENV_ID, **kw), WRAPPERS) for kw in kwargs]
+    batch = apply_vector_wrappers(
+        make_sync_vector_env([functools.partial(gym.make, ENV_ID, **kw) for kw in kwargs]), WRAPPERS
+    )
+    assert batch.single_observation_space == single[0].observation_space
+    obs, _ = batch.reset(seed=[5, 6, 7])
+    rows = [env.reset(seed=5 + i)[0] for i, env in enumerate(single)]
+    rng = np.random.default_rng(1)
+    for step in range(40):
+        np.testing.assert_array_equal(obs, np.stack(rows), err_msg=f"step {step}")
+        actions = rng.uniform(-1, 1, (3, 2)).astype(np.float32)
+        obs, _, term, trunc, _ = batch.step(actions)
+        rows = []
+        for i, env in enumerate(single):
+            row, _, t, u, _ = env.step(actions[i])
+            if t or u:
+                row = env.reset()[0]
+            rows.append(row)
+        done = term | trunc
+        if done.any():
+            obs, _ = batch.reset(options={"reset_mask": done})
+
+
+def test_a_loaded_policy_replays_the_features():
+    env = gym.make(ENV_ID, **SMALL)
+    wrapped, chain = observation_chain(gym.make(ENV_ID, **SMALL), WRAPPERS)
+    raw, _ = env.reset(seed=8)
+    np.testing.assert_array_equal(ObservationReplay(chain)(raw, new_episode=True), wrapped.reset(seed=8)[0])
+
+
+@pytest.mark.parametrize(
+    "wrapper, kwargs, match",
+    [
+        (Differences, {}, "at least one key"),
+        (Differences, {"camera": [[0, 1]]}, "'camera' must be a 1-D Box"),
+        (Differences, {"sonar": [[1, 1]]}, "two distinct indices"),
+        (Differences, {"sonar": [[1, 7]]}, "two distinct indices"),
+        (Differences, {"sonar": [1, 4]}, "list of index pairs"),
+        (Differences, {"memory": [[0, 1]]}, "'memory' must be a 1-D Box"),
+        (Ramp, {}, "at least one key"),
+        (Ramp, {"sonar": {"low": 0.5}}, "needs {low: ..., high: ...}"),
+        (Ramp, {"sonar": {"low": 0.5, "high": 0.5}}, "above its low"),
+        (Ramp, {"sonar": {"low": [0.1, 0.2], "high": 0.9}}, "one number or 7"),
+    ],
+)
+def test_the_features_refuse_what_they_cannot_read(wrapper, kwargs, match):
+    with pytest.raises(ValueError, match=match):
+        wrapper(gym.make(ENV_ID, **SMALL), **kwargs)
+
+
+@pytest.mark.parametrize("wrapper, kwargs", [(Differences, PAIRS), (Ramp, BOUNDS)])
+def test_the_features_need_a_dict_observation(wrapper, kwargs):
+    with pytest.raises(ValueError, match="Dict observation"):
+        wrapper(gym.wrappers.FlattenObservation(gym.make(ENV_ID, **SMALL)), **kwargs)
