@@ -31,45 +31,66 @@ def _range_box(space: gym.Space[Any], key: str, who: str) -> gym.spaces.Box:
     return box
 
 
-def differences_space(space: gym.spaces.Dict, pairs: Mapping[str, Sequence[Sequence[int]]]) -> gym.spaces.Dict:
+#: A pair of a :class:`Differences` key: two members, each an index or a list of indices (their nearest reading).
+Pair = Sequence[int | Sequence[int]]
+
+
+def differences_space(space: gym.spaces.Dict, pairs: Mapping[str, Sequence[Pair]]) -> gym.spaces.Dict:
     """``space`` with a ``<key>_difference`` Box beside each key of ``pairs`` (see :class:`Differences`).
 
     Raises:
         ValueError: For a space that is not a Dict, a key that is not a 1-D Box, no pairs, or a pair that is
-            not two distinct indices of the key.
+            not two members of indices of the key, different from each other.
     """
     if not pairs:
         raise ValueError("Differences needs at least one key: {key: [[i, j], ...]}")
     added = {}
     for key, key_pairs in pairs.items():
         box = _range_box(space, key, "Differences")
-        index = _pairs(key, key_pairs, box.shape[0])
+        members = _members(key, key_pairs, box.shape[0])
         low = box.low.astype(np.float32)
         high = box.high.astype(np.float32)
+        # The nearest of a group lies between the least low and the least high of its elements.
         added[f"{key}_difference"] = gym.spaces.Box(
-            low[index[:, 0]] - high[index[:, 1]], high[index[:, 0]] - low[index[:, 1]], dtype=np.float32
+            np.array([low[a].min() - high[b].min() for a, b in members], dtype=np.float32),
+            np.array([high[a].min() - low[b].min() for a, b in members], dtype=np.float32),
+            dtype=np.float32,
         )
     return gym.spaces.Dict({**space.spaces, **added})
 
 
-def _pairs(key: str, pairs: Sequence[Sequence[int]], size: int) -> np.ndarray:
-    index = np.asarray(pairs)
-    if index.ndim != 2 or index.shape[0] == 0 or index.shape[1] != 2 or not np.issubdtype(index.dtype, np.integer):
-        raise ValueError(f"Differences: {key!r} needs a list of index pairs [[i, j], ...], got {pairs!r}")
-    if np.any(index < 0) or np.any(index >= size) or np.any(index[:, 0] == index[:, 1]):
-        raise ValueError(
-            f"Differences: each pair of {key!r} must be two distinct indices in [0, {size}), got {pairs!r}"
-        )
-    return index
+def _members(key: str, pairs: Sequence[Pair], size: int) -> list[tuple[list[int], list[int]]]:
+    """The pairs of ``key`` as ``(indices of a, indices of b)``, checked against the key's ``size``."""
+    if not isinstance(pairs, Sequence) or isinstance(pairs, str) or not pairs:
+        raise ValueError(f"Differences: {key!r} needs a list of pairs [[i, j], ...], got {pairs!r}")
+    members = []
+    for pair in pairs:
+        if not isinstance(pair, Sequence) or isinstance(pair, str) or len(pair) != 2:
+            raise ValueError(f"Differences: {key!r} needs a list of pairs [[i, j], ...], got {pairs!r}")
+        a, b = ([m] if isinstance(m, int) else list(m) for m in pair)
+        if not a or not b or not all(isinstance(i, int) and 0 <= i < size for i in a + b) or set(a) == set(b):
+            raise ValueError(
+                f"Differences: each pair of {key!r} must be two different members, each an index in [0, {size})"
+                f" or a list of them, got {pair!r}"
+            )
+        members.append((a, b))
+    return members
 
 
-def add_differences(observation: Mapping[str, Any], pairs: Mapping[str, Sequence[Sequence[int]]]) -> dict[str, Any]:
-    """``observation`` with ``<key>_difference = x[..., i] - x[..., j]`` for each pair ``(i, j)`` of each key."""
+def add_differences(observation: Mapping[str, Any], pairs: Mapping[str, Sequence[Pair]]) -> dict[str, Any]:
+    """``observation`` with ``<key>_difference[k] = min(x[..., a_k]) - min(x[..., b_k])`` for each pair ``(a, b)``.
+
+    A member that is one index is that element itself.
+    """
     out = dict(observation)
     for key, key_pairs in pairs.items():
         x = np.asarray(observation[key], dtype=np.float32)
-        index = np.asarray(key_pairs)
-        out[f"{key}_difference"] = x[..., index[:, 0]] - x[..., index[:, 1]]
+        nearest = [
+            x[..., [a] if isinstance(a, int) else list(a)].min(axis=-1)
+            - x[..., [b] if isinstance(b, int) else list(b)].min(axis=-1)
+            for a, b in key_pairs
+        ]
+        out[f"{key}_difference"] = np.stack(nearest, axis=-1).astype(np.float32, copy=False)
     return out
 
 
@@ -78,17 +99,19 @@ class Differences(gym.ObservationWrapper[dict[str, Any], Any, dict[str, Any]]):
 
     For the Fitorobot's sonars (front; left front, middle, rear; right front, middle, rear),
     ``{Differences: {sonar: [[1, 4], [2, 5], [3, 6]]}}`` gives left minus right at the front, middle and rear
-    of the robot: 0 on a corridor's centre line and twice the offset beside it, in any corridor width.
-    Stateless. Put it before ``FilterObservation`` and ``FlattenObservation``.
+    of the robot: 0 on a corridor's centre line and twice the offset beside it, in any corridor width. A
+    member may also be a list of indices, read as their nearest (least) range: ``[[1, 2, 3], [4, 5, 6]]``
+    is the nearest echo on the left minus the nearest on the right, which one echo that slips long through
+    the foliage does not swing. Stateless. Put it before ``FilterObservation`` and ``FlattenObservation``.
 
     Raises:
         ValueError: See :func:`differences_space`.
     """
 
-    def __init__(self, env: gym.Env[Any, Any], **pairs: Sequence[Sequence[int]]) -> None:
+    def __init__(self, env: gym.Env[Any, Any], **pairs: Sequence[Pair]) -> None:
         space = differences_space(env.observation_space, pairs)  # type: ignore[arg-type]
         super().__init__(env)
-        self.pairs = {key: [[int(i), int(j)] for i, j in key_pairs] for key, key_pairs in pairs.items()}
+        self.pairs = dict(pairs)
         self.observation_space = space
 
     def observation(self, observation: dict[str, Any]) -> dict[str, Any]:

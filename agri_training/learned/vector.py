@@ -30,6 +30,7 @@ from gymnasium.vector.utils import concatenate
 
 from agri_training.learned.policy import add_proximity, proximity_space, wrap_by_name
 from agri_training.learned.range_features import (
+    Pair,
     add_differences,
     add_ramps,
     differences_space,
@@ -216,10 +217,10 @@ class VectorProximity(gym.vector.VectorObservationWrapper[Any, Any, Any, Any]):
 class VectorDifferences(gym.vector.VectorObservationWrapper[Any, Any, Any, Any]):
     """:class:`~agri_training.learned.range_features.Differences` for a whole batch: the same keys, the same bits."""
 
-    def __init__(self, env: VectorEnv[Any, Any, Any], **pairs: Sequence[Sequence[int]]) -> None:
+    def __init__(self, env: VectorEnv[Any, Any, Any], **pairs: Sequence[Pair]) -> None:
         single = differences_space(env.single_observation_space, pairs)  # type: ignore[arg-type]
         super().__init__(env)
-        self.pairs = {key: [[int(i), int(j)] for i, j in key_pairs] for key, key_pairs in pairs.items()}
+        self.pairs = dict(pairs)
         self.single_observation_space = single
         self.observation_space = gym.vector.utils.batch_space(single, self.num_envs)
 

@@ -54,6 +54,20 @@ def test_a_centred_robot_reads_zero_difference_in_any_corridor_width():
     np.testing.assert_allclose(offset["sonar_difference"], -0.15, rtol=1e-6)  # nearer the left row
 
 
+def test_a_group_reads_its_nearest_range_so_one_long_echo_does_not_swing_it():
+    env = Differences(gym.make(ENV_ID, **SMALL), sonar=[[[1, 2, 3], [4, 5, 6]], [0, [1, 4]]])
+    obs, _ = gym.make(ENV_ID, **SMALL).reset(seed=0)
+    slipped = np.float32([0.9, 0.05, 0.06, 0.05, 0.2, 0.95, 0.21])  # the right middle echo slipped long
+    diff = env.observation({**obs, "sonar": slipped})["sonar_difference"]
+    np.testing.assert_array_equal(diff, [np.float32(0.05) - np.float32(0.2), np.float32(0.9) - np.float32(0.05)])
+    box = env.observation_space["sonar_difference"]
+    np.testing.assert_array_equal([box.low, box.high], [[-1.0, -1.0], [1.0, 1.0]])
+    for obs in _drive(env, 6):
+        assert env.observation_space.contains(obs)
+        x = obs["sonar"]
+        assert obs["sonar_difference"][0] == x[1:4].min() - x[4:7].min()
+
+
 def test_the_ramp_is_flat_below_low_and_above_high_and_linear_between():
     env = Ramp(gym.make(ENV_ID, **SMALL), **BOUNDS)
     obs, _ = gym.make(ENV_ID, **SMALL).reset(seed=0)
@@ -110,9 +124,12 @@ def test_a_loaded_policy_replays_the_features():
     [
         (Differences, {}, "at least one key"),
         (Differences, {"camera": [[0, 1]]}, "'camera' must be a 1-D Box"),
-        (Differences, {"sonar": [[1, 1]]}, "two distinct indices"),
-        (Differences, {"sonar": [[1, 7]]}, "two distinct indices"),
-        (Differences, {"sonar": [1, 4]}, "list of index pairs"),
+        (Differences, {"sonar": [[1, 1]]}, "two different members"),
+        (Differences, {"sonar": [[[1, 2], [2, 1]]]}, "two different members"),
+        (Differences, {"sonar": [[1, 7]]}, "two different members"),
+        (Differences, {"sonar": [[1, []]]}, "two different members"),
+        (Differences, {"sonar": [1, 4]}, "list of pairs"),
+        (Differences, {"sonar": [[1, 2, 3]]}, "list of pairs"),
         (Differences, {"memory": [[0, 1]]}, "'memory' must be a 1-D Box"),
         (Ramp, {}, "at least one key"),
         (Ramp, {"sonar": {"low": 0.5}}, "needs {low: ..., high: ...}"),
