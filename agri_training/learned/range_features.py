@@ -119,27 +119,36 @@ class Differences(gym.ObservationWrapper[dict[str, Any], Any, dict[str, Any]]):
         return add_differences(observation, self.pairs)
 
 
-def ramp_bounds(
-    space: gym.spaces.Dict, bounds: Mapping[str, Mapping[str, float | Sequence[float]]]
-) -> dict[str, tuple[np.ndarray, np.ndarray]]:
-    """``{key: (low, high)}`` as float32 arrays of the key's shape (see :class:`Ramp`).
+#: What a :class:`Ramp` key is given: one ramp ``{low: ..., high: ...}`` or a list of them.
+RampSpec = Mapping[str, float | Sequence[float]] | Sequence[Mapping[str, float | Sequence[float]]]
+
+
+def ramp_bounds(space: gym.spaces.Dict, bounds: Mapping[str, RampSpec]) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+    """``{key: (low, high)}`` as float32 arrays, the key's shape once per ramp, end to end (see :class:`Ramp`).
 
     Raises:
-        ValueError: For a space that is not a Dict, a key that is not a 1-D Box, bounds other than ``low``
-            and ``high``, or a ``high`` not above its ``low``.
+        ValueError: For a space that is not a Dict, a key that is not a 1-D Box, a ramp other than ``{low,
+            high}``, bounds that are neither one number nor one per element, or a ``high`` not above its
+            ``low``.
     """
     if not bounds:
         raise ValueError("Ramp needs at least one key: {key: {low: ..., high: ...}}")
     out = {}
     for key, given in bounds.items():
         box = _range_box(space, key, "Ramp")
-        if not isinstance(given, Mapping) or set(given) != {"low", "high"}:
-            raise ValueError(f"Ramp: {key!r} needs {{low: ..., high: ...}}, got {given!r}")
-        try:
-            low = np.broadcast_to(np.asarray(given["low"], dtype=np.float32), box.shape).copy()
-            high = np.broadcast_to(np.asarray(given["high"], dtype=np.float32), box.shape).copy()
-        except ValueError as exc:
-            raise ValueError(f"Ramp: the bounds of {key!r} must be one number or {box.shape[0]}") from exc
+        ramps = [given] if isinstance(given, Mapping) else list(given) if isinstance(given, Sequence) else [given]
+        lows, highs = [], []
+        for ramp in ramps:
+            if not isinstance(ramp, Mapping) or set(ramp) != {"low", "high"}:
+                raise ValueError(f"Ramp: {key!r} needs {{low: ..., high: ...}} or a list of them, got {given!r}")
+            try:
+                lows.append(np.broadcast_to(np.asarray(ramp["low"], dtype=np.float32), box.shape))
+                highs.append(np.broadcast_to(np.asarray(ramp["high"], dtype=np.float32), box.shape))
+            except ValueError as exc:
+                raise ValueError(f"Ramp: the bounds of {key!r} must be one number or {box.shape[0]}") from exc
+        if not ramps:
+            raise ValueError(f"Ramp: {key!r} needs {{low: ..., high: ...}} or a list of them, got {given!r}")
+        low, high = np.concatenate(lows), np.concatenate(highs)
         if not np.all(high > low):
             raise ValueError(f"Ramp: each high of {key!r} must be above its low, got {given!r}")
         out[key] = (low, high)
@@ -155,10 +164,14 @@ def ramp_space(space: gym.spaces.Dict, bounds: Mapping[str, tuple[np.ndarray, np
 
 
 def add_ramps(observation: Mapping[str, Any], bounds: Mapping[str, tuple[np.ndarray, np.ndarray]]) -> dict[str, Any]:
-    """``observation`` with ``<key>_ramp = clip((x - low) / (high - low), 0, 1)`` beside each key of ``bounds``."""
+    """``observation`` with ``<key>_ramp = clip((x - low) / (high - low), 0, 1)`` beside each key of ``bounds``.
+
+    With several ramps of a key, ``<key>_ramp`` holds the first ramp's elements, then the second's, and so on.
+    """
     out = dict(observation)
     for key, (low, high) in bounds.items():
         x = np.asarray(observation[key], dtype=np.float32)
+        x = np.concatenate([x] * (low.shape[0] // x.shape[-1]), axis=-1)  # once per ramp
         out[f"{key}_ramp"] = np.clip((x - low) / (high - low), np.float32(0.0), np.float32(1.0))
     return out
 
@@ -169,14 +182,15 @@ class Ramp(gym.ObservationWrapper[dict[str, Any], Any, dict[str, Any]]):
     For the Fitorobot's sonars (ranges / 4 m), ``low: [0.0, 0.25, ...], high: [0.3, 0.5, ...]`` keeps the
     front sonar's last 1.2 m and turns each side sonar into "a row within 1 m" (0) against "open beyond 2 m"
     (1): every corridor width reads the same, and a row's end still shows. ``low`` and ``high`` are one
-    number or one per element, in the key's units. Stateless. Put it before ``FilterObservation`` and
-    ``FlattenObservation``; in a config: ``{Ramp: {sonar: {low: 0.25, high: 0.5}}}``.
+    number or one per element, in the key's units. A list of ramps reads the key through each in turn, end
+    to end in ``<key>_ramp`` (a near ramp and a far one, say). Stateless. Put it before ``FilterObservation``
+    and ``FlattenObservation``; in a config: ``{Ramp: {sonar: {low: 0.25, high: 0.5}}}``.
 
     Raises:
         ValueError: See :func:`ramp_bounds`.
     """
 
-    def __init__(self, env: gym.Env[Any, Any], **bounds: Mapping[str, float | Sequence[float]]) -> None:
+    def __init__(self, env: gym.Env[Any, Any], **bounds: RampSpec) -> None:
         self.bounds = ramp_bounds(env.observation_space, bounds)  # type: ignore[arg-type]
         super().__init__(env)
         self.observation_space = ramp_space(env.observation_space, self.bounds)  # type: ignore[arg-type]

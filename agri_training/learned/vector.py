@@ -31,6 +31,7 @@ from gymnasium.vector.utils import concatenate
 from agri_training.learned.policy import add_proximity, proximity_space, wrap_by_name
 from agri_training.learned.range_features import (
     Pair,
+    RampSpec,
     add_differences,
     add_ramps,
     differences_space,
@@ -232,7 +233,7 @@ class VectorDifferences(gym.vector.VectorObservationWrapper[Any, Any, Any, Any])
 class VectorRamp(gym.vector.VectorObservationWrapper[Any, Any, Any, Any]):
     """:class:`~agri_training.learned.range_features.Ramp` for a whole batch: the same keys, the same bits."""
 
-    def __init__(self, env: VectorEnv[Any, Any, Any], **bounds: Mapping[str, float | Sequence[float]]) -> None:
+    def __init__(self, env: VectorEnv[Any, Any, Any], **bounds: RampSpec) -> None:
         self.bounds = ramp_bounds(env.single_observation_space, bounds)  # type: ignore[arg-type]
         super().__init__(env)
         self.single_observation_space = ramp_space(env.single_observation_space, self.bounds)  # type: ignore[arg-type]

@@ -80,6 +80,18 @@ def test_the_ramp_is_flat_below_low_and_above_high_and_linear_between():
         assert obs["sonar_ramp"].dtype == np.float32
 
 
+def test_a_list_of_ramps_reads_the_key_through_each_end_to_end():
+    near, far = {"low": 0.025, "high": 0.1125}, {"low": 0.25, "high": 0.75}
+    env = Ramp(gym.make(ENV_ID, **SMALL), sonar=[near, far])
+    assert env.observation_space["sonar_ramp"].shape == (14,)
+    obs, _ = gym.make(ENV_ID, **SMALL).reset(seed=0)
+    sonar = np.float32([1.0, 0.05, 0.1125, 0.3, 0.025, 0.5, 0.75])
+    ramp = env.observation({**obs, "sonar": sonar})["sonar_ramp"]
+    alone = [Ramp(gym.make(ENV_ID, **SMALL), sonar=r).observation({**obs, "sonar": sonar}) for r in (near, far)]
+    np.testing.assert_array_equal(ramp, np.concatenate([a["sonar_ramp"] for a in alone]))
+    np.testing.assert_allclose(ramp[7:], [1.0, 0.0, 0.0, 0.1, 0.0, 0.5, 1.0], rtol=1e-6)
+
+
 def test_one_number_bounds_every_element():
     env = Ramp(gym.make(ENV_ID, **SMALL), sonar={"low": 0.25, "high": 0.75})
     obs, _ = gym.make(ENV_ID, **SMALL).reset(seed=0)
@@ -135,6 +147,8 @@ def test_a_loaded_policy_replays_the_features():
         (Ramp, {"sonar": {"low": 0.5}}, "needs {low: ..., high: ...}"),
         (Ramp, {"sonar": {"low": 0.5, "high": 0.5}}, "above its low"),
         (Ramp, {"sonar": {"low": [0.1, 0.2], "high": 0.9}}, "one number or 7"),
+        (Ramp, {"sonar": []}, "or a list of them"),
+        (Ramp, {"sonar": [{"low": 0.1, "high": 0.2}, {"low": 0.1}]}, "or a list of them"),
     ],
 )
 def test_the_features_refuse_what_they_cannot_read(wrapper, kwargs, match):
