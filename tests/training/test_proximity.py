@@ -1,14 +1,12 @@
 """Proximity: range keys read again as length / (length + range), the same bits on one env and on a batch."""
 
-import functools
-
 import gymnasium as gym
 import numpy as np
 import pytest
+from batch_forms import assert_batch_matches_single_envs
 
 import agri_envs  # noqa: F401
-from agri_training.learned.policy import ObservationReplay, Proximity, apply_wrappers, observation_chain
-from agri_training.learned.vector import apply_vector_wrappers, make_sync_vector_env
+from agri_training.learned.policy import ObservationReplay, Proximity, observation_chain
 
 ENV_ID = "agri_envs/GreenhouseNav-v2"
 SMALL = {"n_rows": 2, "row_length": 4.0, "n_people": 2, "people_tease_prob": 0.6, "max_episode_steps": 40}
@@ -49,27 +47,7 @@ def test_proximity_halves_at_its_length_and_reaches_one_at_contact():
 
 def test_the_batch_form_gives_each_sub_env_the_single_envs_bits():
     kwargs = [{**SMALL, "max_episode_steps": 15 + 9 * i} for i in range(3)]
-    single = [apply_wrappers(gym.make(ENV_ID, **kw), WRAPPERS) for kw in kwargs]
-    batch = apply_vector_wrappers(
-        make_sync_vector_env([functools.partial(gym.make, ENV_ID, **kw) for kw in kwargs]), WRAPPERS
-    )
-    assert batch.single_observation_space == single[0].observation_space
-    obs, _ = batch.reset(seed=[5, 6, 7])
-    rows = [env.reset(seed=5 + i)[0] for i, env in enumerate(single)]
-    rng = np.random.default_rng(1)
-    for step in range(40):
-        np.testing.assert_array_equal(obs, np.stack(rows), err_msg=f"step {step}")
-        actions = rng.uniform(-1, 1, (3, 2)).astype(np.float32)
-        obs, _, term, trunc, _ = batch.step(actions)
-        rows = []
-        for i, env in enumerate(single):
-            row, _, t, u, _ = env.step(actions[i])
-            if t or u:
-                row = env.reset()[0]
-            rows.append(row)
-        done = term | trunc
-        if done.any():
-            obs, _ = batch.reset(options={"reset_mask": done})
+    assert_batch_matches_single_envs(ENV_ID, kwargs, WRAPPERS)
 
 
 def test_a_loaded_policy_replays_the_proximity_keys():

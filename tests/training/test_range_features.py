@@ -1,15 +1,13 @@
 """Differences and Ramp: width-free readings of range keys, the same bits on one env and on a batch."""
 
-import functools
-
 import gymnasium as gym
 import numpy as np
 import pytest
+from batch_forms import assert_batch_matches_single_envs
 
 import agri_envs  # noqa: F401
-from agri_training.learned.policy import ObservationReplay, apply_wrappers, observation_chain
+from agri_training.learned.policy import ObservationReplay, observation_chain
 from agri_training.learned.range_features import Differences, Ramp
-from agri_training.learned.vector import apply_vector_wrappers, make_sync_vector_env
 
 ENV_ID = "agri_envs/GreenhouseCoverage-v1"
 SMALL = {"n_rows": 1, "row_length": 4.0, "max_episode_steps": 40}
@@ -101,27 +99,7 @@ def test_one_number_bounds_every_element():
 
 def test_the_batch_forms_give_each_sub_env_the_single_envs_bits():
     kwargs = [{**SMALL, "max_episode_steps": 15 + 9 * i} for i in range(3)]
-    single = [apply_wrappers(gym.make(ENV_ID, **kw), WRAPPERS) for kw in kwargs]
-    batch = apply_vector_wrappers(
-        make_sync_vector_env([functools.partial(gym.make, ENV_ID, **kw) for kw in kwargs]), WRAPPERS
-    )
-    assert batch.single_observation_space == single[0].observation_space
-    obs, _ = batch.reset(seed=[5, 6, 7])
-    rows = [env.reset(seed=5 + i)[0] for i, env in enumerate(single)]
-    rng = np.random.default_rng(1)
-    for step in range(40):
-        np.testing.assert_array_equal(obs, np.stack(rows), err_msg=f"step {step}")
-        actions = rng.uniform(-1, 1, (3, 2)).astype(np.float32)
-        obs, _, term, trunc, _ = batch.step(actions)
-        rows = []
-        for i, env in enumerate(single):
-            row, _, t, u, _ = env.step(actions[i])
-            if t or u:
-                row = env.reset()[0]
-            rows.append(row)
-        done = term | trunc
-        if done.any():
-            obs, _ = batch.reset(options={"reset_mask": done})
+    assert_batch_matches_single_envs(ENV_ID, kwargs, WRAPPERS)
 
 
 def test_a_loaded_policy_replays_the_features():
