@@ -3,8 +3,8 @@
 A policy cloned in corridors of 1.4-1.6 m learns what a centred robot's side sonars read there, and a wider
 corridor then reads like a row's end. Two stateless transforms take the width out of what it sees:
 
-* :class:`Differences`: ``x[i] - x[j]`` for pairs of elements of a range key (left minus right sonar: twice
-  the offset from a corridor's centre line, whatever its width);
+* :class:`Differences`: ``x[i] - x[j]`` for pairs of elements (or of groups, read as their nearest) of a range
+  key (left minus right sonar: twice the offset from a corridor's centre line, whatever its width);
 * :class:`Ramp`: ``clip((x - low) / (high - low), 0, 1)`` per element (a side sonar's reading turned into
   "a row is beside me" (0) or "it is open" (1), flat across every corridor width below ``low``).
 
@@ -179,12 +179,14 @@ def add_ramps(observation: Mapping[str, Any], bounds: Mapping[str, tuple[np.ndar
 class Ramp(gym.ObservationWrapper[dict[str, Any], Any, dict[str, Any]]):
     """A range key read again through a clipped ramp per element: 0 up to ``low``, 1 from ``high`` on.
 
-    For the Fitorobot's sonars (ranges / 4 m), ``low: [0.0, 0.25, ...], high: [0.3, 0.5, ...]`` keeps the
-    front sonar's last 1.2 m and turns each side sonar into "a row within 1 m" (0) against "open beyond 2 m"
-    (1): every corridor width reads the same, and a row's end still shows. ``low`` and ``high`` are one
-    number or one per element, in the key's units. A list of ramps reads the key through each in turn, end
-    to end in ``<key>_ramp`` (a near ramp and a far one, say). Stateless. Put it before ``FilterObservation``
-    and ``FlattenObservation``; in a config: ``{Ramp: {sonar: {low: 0.25, high: 0.5}}}``.
+    For the Fitorobot's sonars (ranges / 4 m), a far ramp with ``low: 0.15, high: 0.75`` per side sonar
+    reads 0 for any row within 0.6 m (every corridor width looks the same) and rises through a row's end
+    (about 2 m) to a corridor's mouth (beyond 2.5 m), which it must keep apart: a ramp that saturated at 2 m
+    made the two equal, and the cloned robot parked at a mouth. ``low`` and ``high`` are one number or one per
+    element, in the key's units. A list of ramps reads the key through each in turn, end to end in
+    ``<key>_ramp`` (GreenhouseCoverage's recipe adds a near ramp, 0.1-0.45 m, for the walls of a headland
+    turn). Stateless. Put it before ``FilterObservation`` and ``FlattenObservation``; in a config:
+    ``{Ramp: {sonar: {low: 0.15, high: 0.75}}}``.
 
     Raises:
         ValueError: See :func:`ramp_bounds`.
