@@ -9,8 +9,12 @@ Before PPO's first rollout, :func:`pretrain_from_baseline`
 1. runs the baseline ``episodes`` times on the training env (``env_kwargs`` and ``train_env_kwargs``, plus
    what the baseline itself needs, e.g. the full scan) at seeds ``seed ..``: the baseline acts every
    control period, as it was written to; every ``action_repeat``-th period is a decision of the learner,
-   which records the learner's observation (through the run's observation wrappers, without the keys only
-   the baseline reads), the baseline's action and the reward until the next decision;
+   which records the learner's observation (through the run's observation wrappers), the baseline's action
+   and the reward until the next decision. Where the baseline needs other env arguments (a full scan, the
+   true pose), the training env runs beside the baseline's on the same seed and actions, and the learner's
+   observation is the training env's: a learner trained with odometry sees its odometry, not the baseline's
+   true pose. The two must agree on every reward and episode end, or the arguments changed the dynamics
+   and the run stops;
 2. sets ``VecNormalize``'s observation and return statistics from these decisions;
 3. fits the policy's mean action to the baseline's actions (mean squared error) and its value function to
    the demonstrations' discounted, normalised returns, ``epochs`` passes with Adam. The action noise (the
@@ -135,7 +139,9 @@ class Demonstrations:
         rewards: ``(n,)`` reward from each decision to the next.
         episode_ends: ``(n,)`` True at an episode's last decision.
         successes: Episodes the baseline finished with ``info["is_success"]``.
-        episodes: Episodes run.
+        episodes: Episodes run (skipped ones included).
+        skipped: Episodes left out because the baseline could not act in them (a planner that finds no plan
+            raises ``ValueError``); their decisions are not recorded.
     """
 
     observations: Any
@@ -144,6 +150,7 @@ class Demonstrations:
     episode_ends: np.ndarray
     successes: int
     episodes: int
+    skipped: int = 0
 
 
 #: A learner acting: a batch of learner observations (wrapped, not normalised) -> its actions, one row each.
@@ -169,6 +176,7 @@ def _join(first: Demonstrations, second: Demonstrations) -> Demonstrations:
         np.concatenate([first.episode_ends, second.episode_ends]),
         first.successes + second.successes,
         first.episodes + second.episodes,
+        first.skipped + second.skipped,
     )
 
 
@@ -210,34 +218,58 @@ def demonstrate(
     keys = list(space.spaces) if isinstance(space, gym.spaces.Dict) else None
     _, chain = observation_chain(learner_env, config.get("wrappers", []))
     replay = ObservationReplay(chain)
-    env = gym.make(env_id, **{**learner_kwargs, **baseline.env_kwargs})
+    baseline_kwargs = {**learner_kwargs, **baseline.env_kwargs}
+    env = gym.make(env_id, **baseline_kwargs)
+    # Where the baseline's arguments change the env (a true pose for the baseline, a scan only it reads),
+    # the learner's own env runs beside it in lockstep and the learner sees what that env shows.
+    own = learner_env if baseline_kwargs != learner_kwargs else None
     expert = make_policy(spec.policy, env)
     repeat = int(config.get("action_repeat", 1))
-    observations, actions, rewards, ends = [], [], [], []
-    successes = 0
+    observations: list[Any] = []
+    actions: list[np.ndarray] = []
+    rewards: list[float] = []
+    ends: list[bool] = []
+    successes = skipped = 0
     for seed in seeds:
         obs, info = env.reset(seed=int(seed))
-        step, done = 0, False
+        shown = own.reset(seed=int(seed))[0] if own is not None else obs
+        step, done, kept = 0, False, len(actions)
         while not done:
-            action, _ = expert.predict(obs, episode_start=np.array([step == 0]), deterministic=True)
+            try:
+                action, _ = expert.predict(obs, episode_start=np.array([step == 0]), deterministic=True)
+            except ValueError:  # the baseline cannot act here (no plan): the episode is left out
+                del observations[kept:], actions[kept:], rewards[kept:], ends[kept:]
+                skipped += 1
+                break
             if step % repeat == 0:  # a decision of the learner: what it sees, what the baseline does
-                seen = {k: obs[k] for k in keys} if keys is not None else obs
+                seen = {k: shown[k] for k in keys} if keys is not None else shown
                 observations.append(replay(seen, new_episode=step == 0))
                 actions.append(np.clip(np.asarray(action, dtype=np.float32), -1.0, 1.0))
                 rewards.append(0.0)
                 ends.append(False)
                 if learner is not None:  # held for the action_repeat periods until its next decision
                     driven = learner(_stack(observations[-1:]))[0]
-            obs, reward, terminated, truncated, info = env.step(action if learner is None else driven)
+            acted = action if learner is None else driven
+            obs, reward, terminated, truncated, info = env.step(acted)
+            if own is not None:
+                shown, own_reward, *own_ends, _ = own.step(acted)
+                if (own_reward, *own_ends) != (reward, terminated, truncated):
+                    raise ValueError(
+                        f"pretrain: {spec.policy}'s arguments {baseline.env_kwargs} change {env_id}'s dynamics "
+                        f"(seed {seed}, step {step}: reward {reward} against the training env's {own_reward})"
+                    )
             rewards[-1] += float(reward)
             step += 1
             done = terminated or truncated
-        ends[-1] = True
-        successes += int(bool(info.get("is_success", False)))
+        if done:
+            ends[-1] = True
+            successes += int(bool(info.get("is_success", False)))
     env.close()
     learner_env.close()
+    if not actions:
+        raise ValueError(f"pretrain: {spec.policy} could not act in any of the {len(seeds)} episodes")
     return Demonstrations(
-        _stack(observations), np.stack(actions), np.array(rewards), np.array(ends), successes, len(seeds)
+        _stack(observations), np.stack(actions), np.array(rewards), np.array(ends), successes, len(seeds), skipped
     )
 
 
@@ -361,7 +393,7 @@ def pretrain_from_baseline(model: Any, venv: Any, config: Mapping[str, Any]) -> 
     spec = PretrainSpec.from_config(config["pretrain"])
     gamma = float(config["algo_kwargs"].get("gamma", 0.99))
     demos = demonstrate(spec, config)
-    baseline_success = demos.successes / demos.episodes
+    baseline_success, first_skipped = demos.successes / demos.episodes, demos.skipped
     if venv is not None:
         _set_statistics(venv, demos, gamma)
     policy = model.policy
@@ -374,7 +406,13 @@ def pretrain_from_baseline(model: Any, venv: Any, config: Mapping[str, Any]) -> 
         first = spec.seed + spec.episodes + r * spec.dagger_episodes
         seeds = range(first, first + spec.dagger_episodes)
         driven = demonstrate(spec, config, seeds, learner=_mean_action(model, venv))
-        rounds.append({"seeds": [seeds[0], seeds[-1]], "policy_success_rate": driven.successes / driven.episodes})
+        rounds.append(
+            {
+                "seeds": [seeds[0], seeds[-1]],
+                "policy_success_rate": driven.successes / driven.episodes,
+                "skipped": driven.skipped,
+            }
+        )
         demos = _join(demos, driven)
         weights = spec.loss_weights(demos.actions)
         losses.append(_fit(policy, optimizer, venv, demos, gamma, spec.dagger_epochs, spec.batch_size, rng, weights))
@@ -385,6 +423,7 @@ def pretrain_from_baseline(model: Any, venv: Any, config: Mapping[str, Any]) -> 
         "episodes": spec.episodes,
         "seeds": [spec.seed, spec.seed + spec.episodes - 1],
         "baseline_success_rate": baseline_success,
+        "baseline_skipped": first_skipped,
         "decisions": len(demos.actions),
         "epochs": spec.epochs,
         "action_mse_first_last": [first_action, last_action],

@@ -301,6 +301,80 @@ def test_in_a_dagger_round_the_learner_drives_and_the_baseline_labels(tmp_path):
     assert not np.allclose(standing.observations[last], driven.observations[last])
 
 
+def test_an_episode_the_baseline_cannot_act_in_is_left_out(tmp_path, monkeypatch):
+    import agri_training.learned.pretrain as pretrain
+
+    hp = {**TINY_HP, "pretrain": {"policy": "harik-apf-gt", "episodes": 3, "seed": 50000}}
+    config = resolve_config(TrainRequest(ENV_ID, "ppo", tmp_path / "run", seed=4, overrides=hp))
+    spec = pretrain.PretrainSpec.from_config(config["pretrain"])
+    kept = pretrain.demonstrate(spec, config, seeds=[50000, 50002])
+    make = pretrain.make_policy
+
+    class NoPlanIn:
+        """The baseline, except that it raises (as a planner finding no plan does) in the episodes of ``bad``."""
+
+        def __init__(self, env, bad):
+            self.expert, self.env, self.bad, self.step = make("harik-apf-gt", env), env, bad, 0
+
+        def predict(self, obs, episode_start, deterministic):
+            self.step = 0 if episode_start[0] else self.step + 1
+            if self.env.unwrapped.np_random_seed in self.bad and self.step == 3:  # mid-episode: drop what it has
+                raise ValueError("no plan")
+            return self.expert.predict(obs, episode_start=episode_start, deterministic=deterministic)
+
+    monkeypatch.setattr(pretrain, "make_policy", lambda name, env: NoPlanIn(env, {50001}))
+    demos = pretrain.demonstrate(spec, config)
+    assert (demos.episodes, demos.skipped, demos.successes) == (3, 1, kept.successes)
+    np.testing.assert_array_equal(demos.actions, kept.actions)
+    np.testing.assert_array_equal(demos.observations, kept.observations)
+    np.testing.assert_array_equal(demos.episode_ends, kept.episode_ends)
+    monkeypatch.setattr(pretrain, "make_policy", lambda name, env: NoPlanIn(env, {50000, 50001, 50002}))
+    with pytest.raises(ValueError, match="could not act in any of the 3 episodes"):
+        pretrain.demonstrate(spec, config)
+
+
+def test_a_learner_with_odometry_sees_its_odometry_while_a_privileged_baseline_demonstrates(tmp_path):
+    from agri_training.learned.pretrain import PretrainSpec, demonstrate
+
+    coverage = "agri_envs/GreenhouseCoverage-v1"
+    hp = {
+        "env_kwargs": {"max_episode_steps": 150},
+        "wrappers": [],
+        "action_repeat": 1,
+        "pretrain": {"policy": "gonzalez-deliberative", "episodes": 1, "seed": 50000},
+    }
+    config = resolve_config(TrainRequest(coverage, "ppo", tmp_path / "run", seed=0, overrides=hp))
+    demos = demonstrate(PretrainSpec.from_config(config["pretrain"]), config)
+    scene = {**config["env_kwargs"], **config["train_env_kwargs"]}
+    # gonzalez-deliberative drives on the true pose; the learner (the default odometry) is shown what an
+    # odometry env shows under the same seed and actions, replayed here as the oracle.
+    env = gym.make(coverage, **scene)
+    obs, _ = env.reset(seed=50000)
+    for i, action in enumerate(demos.actions):
+        for key in obs:
+            np.testing.assert_array_equal(demos.observations[key][i], obs[key], err_msg=f"{key} at {i}")
+        obs, *_ = env.step(action)
+    truth = gym.make(coverage, localization="ground_truth", **scene)
+    true_obs, _ = truth.reset(seed=50000)
+    for action in demos.actions[:-1]:
+        true_obs, *_ = truth.step(action)
+    assert not np.array_equal(demos.observations["pose"][-1], true_obs["pose"])  # odometry has drifted
+
+
+def test_a_baseline_whose_arguments_change_the_dynamics_is_refused(tmp_path, monkeypatch):
+    import dataclasses
+
+    import agri_training.learned.pretrain as pretrain
+
+    hp = {**TINY_HP, "pretrain": {"policy": "harik-apf-gt", "episodes": 1, "seed": 50000}}
+    config = resolve_config(TrainRequest(ENV_ID, "ppo", tmp_path / "run", seed=4, overrides=hp))
+    spec = pretrain.policy_spec("harik-apf-gt")
+    faster = dataclasses.replace(spec, env_kwargs={**spec.env_kwargs, "max_speed": 1.2})
+    monkeypatch.setattr(pretrain, "policy_spec", lambda name: faster)
+    with pytest.raises(ValueError, match="change agri_envs/GreenhouseNav-v2's dynamics"):
+        pretrain.demonstrate(pretrain.PretrainSpec.from_config(config["pretrain"]), config)
+
+
 def test_emphasized_decisions_count_as_copies_in_the_action_loss():
     from agri_training.learned.pretrain import PretrainSpec, action_loss_of
 
