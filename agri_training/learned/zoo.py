@@ -98,6 +98,21 @@ register_policy(
 
 register_policy(
     PolicySpec(
+        name="dagger-greenhouse-coverage",
+        env_id="agri_envs/GreenhouseCoverage-v1",
+        entry_point="agri_training.learned.zoo:load_zoo_policy",
+        env_kwargs={},
+        description="Learned by imitation (agri_training/zoo/dagger-greenhouse-coverage): sonars read as left-right "
+        "differences and ramps, compass, encoders and its own memory, no map; gonzalez-deliberative cloned on the "
+        "env's training distribution with 8 DAgger rounds, no PPO steps",
+        learned=True,
+        algo="ppo",
+        train_command="agri train --env agri_envs/GreenhouseCoverage-v1 --algo ppo --seed 1 --out runs/cov-dagger-s1",
+    )
+)
+
+register_policy(
+    PolicySpec(
         name="ppo-chain",
         env_id="robot_chain_v1",
         entry_point="agri_training.learned.zoo:load_zoo_policy",
