@@ -65,6 +65,9 @@ class PretrainSpec:
         dagger_episodes: Episodes the policy drives in each round; round ``r`` (from 0) runs seeds
             ``seed + episodes + r * dagger_episodes ..``.
         dagger_epochs: Passes over all decisions after each round.
+        dagger_noise: Standard deviation of Gaussian noise added to the policy's action while it drives a
+            DAgger round (clipped to [-1, 1]): the rounds then also visit the states just off its own path. The
+            labels stay the baseline's. 0: the mean action, as is.
         emphasize: Optional ``{action: i, below: x, weight: w}``: the decisions in which the baseline's action
             component ``i`` is below ``x`` count ``w`` times in the action loss. A rare, decisive action (a
             safety stop's step back: about 1 % of harik-apf-gt's decisions) is otherwise smoothed away by the
@@ -80,6 +83,7 @@ class PretrainSpec:
     dagger_rounds: int = 0
     dagger_episodes: int = 50
     dagger_epochs: int = 10
+    dagger_noise: float = 0.0
     emphasize: Mapping[str, float] | None = None
 
     def __post_init__(self) -> None:
@@ -91,6 +95,8 @@ class PretrainSpec:
                 raise ValueError(f"pretrain: emphasize needs an action index >= 0 and a weight > 0; got {given}")
         if self.episodes < 1 or self.epochs < 1 or self.batch_size < 1:
             raise ValueError(f"pretrain: episodes, epochs and batch_size must be >= 1, got {self}")
+        if not self.dagger_noise >= 0:
+            raise ValueError(f"pretrain: dagger_noise must be >= 0, got {self.dagger_noise}")
         if self.dagger_rounds < 0 or self.dagger_episodes < 1 or self.dagger_epochs < 1:
             raise ValueError(f"pretrain: dagger_rounds must be >= 0, dagger_episodes and dagger_epochs >= 1: {self}")
         if not 0 <= self.seed or self.last_seed >= 100_000:
@@ -365,13 +371,20 @@ def _targets(venv: Any, demos: Demonstrations, gamma: float) -> tuple[Any, np.nd
     return obs, _discounted(rewards, demos.episode_ends, gamma)
 
 
-def _mean_action(model: Any, venv: Any) -> Learner:
-    """The policy's mean action on a batch of learner observations (normalised as PPO will see them)."""
+def _mean_action(model: Any, venv: Any, noise: float = 0.0, rng: np.random.Generator | None = None) -> Learner:
+    """The policy's mean action on a batch of learner observations (normalised as PPO will see them).
+
+    With ``noise`` > 0, Gaussian noise of that standard deviation from ``rng`` is added, clipped to [-1, 1].
+    """
 
     def act(batch: Any) -> np.ndarray:
         obs = venv.normalize_obs(batch) if venv is not None else batch
         actions, _ = model.predict(obs, deterministic=True)
-        return np.asarray(actions, dtype=np.float32)
+        actions = np.asarray(actions, dtype=np.float32)
+        if noise > 0:
+            assert rng is not None
+            actions = np.clip(actions + rng.normal(0.0, noise, actions.shape), -1.0, 1.0).astype(np.float32)
+        return actions
 
     return act
 
@@ -405,7 +418,7 @@ def pretrain_from_baseline(model: Any, venv: Any, config: Mapping[str, Any]) -> 
     for r in range(spec.dagger_rounds):
         first = spec.seed + spec.episodes + r * spec.dagger_episodes
         seeds = range(first, first + spec.dagger_episodes)
-        driven = demonstrate(spec, config, seeds, learner=_mean_action(model, venv))
+        driven = demonstrate(spec, config, seeds, learner=_mean_action(model, venv, spec.dagger_noise, rng))
         rounds.append(
             {
                 "seeds": [seeds[0], seeds[-1]],

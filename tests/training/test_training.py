@@ -301,6 +301,26 @@ def test_in_a_dagger_round_the_learner_drives_and_the_baseline_labels(tmp_path):
     assert not np.allclose(standing.observations[last], driven.observations[last])
 
 
+def test_dagger_noise_perturbs_the_driving_policy_within_the_action_box():
+    from agri_training.learned.pretrain import PretrainSpec, _mean_action
+
+    class Fixed:
+        """A policy whose mean action is 0.9 forward and 0 turn for every observation."""
+
+        def predict(self, obs, deterministic):
+            return np.tile(np.array([0.9, 0.0], np.float32), (len(obs), 1)), None
+
+    batch = np.zeros((2000, 3), np.float32)
+    np.testing.assert_array_equal(_mean_action(Fixed(), None)(batch)[0], np.array([0.9, 0.0], np.float32))
+    noisy = _mean_action(Fixed(), None, 0.3, np.random.default_rng(5))(batch)
+    again = _mean_action(Fixed(), None, 0.3, np.random.default_rng(5))(batch)
+    np.testing.assert_array_equal(noisy, again)  # reproducible from the run's generator
+    assert noisy.dtype == np.float32 and noisy.min() >= -1.0 and noisy.max() == 1.0  # clipped at the box
+    assert abs(float(np.std(noisy[:, 1])) - 0.3) < 0.02 and abs(float(np.mean(noisy[:, 1]))) < 0.03
+    with pytest.raises(ValueError, match="dagger_noise must be >= 0"):
+        PretrainSpec.from_config({"policy": "harik-apf-gt", "dagger_noise": -0.1})
+
+
 def test_an_episode_the_baseline_cannot_act_in_is_left_out(tmp_path, monkeypatch):
     import agri_training.learned.pretrain as pretrain
 
