@@ -107,7 +107,7 @@ register_policy(
         "env's training distribution with 8 DAgger rounds, no PPO steps",
         learned=True,
         algo="ppo",
-        train_command="agri train --env agri_envs/GreenhouseCoverage-v1 --algo ppo --seed 1 --out runs/cov-dagger-s1",
+        train_command="agri train --env agri_envs/GreenhouseCoverage-v1 --algo ppo --seed 2 --out runs/cov-dagger-s2",
     )
 )
 
