@@ -20,7 +20,7 @@ Before PPO's first rollout, :func:`pretrain_from_baseline`
    the demonstrations' discounted, normalised returns, ``epochs`` passes with Adam. The action noise (the
    log standard deviation) keeps its configured value, so PPO still explores from there;
 4. with ``dagger_rounds: R`` (DAgger, Ross, Gordon & Bagnell 2011), R times: the policy's mean action
-   drives ``dagger_episodes`` episodes while the baseline, run beside it on the same observations, says
+   (plus ``dagger_noise``) drives ``dagger_episodes`` episodes while the baseline, run beside it, says
    what it would have done; these decisions join the demonstrations and the fit is repeated
    (``dagger_epochs`` passes over all of them). Cloning alone trains only on the states the baseline
    visits, and a small error then leads the clone where it has never been shown what to do; DAgger
