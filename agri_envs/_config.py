@@ -81,6 +81,7 @@ def param(
     high: float | None = None,
     choices: Sequence[Any] | None = None,
     valid: str | None = None,
+    adds_observation: bool = False,
 ) -> Any:
     """Declare a config field with its documentation and validated range.
 
@@ -92,6 +93,8 @@ def param(
         high: Inclusive upper bound for numbers (or for every element of a tuple).
         choices: Allowed values for categorical fields.
         valid: Description of the valid values when no range or choice list says it (checked in ``validate``).
+        adds_observation: The field only adds observation keys (a full-resolution scan): an env made with
+            either value steps alike and shows the same values under every other key.
 
     Returns:
         A ``dataclasses.field`` carrying the metadata.
@@ -103,6 +106,7 @@ def param(
         "high": high,
         "choices": tuple(choices) if choices else None,
         "valid": valid,
+        "adds_observation": adds_observation,
     }
     return dataclasses.field(default=default, metadata=meta)
 
@@ -230,6 +234,20 @@ class StrictConfig:
             valid = "True or False" if isinstance(f.default, bool) else _range_text(m)
             rows.append((f.name, f.default, m.get("unit", ""), valid, m.get("doc", "")))
         return rows
+
+    def differences(self, kwargs: Mapping[str, Any]) -> list[str]:
+        """The names in ``kwargs`` whose value differs from this config's and that do more than add observation keys.
+
+        Empty: an env made with ``kwargs`` on top of this config steps like this config's and shows the same
+        values under this config's observation keys. A name that is not a field counts as a difference.
+        """
+        fields = {f.name: f for f in dataclasses.fields(self)}
+        return [
+            name
+            for name, value in kwargs.items()
+            if name not in fields
+            or (getattr(self, name) != value and not fields[name].metadata.get("adds_observation", False))
+        ]
 
     def replace(self: T, **changes: Any) -> T:
         """Return a copy with some fields changed (validated like the original)."""

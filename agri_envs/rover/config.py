@@ -78,7 +78,9 @@ class GreenhouseNavConfig(StrictConfig):
     frame_skip: int = param(1, "control periods per step (action held, observed once at the end)", low=1, high=16)
     # Sensors
     lidar_beams: int = param(90, "LIDAR beams in the observation (min-pooled from the full scan)", low=1, high=811)
-    full_scan: bool = param(False, "add the full-resolution 811-beam scan as observation key 'scan'")
+    full_scan: bool = param(
+        False, "add the full-resolution 811-beam scan as observation key 'scan'", adds_observation=True
+    )
     lidar_noise_std: float = param(
         0.02, "LIDAR Gaussian range noise (TiM561 statistical error)", unit="m", low=0.0, high=0.5
     )

@@ -10,11 +10,11 @@ Before PPO's first rollout, :func:`pretrain_from_baseline`
    what the baseline itself needs, e.g. the full scan) at seeds ``seed ..``: the baseline acts every
    control period, as it was written to; every ``action_repeat``-th period is a decision of the learner,
    which records the learner's observation (through the run's observation wrappers), the baseline's action
-   and the reward until the next decision. Where the baseline needs other env arguments (a full scan, the
-   true pose), the training env runs beside the baseline's on the same seed and actions, and the learner's
-   observation is the training env's: a learner trained with odometry sees its odometry, not the baseline's
-   true pose. The two must agree on every reward and episode end, or the arguments changed the dynamics
-   and the run stops;
+   and the reward until the next decision. Where the baseline needs env arguments that change more than
+   extra observation keys (the true pose, not a full scan: ``StrictConfig.differences``), the training env
+   runs beside the baseline's on the same seed and actions, and the learner's observation is the training
+   env's: a learner trained with odometry sees its odometry, not the baseline's true pose. The two must
+   agree on every reward and episode end, or the arguments changed the dynamics and the run stops;
 2. sets ``VecNormalize``'s observation and return statistics from these decisions;
 3. fits the policy's mean action to the baseline's actions (mean squared error) and its value function to
    the demonstrations' discounted, normalised returns, ``epochs`` passes with Adam. The action noise (the
@@ -224,11 +224,12 @@ def demonstrate(
     keys = list(space.spaces) if isinstance(space, gym.spaces.Dict) else None
     _, chain = observation_chain(learner_env, config.get("wrappers", []))
     replay = ObservationReplay(chain)
-    baseline_kwargs = {**learner_kwargs, **baseline.env_kwargs}
-    env = gym.make(env_id, **baseline_kwargs)
-    # Where the baseline's arguments change the env (a true pose for the baseline, a scan only it reads),
-    # the learner's own env runs beside it in lockstep and the learner sees what that env shows.
-    own = learner_env if baseline_kwargs != learner_kwargs else None
+    env = gym.make(env_id, **{**learner_kwargs, **baseline.env_kwargs})
+    # Where the baseline's arguments change more than extra observation keys (a true pose for the baseline,
+    # not a scan only it reads), the learner's own env runs beside it in lockstep and the learner sees what
+    # that env shows.
+    unwrapped: Any = learner_env.unwrapped
+    own = learner_env if unwrapped.config.differences(baseline.env_kwargs) else None
     expert = make_policy(spec.policy, env)
     repeat = int(config.get("action_repeat", 1))
     observations: list[Any] = []
@@ -257,6 +258,7 @@ def demonstrate(
                     driven = learner(_stack(observations[-1:]))[0]
             acted = action if learner is None else driven
             obs, reward, terminated, truncated, info = env.step(acted)
+            shown = obs
             if own is not None:
                 shown, own_reward, *own_ends, _ = own.step(acted)
                 if (own_reward, *own_ends) != (reward, terminated, truncated):

@@ -114,6 +114,29 @@ def test_config_strictness():
     }
 
 
+def test_the_full_scan_only_adds_an_observation_key():
+    # full_scan is declared adds_observation (StrictConfig.differences skips it); the rollouts show it is true.
+    plain = gym.make(ENV_ID, n_people=2, max_episode_steps=60)
+    scanning = gym.make(ENV_ID, n_people=2, max_episode_steps=60, full_scan=True)
+    a, _ = plain.reset(seed=4)
+    b, _ = scanning.reset(seed=4)
+    rng = np.random.default_rng(0)
+    for _ in range(60):
+        assert set(b) == set(a) | {"scan"}
+        for key in a:
+            np.testing.assert_array_equal(a[key], b[key], err_msg=key)
+        action = rng.uniform(-1, 1, 2).astype(np.float32)
+        a, reward_a, *ends_a, _ = plain.step(action)
+        b, reward_b, *ends_b, _ = scanning.step(action)
+        assert (reward_a, *ends_a) == (reward_b, *ends_b)
+        if any(ends_a):
+            break
+    config = plain.unwrapped.config
+    # the defaults: localization "ground_truth", 3 rows
+    assert config.differences({"full_scan": True, "localization": "none", "n_rows": 3}) == ["localization"]
+    assert config.differences({"localization": "ground_truth", "no_such_argument": 1}) == ["no_such_argument"]
+
+
 def test_every_argument_is_documented_with_a_range():
     for name, _default, _unit, valid, doc in GreenhouseNavConfig().describe():
         assert doc and valid != "any value", name
