@@ -234,9 +234,10 @@ def render_markdown(entries: Sequence[Mapping[str, Any]], suites: Sequence[Suite
             )
             lines += [f"### {suite.name} (v{suite.version})", "", suite.description, ""]
             levels = len(suite.levels())
+            swept = " and ".join(f"`{p}`" for p in suite.sweep[0]) if suite.sweep else ""
             lines.append(
                 f"Seeds {suite.seed_start}-{suite.seed_start + suite.episodes - 1}"
-                + (f" at each of {levels} levels of `{suite.sweep[0]}`" if suite.sweep else "")
+                + (f" at each of {levels} levels of {swept}" if suite.sweep else "")
                 + (
                     f", in {suite.episodes // suite.campaign_runs} campaigns of {suite.campaign_runs} runs "
                     "(one world and one policy each)"

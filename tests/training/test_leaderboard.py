@@ -48,6 +48,14 @@ def test_suite_loader(tmp_path):
     swept = lb.parse_suite({**SUITE, "sweep": {"parameter": "growth", "values": [0.0, 1.0]}})
     assert [label for label, _ in swept.levels()] == ["tiny-rover growth=0.0", "tiny-rover growth=1.0"]
     assert swept.levels()[1][1]["growth"] == 1.0
+    # several arguments changed together, one row per level (a longer chain needs a bigger office)
+    both = lb.parse_suite(
+        {**SUITE, "stress": "plants", "sweep": {"parameters": ["growth", "n_trees"], "values": [[0.0, 0], [1.0, 4]]}}
+    )
+    labels = ["tiny-rover growth=0.0 n_trees=0", "tiny-rover growth=1.0 n_trees=4"]
+    assert [label for label, _ in both.levels()] == labels
+    assert both.levels()[1][1] == {**SUITE["env_kwargs"], "growth": 1.0, "n_trees": 4}
+    assert both.stress == "plants" and both.level_values() == ["growth=0.0 n_trees=0", "growth=1.0 n_trees=4"]
 
 
 @pytest.mark.parametrize(
@@ -60,6 +68,11 @@ def test_suite_loader(tmp_path):
         ({"episodes": 3}, "unknown suite keys"),
         ({"name": "Bad Name"}, "name"),
         ({"sweep": {"parameter": "n_rows", "values": [1]}}, "sweep"),
+        ({"sweep": {"parameters": ["growth", "n_trees"], "values": [[0.5]]}}, "one value for each"),
+        ({"sweep": {"parameters": ["growth"], "values": [[0.5], [0.5]]}}, "levels must differ"),
+        ({"sweep": {"parameter": "growth", "values": 0.5}}, "sweep must be"),
+        ({"stress": "crowd"}, "needs a sweep of at least 2 levels"),
+        ({"stress": "Crowd", "sweep": {"parameter": "growth", "values": [0.0, 1.0]}}, "stress must name an axis"),
         ({"rank_by": [{"metric": "success rate"}]}, "rank_by metric"),
         ({"campaign": {"runs": 3}}, "campaign.runs must be >= 1 and divide"),
         ({"campaign": 2}, "campaign must be a mapping"),
