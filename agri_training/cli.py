@@ -274,9 +274,15 @@ def _cmd_leaderboard(args: argparse.Namespace) -> int:
         entries = [e for e in entries if str(Path(e["_path"]).resolve()) in wanted]
         if len(entries) != len(wanted):
             raise ValueError(f"not an entry under {entries_dir}: {sorted(wanted)}")
-    problems, seconds = lb.timed(
-        lb.verify_entries, entries, suites_dir, args.workers, args.rtol, not args.quiet, args.ray, args.batch
-    )
+    if args.sample is not None:
+        problems, seconds = lb.timed(
+            lb.verify_sample, entries, args.sample, suites_dir, args.workers, args.rtol, not args.quiet, args.ray,
+            args.batch,
+        )
+    else:
+        problems, seconds = lb.timed(
+            lb.verify_entries, entries, suites_dir, args.workers, args.rtol, not args.quiet, args.ray, args.batch
+        )
     if not args.no_markdown and not lb.leaderboard_is_current(md, entries_dir, suites_dir):
         problems.append(f"{md} is stale: run `agri leaderboard render` and commit it")
     if problems:
@@ -284,6 +290,8 @@ def _cmd_leaderboard(args: argparse.Namespace) -> int:
         lb.print_problems(problems)
         return 1
     tol = "exactly" if args.rtol == 0 else f"within rtol {args.rtol:g}"
+    if args.sample is not None:
+        tol += f" (a sample: {args.sample} episode(s) per level re-run, every summary recomputed)"
     print(f"verified {len(entries)} entries {tol} in {seconds:.0f} s ({args.workers} worker(s)); {md.name} is current")
     return 0
 
@@ -505,6 +513,14 @@ def build_parser() -> argparse.ArgumentParser:
     add_batch_argument(ve)
     ve.add_argument("--rtol", type=float, default=0.0, help="relative tolerance for floats (default 0: exact)")
     ve.add_argument("--no-markdown", action="store_true", help="do not check that LEADERBOARD.md is current")
+    ve.add_argument(
+        "--sample",
+        type=int,
+        default=None,
+        metavar="N",
+        help="re-run only N evenly spaced episodes (whole campaigns) of every level of every entry, and recompute "
+        "every summary from the committed records (make test: 1; default: every episode)",
+    )
     ve.add_argument("--quiet", action="store_true")
     board.set_defaults(func=_cmd_leaderboard)
     ls = sub.add_parser("list", help="registered envs, scenarios and baselines")

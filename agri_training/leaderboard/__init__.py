@@ -19,9 +19,11 @@ from agri_training.leaderboard.entries import (
     policy_reference,
     print_problems,
     run_blocks,
+    sample_indices,
     slug,
     timed,
     verify_entries,
+    verify_sample,
     write_entry,
 )
 from agri_training.leaderboard.markdown import (
@@ -97,10 +99,12 @@ __all__ = [
     "print_problems",
     "render_markdown",
     "run_blocks",
+    "sample_indices",
     "sha256_file",
     "slug",
     "timed",
     "verify_entries",
+    "verify_sample",
     "write_entry",
     "write_markdown",
 ]

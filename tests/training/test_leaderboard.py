@@ -204,6 +204,39 @@ def test_verify_fails_on_an_altered_number(board, tmp_path, capsys):
     ]
 
 
+def test_sampled_verify_reruns_picked_episodes_and_recomputes_every_summary(board, tmp_path, capsys):
+    assert lb.sample_indices(20, 1, 1) == [0] and lb.sample_indices(20, 1, 3) == [0, 6, 13]
+    assert lb.sample_indices(20, 4, 2) == [0, 1, 2, 3, 8, 9, 10, 11]  # whole campaigns
+    assert lb.sample_indices(2, 1, 5) == [0, 1]
+    suites, entries, md = copy_board(board, tmp_path)
+    assert cli(suites, entries, md, "verify", "--sample", "1", "--workers", "1", "--quiet") == 0
+    assert "a sample: 1 episode(s) per level re-run" in capsys.readouterr().out
+    path = next(entries.glob("*/*.json"))
+    committed = path.read_text()
+    # a record that is re-run (episode 0) is caught by the re-run and by the summaries it feeds
+    doc = json.loads(committed)
+    doc["levels"][0]["episodes"][0]["path_length"] += 1e-9
+    path.write_text(json.dumps(doc, indent=1))
+    problems = lb.verify_sample(lb.load_entries(entries), 1, suites, progress=False)
+    assert any("[tiny-rover]: episodes[0].path_length" in p for p in problems)
+    assert any("summary.mean_path_length" in p for p in problems)
+    # a record that is not re-run (episode 1) is caught through the summaries
+    doc = json.loads(committed)
+    doc["levels"][0]["episodes"][1]["episode_time"] += 1.0
+    path.write_text(json.dumps(doc, indent=1))
+    problems = lb.verify_sample(lb.load_entries(entries), 1, suites, progress=False)
+    assert problems and all("summary" in p for p in problems)
+    # and a summary edited alone
+    doc = json.loads(committed)
+    doc["summary"]["success_rate"] = 0.5
+    path.write_text(json.dumps(doc, indent=1))
+    assert lb.verify_sample(lb.load_entries(entries), 1, suites, progress=False) == [
+        "tiny-rover/harik-apf-gt: summary.success_rate: committed 0.5 != reproduced 1.0"
+    ]
+    with pytest.raises(ValueError, match="at least one episode"):
+        lb.sample_indices(20, 1, 0)
+
+
 def test_verify_fails_on_a_stale_leaderboard_page(board, tmp_path, capsys):
     suites, entries, md = copy_board(board, tmp_path)
     md.write_text(md.read_text().replace("1.00 [", "0.99 ["))
