@@ -342,6 +342,32 @@ def test_malformed_actions_are_named_and_leave_the_env_working(env_id):
         assert data_equivalence(env.step(action), fresh.step(action), exact=True)
 
 
+VECTOR_IDS = sorted(env_id for env_id in ENV_IDS if gym.spec(env_id).vector_entry_point is not None)
+
+
+@pytest.mark.parametrize("env_id", VECTOR_IDS)
+def test_batched_form_reports_its_seeds_as_sync_vector_env_does(env_id):
+    # SyncVectorEnv (the oracle) reports its sub-envs' seeds; the batched forms reported a random 128-bit number.
+    native = gym.make_vec(env_id, num_envs=3, vectorization_mode="vector_entry_point")
+    sync = gym.make_vec(env_id, num_envs=3, vectorization_mode="sync")
+    assert not isinstance(native.unwrapped, gym.vector.SyncVectorEnv)
+    try:
+        # An unseeded reset keeps each sub-env's seed.
+        for seed, seeds in ((42, (42, 43, 44)), ([7, 8, 9], (7, 8, 9)), (None, (7, 8, 9))):
+            native.reset(seed=seed)
+            sync.reset(seed=seed)
+            assert native.np_random_seed == sync.np_random_seed == seeds
+            assert all(type(s) is int for s in native.np_random_seed)
+            assert [g.bit_generator.state for g in native.np_random] == [
+                g.bit_generator.state for g in sync.np_random
+            ]
+        native.step(native.action_space.sample())
+        assert native.np_random_seed == (7, 8, 9)
+    finally:
+        native.close()
+        sync.close()
+
+
 def test_one_registry_builds_every_env_of_both_kinds():
     ids = agri_envs.env_ids()
     assert "robot_chain_v1" in ids and set(ENV_IDS) <= set(ids)
