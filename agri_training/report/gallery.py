@@ -33,7 +33,7 @@ from agri_training.learned import zoo  # noqa: F401  (registers the shipped lear
 #: Env families of the site: (page name, env id, preset ids that share the page).
 ENV_PAGES = (
     ("greenhouse-nav", "agri_envs/GreenhouseNav-v2", ()),
-    ("greenhouse-coverage", "agri_envs/GreenhouseCoverage-v1", ()),
+    ("greenhouse-coverage", "agri_envs/GreenhouseCoverage-v2", ()),
     ("robot-chain", "robot_chain_v1", ()),
     ("grape-harvest", "agri_envs/GrapeHarvest-v1", ("agri_envs/GrapeHarvestReach-v1",)),
 )

@@ -50,7 +50,7 @@ SECTION_HOOKS: dict[str, str] = {
     "agri_envs/GreenhouseNav-v2": "agri_training.report.rover:report_section",
     "agri_envs/GrapeHarvest-v1": "agri_training.report.arm:report_section",
     "robot_chain_v1": "agri_training.report.chain:report_section",
-    "agri_envs/GreenhouseCoverage-v1": "agri_training.report.coverage:report_section",
+    "agri_envs/GreenhouseCoverage-v2": "agri_training.report.coverage:report_section",
 }
 
 #: Success rates the papers report, as (successes, trials, source), per suite name: our rate is compared

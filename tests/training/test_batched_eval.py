@@ -75,9 +75,9 @@ def test_traces_and_reruns_match_the_reference_loop(monkeypatch):
 
 
 def test_which_policies_run_batched(monkeypatch):
-    assert has_batched_form(NAV) and has_batched_form("agri_envs/GreenhouseCoverage-v1")
+    assert has_batched_form(NAV) and has_batched_form("agri_envs/GreenhouseCoverage-v2")
     assert not has_batched_form("robot_chain_v1") and not has_batched_form("agri_envs/GrapeHarvest-v1")
-    assert not batchable("agri_envs/GreenhouseCoverage-v1", "gonzalez-pseudo-reactive")  # it reads the env
+    assert not batchable("agri_envs/GreenhouseCoverage-v2", "gonzalez-pseudo-reactive")  # it reads the env
     assert batchable(NAV, "harik-apf") and batchable(NAV, "ppo-greenhouse-nav")
     assert batchable(NAV, str(ZOO_DIR / "ppo-greenhouse-nav"))  # a run folder: a learned policy
     assert not batchable("agri_envs/GrapeHarvest-v1", "luo-apf") and not batchable(NAV, "no-such-policy")

@@ -87,7 +87,7 @@ def test_bad_suites_are_rejected(change, message):
 
 def test_generalization_suites_lie_outside_the_training_distribution():
     committed = {s.env_id: s for s in lb.load_suites() if s.generalization}
-    assert set(committed) == {"agri_envs/GreenhouseNav-v2", "agri_envs/GreenhouseCoverage-v1"}
+    assert set(committed) == {"agri_envs/GreenhouseNav-v2", "agri_envs/GreenhouseCoverage-v2"}
     for suite in committed.values():
         for label, families in lb.outside_training(suite).items():
             assert families and all(families.values()), (label, families)
@@ -164,7 +164,7 @@ def test_entry_records_what_it_needs(board):
 def test_entries_keep_each_episodes_scalars_and_report_traces_its_whole_record():
     # gonzalez-pseudo-reactive records its sensory map and odometry path per episode (episode_metrics): the
     # entry keeps the numbers, a traced episode (which the report plots) keeps the whole record.
-    coverage = {**SUITE, "env_id": "agri_envs/GreenhouseCoverage-v1", "env_kwargs": {"n_rows": 1, "row_length": 3.0}}
+    coverage = {**SUITE, "env_id": "agri_envs/GreenhouseCoverage-v2", "env_kwargs": {"n_rows": 1, "row_length": 3.0}}
     suite = lb.parse_suite({**coverage, "seeds": {"start": 100000, "episodes": 1}})
     traces: list = []
     (entry,) = lb.evaluate_entries(
