@@ -240,8 +240,14 @@ def _cmd_leaderboard(args: argparse.Namespace) -> int:
         return 0
     if args.action == "submit":
         suites = lb.load_suites(suites_dir)
-        if args.all:
-            pairs = lb.all_baseline_pairs(s for s in suites if not args.env or s.env_id == args.env)
+        if args.all:  # optionally only the suites named (every registered policy on each)
+            named = set(args.suite or [])
+            unknown = named - {s.name for s in suites}
+            if unknown:
+                raise ValueError(f"unknown suites {sorted(unknown)}; `agri leaderboard suites` lists them")
+            pairs = lb.all_baseline_pairs(
+                s for s in suites if (not args.env or s.env_id == args.env) and (not named or s.name in named)
+            )
         else:
             if not args.suite or not args.policy:
                 raise ValueError("submit needs --suite and --policy (or --all for every baseline on every suite)")
@@ -502,7 +508,9 @@ def build_parser() -> argparse.ArgumentParser:
     su.add_argument("--suite", nargs="+", help="suite names, or 'all' (every suite of the policy's env)")
     su.add_argument("--policy", help="registered policy name, or an `agri train` run folder")
     su.add_argument("--name", default=None, help="display name of a learned policy")
-    su.add_argument("--all", action="store_true", help="every registered baseline on every suite of its env")
+    su.add_argument(
+        "--all", action="store_true", help="every registered policy on every suite of its env (or on the --suite named)"
+    )
     su.add_argument("--env", default=None, help="with --all: only this env id")
     add_scale_arguments(su)
     add_batch_argument(su)
