@@ -23,7 +23,7 @@ from __future__ import annotations
 import dataclasses
 import math
 from collections.abc import Callable
-from typing import Any
+from typing import Any, cast
 
 import numba
 import numpy as np
@@ -120,8 +120,8 @@ def _braking(u: float, accel: float, reaction_time: float) -> float:
 _PAPER_BRAKING = (0.5, 1.0, 1.0 / 15.0)
 
 #: The limits of GreenhouseNav's default robot, for which the paper's gains (:class:`HarikApfParams`) are set.
-DEFAULT_LIMITS = {
-    f.name: float(f.default)
+DEFAULT_LIMITS: dict[str, float] = {
+    f.name: float(cast(float, f.default))
     for f in dataclasses.fields(GreenhouseNavConfig)
     if f.name in ("max_speed", "max_turn_rate", "max_accel")
 }
