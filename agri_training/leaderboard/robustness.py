@@ -7,19 +7,18 @@ failed episodes. Both LEADERBOARD.md and the report print the same lines (:func:
 
 Failure kinds are read from each episode's record (the scalars an entry keeps; they differ per env):
 
-============  ====================================================================================
-kind          meaning, and where it is read from
-============  ====================================================================================
-crash         a collision or a contact (``collision``, which every env records)
-chain break   robot_chain: a gap in the chain ended the episode (``chain_intact`` false)
-stall         truncated with the robot not moving at the end: GreenhouseNav, ``blocked_at_end``
-              (Harik's safety stop was holding it); GrapeHarvest, ``plan_success`` false (Luo's
-              planner gave up, so the arm holds its last pose)
-time-out      truncated otherwise; also wherever a record does not tell a stall apart (learned
-              policies record no controller state; the coverage and chain records hold no motion
-              at the end)
-ended         ended early for none of the reasons above
-============  ====================================================================================
+| kind | meaning | read from |
+|---|---|---|
+| crash | a collision or a contact | ``collision`` (every env records it) |
+| chain break | robot_chain: a gap in the chain ended the episode | ``chain_intact`` false |
+| stall | truncated with the robot not moving at the end | see below |
+| time-out | truncated otherwise, or where the record cannot tell a stall | ``truncated`` |
+| ended | ended early for none of the reasons above | |
+
+A stall is told apart where a record says the robot stood still at the end: GreenhouseNav, ``blocked_at_end``
+(Harik's safety stop was holding it); GrapeHarvest, ``plan_success`` false (Luo's planner gave up, so the arm
+holds its last pose). Learned policies record no controller state, and the coverage and chain records hold no
+motion at the end: their truncated episodes count as time-outs.
 
 Per-env rules live in :data:`FAILURE_KIND_READERS`, keyed by env family (the id without its version, so a
 version bump needs no change here).

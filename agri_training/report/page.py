@@ -944,8 +944,9 @@ def glance_lines(
         "Success rate of every policy on every suite, over the suite's held-out episodes: the papers' suites, "
         "the generalization suites (scenes outside every training range) and the stress suites (one axis swept "
         f"from the env's default out to its limits). **Bold**: below {lb.SUCCESS_FLOOR:.2f}. A stress cell pools "
-        f"its levels; ▾ gives its worst level, and the cell is bold when that one is below {lb.SUCCESS_FLOOR:.2f}. **P**: privileged (uses what a real robot lacks, such as the true "
-        "pose). `-`: no entry. Intervals, paired comparisons and plots are in each env's section below.",
+        "its levels; ▾ gives its worst level, and the cell is bold when that level is. **P**: privileged (uses "
+        "what a real robot lacks, such as the true pose). `-`: no entry. Intervals, paired comparisons and plots "
+        "are in each env's section below.",
         "",
     ]
     for env_id in env_ids:
@@ -1011,8 +1012,7 @@ def who_wins_where(env_ids: Sequence[str], suites: Sequence[lb.Suite], rows: Seq
     if every:
         lines += [
             "",
-            "<details><summary>Every paired claim, on every ranking metric "
-            f"({len(every)})</summary>",
+            f"<details><summary>Every paired claim, on every ranking metric ({len(every)})</summary>",
             "",
             *(f"- {c}" for c in every),
             "",
