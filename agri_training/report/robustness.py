@@ -132,8 +132,14 @@ def _column_labels(suite: lb.Suite) -> tuple[str, list[str]]:
     names, rows = suite.sweep
     header = f"{suite.stress or suite.name}\n({', '.join(names)})"
     if len(names) == 1:
-        return header, [str(row[0]) for row in rows]
-    return header, ["\n".join(str(v) for v in row) for row in rows]
+        return header, [_short(row[0]) for row in rows]
+    return header, ["\n".join(_short(v) for v in row) for row in rows]
+
+
+def _short(value: Any, most: int = 12) -> str:
+    """A level value as a column label: long ones (a map's path) cut to ``most`` characters."""
+    text = str(value)
+    return text if len(text) <= most else text[: most - 1] + "…"
 
 
 def robustness_figure(
@@ -160,15 +166,19 @@ def robustness_figure(
     policies = policy_order(list(entries.values()))
     bands = _bands(stress)
     n_rows = len(policies)
-    title_h, header_h, cells_h, gap_h = 0.55, 0.95, 0.42 * n_rows, 0.3  # inches
-    total = title_h + len(bands) * (header_h + cells_h) + (len(bands) - 1) * gap_h + 0.1
+    cell_h = 0.42  # inches
+    # per band: the level labels (one line per swept argument), then the two-line suite header above them
+    label_h = [0.12 + 0.12 * max(len(s.sweep[0]) if s.sweep else 1 for s in band) for band in bands]
+    header_h = [h + 0.45 for h in label_h]
+    title_h, cells_h, gap_h = 0.55, cell_h * n_rows, 0.3
+    total = title_h + sum(header_h) + len(bands) * cells_h + (len(bands) - 1) * gap_h + 0.1
     fig = plt.figure(figsize=(FIGURE_WIDTH, total))
     cmap = plt.get_cmap("RdYlGn")
     # the floor is the colour scale's midpoint (yellow): every rate below it reads orange to red
     norm = TwoSlopeNorm(vmin=0.0, vcenter=lb.SUCCESS_FLOOR, vmax=1.0)
     width_cols = MAX_COLUMNS
     for b, band in enumerate(bands):
-        bottom = total - title_h - (b + 1) * (header_h + cells_h) - b * gap_h
+        bottom = total - title_h - sum(header_h[: b + 1]) - (b + 1) * cells_h - b * gap_h
         ax = fig.add_axes((_LABEL_WIDTH / FIGURE_WIDTH, bottom / total, 1 - (_LABEL_WIDTH + 0.1) / FIGURE_WIDTH,
                            cells_h / total))  # fmt: skip
         ax.set_xlim(0, width_cols)
@@ -177,7 +187,8 @@ def robustness_figure(
         x = 0.0
         for suite in band:
             header, labels = _column_labels(suite)
-            ax.text(x + len(labels) / 2, -1.55, header, ha="center", va="bottom", fontsize=8, fontweight="bold")
+            ax.text(x + len(labels) / 2, -(label_h[b] + 0.06) / cell_h, header, ha="center", va="bottom", fontsize=8,
+                    fontweight="bold")  # fmt: skip
             for j, label in enumerate(labels):
                 ax.text(x + j + 0.5, -0.12, label, ha="center", va="bottom", fontsize=7)
             for i, (name, _, _) in enumerate(policies):
@@ -229,7 +240,7 @@ def robustness_figure(
         fontsize=8.5,
     )
     name = figure_name(env_id)
-    fig.savefig(out_dir / name, dpi=FIGURE_DPI)
+    fig.savefig(out_dir / name, dpi=FIGURE_DPI, bbox_inches="tight", pad_inches=0.1)  # never wider than drawn
     plt.close(fig)
     return name
 
