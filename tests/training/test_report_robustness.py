@@ -7,6 +7,7 @@ from agri_training import leaderboard as lb
 from agri_training.core.stats import wilson_interval
 from agri_training.report import page
 from agri_training.report.page import Row
+from agri_training.report.robustness import robustness_section
 
 NAV = "agri_envs/GreenhouseNav-v2"
 RANK = [{"metric": "success_rate", "higher_is_better": True}]
@@ -129,5 +130,11 @@ def test_report_opens_with_the_glance_and_draws_a_robustness_matrix(tmp_path, mo
         if line.startswith("|---"):
             assert i + 1 < len(lines) and lines[i + 1].startswith("| "), lines[i - 1]
     assert "`a` vs `b`" not in md and "X vs Y" not in md.split("#### nav-paper")[1].split("####")[0]
+    # one matrix per env family, named after it (no version: it survives a version bump)
+    chain = lb.parse_suite(CHAIN_LENGTH)
+    section = robustness_section(chain.env_id, [chain], [(chain, _entry(chain, "apoorva", [[], []]))], out)
+    assert "![robustness-robot-chain.png](robustness-robot-chain.png)" in section
+    assert section[-1] == "- `apoorva`: holds on every level."
+    assert (out / "robustness-robot-chain.png").exists()
     html = (out / "report.html").read_text()
     assert "img,video{max-width:100%" in html and "<details><summary>" in html
