@@ -16,7 +16,7 @@ $(STAMP): pyproject.toml
 	if $(BIN)/python -c "import urllib.request as u; u.urlopen('$(TORCH_CPU_INDEX)/torch/', timeout=10)" 2>/dev/null; \
 	then $(BIN)/pip install -q "$(TORCH)" --index-url $(TORCH_CPU_INDEX); \
 	else echo "PyTorch's CPU index is out of reach: $(TORCH) from the default index"; $(BIN)/pip install -q "$(TORCH)"; fi
-	$(BIN)/pip install -q -e ".[train,report,dev,ray,video,docs]"
+	$(BIN)/pip install -q -e ".[train,report,dev,ray,video,docs,datasets]"
 	touch $(STAMP)
 
 .PHONY: report test lint bench leaderboard verify docs
