@@ -28,7 +28,7 @@ import dataclasses
 import os
 import shutil
 import uuid
-from collections.abc import Iterator, Mapping
+from collections.abc import Iterator, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -312,7 +312,34 @@ def recover_env(dataset: Any) -> Any:
     return describe(dataset).make()
 
 
-def episodes(dataset: Any) -> Iterator[tuple[dict[str, Any], Any]]:
-    """``(metadata, episode)`` of every episode in order: Minari's metadata (``seed``, ``run``, ``agent``) and data."""
+def episodes(dataset: Any, seeds: Sequence[int] | None = None) -> Iterator[tuple[dict[str, Any], Any]]:
+    """``(metadata, episode)`` of the episodes in order: Minari's metadata (``seed``, ``run``, ``agent``) and data.
+
+    Args:
+        dataset: A Minari dataset.
+        seeds: Only the episodes reset with these seeds (every one must be there), in the dataset's order.
+
+    Raises:
+        ValueError: When a seed has no episode.
+    """
     ids = list(dataset.episode_indices)
-    yield from zip(dataset.storage.get_episode_metadata(ids), dataset.iterate_episodes(ids), strict=True)
+    metas = list(dataset.storage.get_episode_metadata(ids))
+    if seeds is not None:
+        wanted = {int(s) for s in seeds}
+        missing = sorted(wanted - {int(m["seed"]) for m in metas})
+        if missing:
+            held = sorted({int(m["seed"]) for m in metas})
+            raise ValueError(
+                f"dataset {dataset.spec.dataset_id} holds no episode of seeds {_span(missing)} (it holds seeds "
+                f"{_span(held)}): ask for seeds it holds"
+            )
+        picked = [k for k, m in enumerate(metas) if int(m["seed"]) in wanted]
+        ids, metas = [ids[k] for k in picked], [metas[k] for k in picked]
+    yield from zip(metas, dataset.iterate_episodes(ids), strict=True)
+
+
+def _span(seeds: list[int]) -> str:
+    """``3..7`` for a run of consecutive seeds, else the list (shortened)."""
+    if seeds and seeds == list(range(seeds[0], seeds[-1] + 1)):
+        return f"{seeds[0]}..{seeds[-1]}" if len(seeds) > 1 else str(seeds[0])
+    return str(seeds[:8])[:-1] + (", ...]" if len(seeds) > 8 else "]")

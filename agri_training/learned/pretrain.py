@@ -34,10 +34,11 @@ The demonstrations may come from a Minari dataset that ``agri dataset`` wrote in
 Its episodes are read as step 1 would have recorded them: the dataset's env must be the training env (its id,
 and its arguments up to what the baseline adds). Where those arguments change more than extra observation keys,
 the training env replays each episode's recorded actions from its seed in lockstep, exactly as beside a live
-baseline, and must agree on every reward and end. The dataset names its policy and seeds: ``policy`` (the
-labeller of DAgger rounds) defaults to the dataset's, ``seed`` and ``episodes`` are the dataset's, and DAgger's
-seeds follow its last. Cloned from a dataset, the demonstrations (and so the weights) equal those of the same
-baseline driven live on the same seeds.
+baseline, and must agree on every reward and end. ``seed`` and ``episodes`` keep their meaning: the dataset's
+episodes of seeds ``seed .. seed + episodes - 1`` are the demonstrations (the dataset must hold them all), and
+DAgger's seeds follow; ``policy`` (the labeller of DAgger rounds) defaults to the dataset's and must be it. Cloned
+from a dataset, the demonstrations (and so the weights) equal those of the same baseline driven live on the
+same seeds.
 
 A PettingZoo env (the robot chain) is cloned the same way into the parameter-shared policy: every agent's
 decision is one sample, each agent's decisions one trajectory for the returns, and the baseline is the
@@ -70,10 +71,9 @@ class PretrainSpec:
     Attributes:
         policy: Registered baseline of the env whose actions are cloned (with ``dataset``: the dataset's policy,
             the default; DAgger rounds need it registered).
-        episodes: Demonstration episodes, >= 1 (with ``dataset``: the dataset's).
+        episodes: Demonstration episodes, >= 1.
         epochs: Passes over the demonstrations, >= 1.
-        seed: First demonstration seed (``seed .. seed + episodes - 1``), below 100000 (with ``dataset``: the
-            dataset's).
+        seed: First demonstration seed (``seed .. seed + episodes - 1``), below 100000.
         learning_rate: Adam's step size.
         batch_size: Decisions per gradient step.
         dagger_rounds: DAgger rounds after the first fit (0: cloning alone).
@@ -151,9 +151,6 @@ class PretrainSpec:
         unknown = sorted(set(block) - set(names))
         if unknown:
             raise ValueError(f"pretrain: unknown keys {unknown}; valid: {', '.join(names)}")
-        fixed = sorted({"seed", "episodes"} & set(block))
-        if block.get("dataset") and fixed:
-            raise ValueError(f"pretrain: {fixed} come from the dataset; leave them out beside dataset")
         return cls(**dict(block))
 
 
@@ -311,11 +308,11 @@ def demonstrate_dataset(spec: PretrainSpec, config: Mapping[str, Any]) -> tuple[
         config: The resolved training config.
 
     Returns:
-        The spec with the dataset's policy, first seed and episode count; the demonstrations.
+        The spec with the dataset's policy; the demonstrations of its episodes on seeds ``spec.seed ..``.
 
     Raises:
-        ValueError: When the dataset is missing, ran another env or another policy than ``spec.policy``, or its
-            arguments change the training env's dynamics.
+        ValueError: When the dataset is missing, lacks one of the seeds, ran another env or another policy than
+            ``spec.policy``, or its arguments change the training env's dynamics.
     """
     assert spec.dataset is not None
     dataset = datasets.load(spec.dataset)
@@ -323,8 +320,8 @@ def demonstrate_dataset(spec: PretrainSpec, config: Mapping[str, Any]) -> tuple[
     meta = dataset.storage.metadata[datasets.METADATA_KEY]
     if spec.policy and spec.policy != meta["policy"]:
         raise ValueError(f"pretrain: dataset {spec.dataset} was driven by {meta['policy']}, not {spec.policy}")
-    first, last = (int(s) for s in meta["seeds"])
-    spec = dataclasses.replace(spec, policy=str(meta["policy"]), seed=first, episodes=last - first + 1)
+    spec = dataclasses.replace(spec, policy=str(meta["policy"]))
+    seeds = range(spec.seed, spec.seed + spec.episodes)
     env_id = config["env_id"]
     if described.env_id != env_id:
         raise ValueError(f"pretrain: dataset {spec.dataset} ran {described.env_id}, not {env_id}")
@@ -341,7 +338,7 @@ def demonstrate_dataset(spec: PretrainSpec, config: Mapping[str, Any]) -> tuple[
         learner_env.close()
         if changed:
             raise ValueError(f"pretrain: dataset {spec.dataset}'s {env_id} differs from the training env in {changed}")
-        return spec, _dataset_agents(dataset)
+        return spec, _dataset_agents(dataset, seeds)
     space = learner_env.observation_space
     keys = list(space.spaces) if isinstance(space, gym.spaces.Dict) else None
     _, chain = observation_chain(learner_env, config.get("wrappers", []))
@@ -353,7 +350,7 @@ def demonstrate_dataset(spec: PretrainSpec, config: Mapping[str, Any]) -> tuple[
     rewards: list[float] = []
     ends: list[bool] = []
     successes = runs = 0
-    for meta_ep, episode in datasets.episodes(dataset):
+    for meta_ep, episode in datasets.episodes(dataset, seeds):
         seed = int(meta_ep["seed"])
         runs += 1
 
@@ -392,11 +389,11 @@ def demonstrate_dataset(spec: PretrainSpec, config: Mapping[str, Any]) -> tuple[
     )
 
 
-def _dataset_agents(dataset: Any) -> Demonstrations:
+def _dataset_agents(dataset: Any, seeds: Sequence[int]) -> Demonstrations:
     """:func:`demonstrate_dataset` on a PettingZoo env: every agent's episode one trajectory, as live."""
     observations, actions, rewards, ends = [], [], [], []
     successes, runs, first_agent = 0, set(), None
-    for meta, episode in datasets.episodes(dataset):
+    for meta, episode in datasets.episodes(dataset, seeds):
         first_agent = first_agent or meta["agent"]
         runs.add(int(meta["run"]))
         steps = len(episode.actions)

@@ -171,3 +171,85 @@ def test_the_spec_records_a_policys_own_arguments():
     described = resolve_dataset_env(request)
     assert described.env_kwargs == {"scene_distribution": "training", "full_scan": True, "localization": "ground_truth"}
     json.dumps(described.env_kwargs)
+
+
+def test_a_clone_from_a_dataset_equals_the_clone_from_the_same_baseline_driven_live(tmp_path):
+    import torch
+
+    from agri_training.learned.pretrain import PretrainSpec, demonstrate, demonstrate_dataset
+    from agri_training.train import TrainRequest, resolve_config, train
+
+    env_id = "agri_envs/GreenhouseNav-v2"
+    hp = {
+        "n_envs": 1,
+        "env_kwargs": {"n_rows": 1, "row_length": 3.0, "n_people": 0, "max_episode_steps": 60},
+        "train_env_kwargs": {"scene_distribution": "off"},
+        "eval_env_kwargs": {"scene_distribution": "off"},
+        "algo_kwargs": {"n_steps": 32, "batch_size": 32, "n_epochs": 1},
+        "policy_kwargs": {"net_arch": {"pi": [16], "vf": [16]}},
+        "eval_freq": 64,
+        "eval_episodes": 1,
+        "checkpoint_freq": 64,
+    }
+    live = {**hp, "pretrain": {"policy": "harik-apf-gt", "episodes": 2, "epochs": 3, "seed": 50000}}
+    config = resolve_config(TrainRequest(env_id, "ppo", tmp_path / "live", seed=4, overrides=live))
+    # The dataset: the same baseline, seeds and training env (the baseline adds its own arguments).
+    learner_kwargs = {**config["env_kwargs"], **config["train_env_kwargs"]}
+    dataset_id = "agri/GreenhouseNav-v2/harik-apf-gt-v0"
+    request = DatasetRequest(env_id, "harik-apf-gt", dataset_id, 2, 50000, env_kwargs=learner_kwargs)
+    make_dataset(request, progress=False)
+    cloned = {**hp, "pretrain": {"dataset": dataset_id, "episodes": 2, "epochs": 3, "seed": 50000}}
+    config_d = resolve_config(TrainRequest(env_id, "ppo", tmp_path / "data", seed=4, overrides=cloned))
+    # The dataset's env adds only the full scan to the learner's: its recorded observations are shown.
+    spec, from_data = demonstrate_dataset(PretrainSpec.from_config(config_d["pretrain"]), config_d)
+    shown = demonstrate(PretrainSpec.from_config(config["pretrain"]), config)
+    assert spec.policy == "harik-apf-gt"
+    for name in ("observations", "actions", "rewards", "episode_ends", "successes", "episodes"):
+        np.testing.assert_array_equal(getattr(from_data, name), getattr(shown, name))
+    # So the cloned weights are equal bit for bit.
+    runs = {}
+    for name, overrides in (("live", live), ("data", cloned)):
+        out = tmp_path / f"run-{name}"
+        train(TrainRequest(env_id, "ppo", out, seed=4, timesteps=0, overrides=overrides, progress=False), "test")
+        runs[name] = torch.load(out / "checkpoints" / "step_0" / "policy.pt", weights_only=True)
+    assert runs["live"].keys() == runs["data"].keys()
+    assert all(torch.equal(runs["live"][k], runs["data"][k]) for k in runs["live"])
+    with pytest.raises(ValueError, match=r"holds no episode of seeds 50002 \(it holds seeds 50000..50001\)"):
+        demonstrate_dataset(PretrainSpec(dataset=dataset_id, episodes=3, seed=50000), config_d)
+    with pytest.raises(ValueError, match="policy .* or dataset"):
+        PretrainSpec.from_config({"epochs": 3})
+    with pytest.raises(ValueError, match="was driven by harik-apf-gt, not harik-apf"):
+        demonstrate_dataset(PretrainSpec(policy="harik-apf", dataset=dataset_id, episodes=2, seed=50000), config_d)
+
+
+def test_a_privileged_dataset_is_replayed_in_the_learners_own_env(tmp_path):
+    from agri_training.learned.pretrain import PretrainSpec, demonstrate, demonstrate_dataset
+    from agri_training.train import TrainRequest, resolve_config
+
+    coverage = "agri_envs/GreenhouseCoverage-v1"
+    hp = {"env_kwargs": {"max_episode_steps": 60}, "pretrain": {"policy": "gonzalez-deliberative", "episodes": 1}}
+    config = resolve_config(TrainRequest(coverage, "ppo", tmp_path / "run", seed=0, overrides=hp))
+    scene = {**config["env_kwargs"], **config["train_env_kwargs"]}  # the training distribution, odometry
+    seed = config["pretrain"].get("seed", 50000)
+    dataset_id = "agri/GreenhouseCoverage-v1/gonzalez-deliberative-v0"
+    request = DatasetRequest(coverage, "gonzalez-deliberative", dataset_id, 1, seed, env_kwargs=scene)
+    make_dataset(request, progress=False)
+    # gonzalez-deliberative drove on the true pose; the learner (odometry) sees its own env, stepped in lockstep.
+    shown = demonstrate(PretrainSpec.from_config(config["pretrain"]), config)
+    data_hp = {**hp, "pretrain": {**hp["pretrain"], "dataset": dataset_id}}
+    data_config = resolve_config(TrainRequest(coverage, "ppo", tmp_path / "data", seed=0, overrides=data_hp))
+    _, from_data = demonstrate_dataset(PretrainSpec.from_config(data_config["pretrain"]), data_config)
+    for key in shown.observations:
+        np.testing.assert_array_equal(from_data.observations[key], shown.observations[key])
+    np.testing.assert_array_equal(from_data.actions, shown.actions)
+    np.testing.assert_array_equal(from_data.rewards, shown.rewards)
+    # A dataset whose arguments change the rewards is refused, naming the dynamics.
+    other = "agri/GreenhouseCoverage-v1/slow-v0"
+    slower = DatasetRequest(coverage, "gonzalez-deliberative", other, 1, seed, env_kwargs={**scene, "reward_time": 0.5})
+    make_dataset(slower, progress=False)
+    with pytest.raises(ValueError, match="change agri_envs/GreenhouseCoverage-v1's dynamics"):
+        demonstrate_dataset(PretrainSpec(dataset=other, episodes=1, seed=seed), data_config)
+    with pytest.raises(ValueError, match="ran agri_envs/GreenhouseCoverage-v1, not"):
+        demonstrate_dataset(
+            PretrainSpec(dataset=other, episodes=1, seed=seed), {**data_config, "env_id": "agri_envs/GreenhouseNav-v2"}
+        )
