@@ -253,3 +253,24 @@ def test_a_privileged_dataset_is_replayed_in_the_learners_own_env(tmp_path):
         demonstrate_dataset(
             PretrainSpec(dataset=other, episodes=1, seed=seed), {**data_config, "env_id": "agri_envs/GreenhouseNav-v2"}
         )
+
+
+def test_the_chain_clones_from_its_dataset_robot_by_robot_as_live(tmp_path):
+    from agri_training.learned.pretrain import PretrainSpec, demonstrate, demonstrate_dataset
+    from agri_training.train import TrainRequest, resolve_config
+
+    pretrain = {"policy": "apoorva-chain", "episodes": 1, "seed": 50000, "dagger_rounds": 0}
+    hp = {"env_kwargs": {"n_robots": 3}, "pretrain": pretrain}
+    config = resolve_config(TrainRequest("robot_chain_v1", "ppo", tmp_path / "run", seed=0, overrides=hp))
+    dataset_id = "agri/robot_chain_v1/apoorva-chain-v0"
+    kwargs = {**config["env_kwargs"], **config.get("train_env_kwargs", {})}
+    make_dataset(
+        DatasetRequest("robot_chain_v1", "apoorva-chain", dataset_id, 1, 50000, env_kwargs=kwargs), progress=False
+    )
+    shown = demonstrate(PretrainSpec.from_config(config["pretrain"]), config)
+    _, from_data = demonstrate_dataset(PretrainSpec.from_config({**pretrain, "dataset": dataset_id}), config)
+    for name in ("observations", "actions", "rewards", "episode_ends", "successes", "episodes"):
+        np.testing.assert_array_equal(getattr(from_data, name), getattr(shown, name))
+    four = {**config, "env_kwargs": {"n_robots": 4}}
+    with pytest.raises(ValueError, match="differs from the training env in"):
+        demonstrate_dataset(PretrainSpec.from_config({**pretrain, "dataset": dataset_id}), four)
