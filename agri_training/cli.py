@@ -16,7 +16,7 @@ from agri_baselines import list_policies, policy_spec
 from agri_envs.scenarios import list_scenarios
 from agri_training import leaderboard as lb
 from agri_training.core.yaml_values import load_yaml
-from agri_training.datasets import DatasetRequest, make_dataset
+from agri_training.datasets import DatasetRequest, default_dataset_id, default_env, make_dataset
 from agri_training.evaluation.batched import BATCH_SIZE
 from agri_training.evaluation.evaluate import EvalRequest, evaluate, format_summary
 from agri_training.evaluation.parallel import EpisodeError
@@ -64,10 +64,11 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
 
 
 def _cmd_dataset(args: argparse.Namespace) -> int:
+    env_id = args.env or default_env(args.policy)
     request = DatasetRequest(
-        env_id=args.env,
+        env_id=env_id,
         policy=args.policy,
-        dataset_id=args.dataset_id,
+        dataset_id=args.dataset_id or default_dataset_id(env_id, args.policy),
         episodes=args.episodes,
         seed=args.seed,
         scenario=args.scenario,
@@ -410,9 +411,13 @@ def build_parser() -> argparse.ArgumentParser:
         "dataset",
         help="run a policy over seeds S, S+1, ... and write its episodes as a Minari dataset (MINARI_DATASETS_PATH)",
     )
-    ds.add_argument("--env", required=True, help="env id, e.g. agri_envs/GreenhouseNav-v2 or robot_chain_v1")
     ds.add_argument("--policy", required=True, help="registered policy name (agri list) or an `agri train` run")
-    ds.add_argument("--dataset-id", required=True, help="Minari id, e.g. agri/GreenhouseNav-v2/harik-apf-gt-v0")
+    ds.add_argument("--env", default=None, help="env id (default: the registered policy's env)")
+    ds.add_argument(
+        "--dataset-id",
+        default=None,
+        help="Minari id (default agri/ENV/POLICY-v0, e.g. agri/GreenhouseNav-v2/harik-apf-gt-v0)",
+    )
     ds.add_argument("--episodes", type=int, default=100, help="episodes to record (default 100)")
     ds.add_argument(
         "--seed", type=int, default=0, help="seed of the first episode; episode i runs seed S+i, all below 100000"

@@ -29,6 +29,7 @@ from pathlib import Path
 from typing import Any
 
 import agri_envs
+from agri_baselines import policy_spec
 from agri_envs.scenarios import scenario as get_scenario
 from agri_training.core.datasets import DatasetEnv, DatasetWriter, EpisodeSteps, check_dataset_id, dataset_path
 from agri_training.core.documents import EpisodeOutput, git_commit
@@ -76,6 +77,23 @@ class DatasetRequest:
                 f"seeds {self.seed}..{last} reach the held-out seeds ({HELD_OUT_SEED} and up, kept for evaluation): "
                 f"a dataset's last seed must lie below {HELD_OUT_SEED}"
             )
+
+
+def default_env(policy: str) -> str:
+    """The env a registered policy drives (``--env`` may then be left out).
+
+    Raises:
+        ValueError: For a policy that is not a registered name (an ``agri train`` run needs ``--env``).
+    """
+    try:
+        return policy_spec(policy).env_id
+    except ValueError:
+        raise ValueError(f"{policy!r} is not a registered policy name: give --env") from None
+
+
+def default_dataset_id(env_id: str, policy: str) -> str:
+    """``agri/<env name>/<policy>-v0`` (a run: its folder name), e.g. ``agri/GreenhouseNav-v2/harik-apf-gt-v0``."""
+    return f"agri/{env_id.split('/')[-1]}/{Path(policy.rstrip('/')).name}-v0"
 
 
 def resolve_dataset_env(request: DatasetRequest) -> DatasetEnv:
