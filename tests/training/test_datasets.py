@@ -2,6 +2,7 @@
 
 import dataclasses
 import json
+import re
 
 import numpy as np
 import pytest
@@ -17,12 +18,20 @@ from agri_training.cli import main  # noqa: E402
 from agri_training.core import datasets  # noqa: E402
 from agri_training.datasets import DatasetRequest, make_dataset, resolve_dataset_env  # noqa: E402
 
-#: Short episodes: a small scene where the env has one, and a time limit (gym.make's, kept in the spec).
+#: Short episodes per env family: a small scene where the env has one, and a time limit (gym.make's, kept in the spec).
 SHORT = {
-    "agri_envs/GreenhouseNav-v2": {"n_rows": 1, "row_length": 3.0, "n_people": 0, "max_episode_steps": 150},
-    "agri_envs/GreenhouseCoverage-v1": {"max_episode_steps": 150},
-    "agri_envs/GrapeHarvest-v1": {"max_episode_steps": 150},
+    "GreenhouseNav": {"n_rows": 1, "row_length": 3.0, "n_people": 0, "max_episode_steps": 150},
+    "GreenhouseCoverage": {"max_episode_steps": 150},
+    "GrapeHarvest": {"max_episode_steps": 150},
 }
+
+
+def family(env_id):
+    """``GreenhouseCoverage`` for ``agri_envs/GreenhouseCoverage-v1`` (whatever its version)."""
+    return env_id.split("/")[-1].rsplit("-", 1)[0]
+
+
+COVERAGE = next(i for i in agri_envs.env_ids() if family(i) == "GreenhouseCoverage")
 
 
 @pytest.fixture(autouse=True)
@@ -53,20 +62,19 @@ def assert_replays_exactly(dataset):
     env.close()
 
 
-GYM_FAMILIES = [i for i in agri_envs.env_ids() if not agri_envs.is_parallel_id(i) and i in SHORT]
+GYM_FAMILIES = [i for i in agri_envs.env_ids() if not agri_envs.is_parallel_id(i) and family(i) in SHORT]
 
 
 def test_every_gymnasium_family_is_covered():
-    families = {i.split("/")[-1].rsplit("-", 1)[0] for i in agri_envs.env_ids() if not agri_envs.is_parallel_id(i)}
-    covered = {i.split("/")[-1].rsplit("-", 1)[0] for i in GYM_FAMILIES}
-    assert families - covered <= {"GrapeHarvestReach"}  # a preset of GrapeHarvest, no baseline of its own
+    families = {family(i) for i in agri_envs.env_ids() if not agri_envs.is_parallel_id(i)}
+    assert families - {family(i) for i in GYM_FAMILIES} <= {"GrapeHarvestReach"}  # a preset, no baseline of its own
 
 
 @pytest.mark.parametrize("env_id", GYM_FAMILIES)
 def test_a_dataset_replays_bit_for_bit_from_its_seeds(env_id):
     policy = paper_policy(env_id)
     dataset_id = f"agri/{env_id.split('/')[-1]}/{policy}-v0"
-    kwargs = [f"{k}={v}" for k, v in SHORT[env_id].items()]
+    kwargs = [f"{k}={v}" for k, v in SHORT[family(env_id)].items()]
     argv = ["dataset", "--env", env_id, "--policy", policy, "--episodes", "2", "--seed", "11"]
     assert main([*argv, "--dataset-id", dataset_id, "--env-kwargs", *kwargs, "--workers", "1", "--quiet"]) == 0
     dataset = minari.load_dataset(dataset_id)
@@ -76,7 +84,7 @@ def test_a_dataset_replays_bit_for_bit_from_its_seeds(env_id):
     # The spec holds the arguments the episodes ran with: the user's and what the policy needs.
     spec = dataset.spec.env_spec
     needs = {p.name: p for p in list_policies()}[policy].env_kwargs
-    assert {**spec.kwargs, "max_episode_steps": spec.max_episode_steps} == {**SHORT[env_id], **needs}
+    assert {**spec.kwargs, "max_episode_steps": spec.max_episode_steps} == {**SHORT[family(env_id)], **needs}
     episode = dataset[0]
     assert episode.actions.dtype == np.float64 and {"is_success", "collision"} <= set(episode.infos)
     assert len(episode.infos["is_success"]) == len(episode.actions) + 1
@@ -226,12 +234,12 @@ def test_a_privileged_dataset_is_replayed_in_the_learners_own_env(tmp_path):
     from agri_training.learned.pretrain import PretrainSpec, demonstrate, demonstrate_dataset
     from agri_training.train import TrainRequest, resolve_config
 
-    coverage = "agri_envs/GreenhouseCoverage-v1"
+    coverage = COVERAGE
     hp = {"env_kwargs": {"max_episode_steps": 60}, "pretrain": {"policy": "gonzalez-deliberative", "episodes": 1}}
     config = resolve_config(TrainRequest(coverage, "ppo", tmp_path / "run", seed=0, overrides=hp))
     scene = {**config["env_kwargs"], **config["train_env_kwargs"]}  # the training distribution, odometry
     seed = config["pretrain"].get("seed", 50000)
-    dataset_id = "agri/GreenhouseCoverage-v1/gonzalez-deliberative-v0"
+    dataset_id = f"agri/{family(coverage)}/gonzalez-deliberative-v0"
     request = DatasetRequest(coverage, "gonzalez-deliberative", dataset_id, 1, seed, env_kwargs=scene)
     make_dataset(request, progress=False)
     # gonzalez-deliberative drove on the true pose; the learner (odometry) sees its own env, stepped in lockstep.
@@ -244,12 +252,12 @@ def test_a_privileged_dataset_is_replayed_in_the_learners_own_env(tmp_path):
     np.testing.assert_array_equal(from_data.actions, shown.actions)
     np.testing.assert_array_equal(from_data.rewards, shown.rewards)
     # A dataset whose arguments change the rewards is refused, naming the dynamics.
-    other = "agri/GreenhouseCoverage-v1/slow-v0"
+    other = f"agri/{family(coverage)}/slow-v0"
     slower = DatasetRequest(coverage, "gonzalez-deliberative", other, 1, seed, env_kwargs={**scene, "reward_time": 0.5})
     make_dataset(slower, progress=False)
-    with pytest.raises(ValueError, match="change agri_envs/GreenhouseCoverage-v1's dynamics"):
+    with pytest.raises(ValueError, match=re.escape(f"change {coverage}'s dynamics")):
         demonstrate_dataset(PretrainSpec(dataset=other, episodes=1, seed=seed), data_config)
-    with pytest.raises(ValueError, match="ran agri_envs/GreenhouseCoverage-v1, not"):
+    with pytest.raises(ValueError, match=re.escape(f"ran {coverage}, not")):
         demonstrate_dataset(
             PretrainSpec(dataset=other, episodes=1, seed=seed), {**data_config, "env_id": "agri_envs/GreenhouseNav-v2"}
         )
