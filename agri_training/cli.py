@@ -16,6 +16,7 @@ from agri_baselines import list_policies, policy_spec
 from agri_envs.scenarios import list_scenarios
 from agri_training import leaderboard as lb
 from agri_training.core.yaml_values import load_yaml
+from agri_training.datasets import DatasetRequest, default_dataset_id, default_env, make_dataset
 from agri_training.evaluation.batched import BATCH_SIZE
 from agri_training.evaluation.evaluate import EvalRequest, evaluate, format_summary
 from agri_training.evaluation.parallel import EpisodeError
@@ -59,6 +60,28 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
     out.write_text(json.dumps(result, indent=1))
     print(format_summary(result))
     print(f"wrote {out}")
+    return 0
+
+
+def _cmd_dataset(args: argparse.Namespace) -> int:
+    env_id = args.env or default_env(args.policy)
+    request = DatasetRequest(
+        env_id=env_id,
+        policy=args.policy,
+        dataset_id=args.dataset_id or default_dataset_id(env_id, args.policy),
+        episodes=args.episodes,
+        seed=args.seed,
+        scenario=args.scenario,
+        env_kwargs=parse_env_kwargs(args.env_kwargs or []),
+        training_distribution=args.training_distribution,
+        overwrite=args.overwrite,
+    )
+    done = make_dataset(request, workers=args.workers, ray=args.ray, progress=not args.quiet)
+    print(
+        f"wrote {done['dataset_id']} ({done['path']}): {done['episodes']} episodes, {done['trajectories']} Minari "
+        f"episodes, {done['steps']} steps, {done['successes']} successes, {done['size_mb']:.1f} MB in "
+        f"{done['seconds']:.0f} s; load it with minari.load_dataset({done['dataset_id']!r})"
+    )
     return 0
 
 
@@ -398,6 +421,32 @@ def build_parser() -> argparse.ArgumentParser:
     add_scale_arguments(ev)
     add_batch_argument(ev)
     ev.set_defaults(func=_cmd_evaluate)
+    ds = sub.add_parser(
+        "dataset",
+        help="run a policy over seeds S, S+1, ... and write its episodes as a Minari dataset (MINARI_DATASETS_PATH)",
+    )
+    ds.add_argument("--policy", required=True, help="registered policy name (agri list) or an `agri train` run")
+    ds.add_argument("--env", default=None, help="env id (default: the registered policy's env)")
+    ds.add_argument(
+        "--dataset-id",
+        default=None,
+        help="Minari id (default agri/ENV/POLICY-v0, e.g. agri/GreenhouseNav-v2/harik-apf-gt-v0)",
+    )
+    ds.add_argument("--episodes", type=int, default=100, help="episodes to record (default 100)")
+    ds.add_argument(
+        "--seed", type=int, default=0, help="seed of the first episode; episode i runs seed S+i, all below 100000"
+    )
+    ds.add_argument("--scenario", default=None, help="named preset of env arguments (agri list)")
+    ds.add_argument("--env-kwargs", nargs="*", action="extend", metavar="KEY=VALUE", help="extra env arguments")
+    ds.add_argument(
+        "--training-distribution",
+        action="store_true",
+        help="draw each episode's scene from the env's training distribution (scene_distribution=training)",
+    )
+    ds.add_argument("--overwrite", action="store_true", help="replace a dataset already under the id")
+    ds.add_argument("--quiet", action="store_true", help="no progress bar or progress lines")
+    add_scale_arguments(ds)
+    ds.set_defaults(func=_cmd_dataset)
     va = sub.add_parser(
         "validate",
         help="choose a learned policy's weights: evaluate runs (and their checkpoints) on validation seeds of "

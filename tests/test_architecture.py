@@ -19,6 +19,7 @@ TRAINING_LAYERS = (
     ("agri_training.learned",),
     ("agri_training.evaluation",),
     ("agri_training.leaderboard",),
+    ("agri_training.datasets",),
     ("agri_training.report",),
     ("agri_training.train",),
     ("agri_training.sweep",),
@@ -30,7 +31,7 @@ TRAINING_LAYERS = (
 DEFERRABLE = {
     "torch", "stable_baselines3", "sb3_contrib", "supersuit", "matplotlib", "ray", "optuna", "pybullet",
     "pybullet_data", "moviepy", "imageio", "imageio_ffmpeg", "pygame", "tqdm", "tensorboard", "psutil", "numba",
-    "scipy", "PIL", "mkdocs",
+    "scipy", "PIL", "mkdocs", "minari", "h5py",
 }  # fmt: skip
 
 

@@ -88,6 +88,12 @@ API_PAGES = (
         ),
     ),
     (
+        "datasets",
+        "agri_training.datasets",
+        "Minari datasets of any policy on any env (agri dataset): the request, the format, the step recorder.",
+        ("agri_training.datasets", "agri_training.core.datasets", "agri_training.evaluation.recording"),
+    ),
+    (
         "leaderboard",
         "agri_training.leaderboard",
         "Pinned suites, entries, verify and LEADERBOARD.md (format: docs/leaderboard.md in the repository).",
@@ -107,13 +113,17 @@ API_PAGES = (
     ),
 )
 
+#: The repository's docs/ folder, and the hand-written guides of it that the site carries (in mkdocs.yml's nav).
+DOCS_DIR = Path(__file__).resolve().parents[2] / "docs"
+GUIDE_PAGES = ("datasets.md",)
+
 INDEX = """\
 # agri_envs
 
 Gymnasium / PettingZoo environments for agricultural robots, with the controllers of published papers as
 scripted baselines and learned policies (stable-baselines3) benchmarked against them. The README is the
 short path in (set-up, `agri` commands); these pages document each env in full, each
-[policy](policies/index.md), and the [Python API](api/index.md).
+[policy](policies/index.md), [demonstration datasets](datasets.md), and the [Python API](api/index.md).
 
 | env | page |
 |---|---|
@@ -290,6 +300,10 @@ def build_docs_source(out_dir: Path) -> list[Path]:
         pages.append(path)
         listing.append(f"| [{title}]({name}.md) | {_cell(what)} |")
     (out_dir / "api" / "index.md").write_text("\n".join(listing) + "\n")
+    for name in GUIDE_PAGES:  # guides written by hand, kept in the repository's docs/
+        path = out_dir / name
+        path.write_text((DOCS_DIR / name).read_text())
+        pages.append(path)
     return [index_path, *pages]
 
 
