@@ -50,8 +50,8 @@ bench: $(STAMP)
 
 # The documentation site: a page per env family (frame, docstring, every argument from its config class),
 # built by MkDocs in strict mode (a broken link or a missing page fails) into build/site.
+# The docs extra comes with the one install of $(STAMP), so nothing is installed again here.
 docs: $(STAMP)
-	$(BIN)/pip install -q -e ".[docs]"
 	SDL_VIDEODRIVER=dummy $(BIN)/python -m agri_training.report.gallery build/docs
 	$(BIN)/python -m mkdocs build --strict
 

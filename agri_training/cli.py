@@ -22,6 +22,7 @@ from agri_training.evaluation.evaluate import EvalRequest, evaluate, format_summ
 from agri_training.evaluation.parallel import EpisodeError
 from agri_training.evaluation.validation import VALIDATION_SEED, candidates, validate
 from agri_training.evaluation.video import ClipRequest, record
+from agri_training.learned.zoo import zoo_training
 from agri_training.report.page import build_report
 from agri_training.sweep import SUMMARY_MD, SweepRequest, parse_grid, run_sweep
 from agri_training.train import TrainRequest, train
@@ -120,7 +121,7 @@ def _clip_request(args: argparse.Namespace, out: str | None) -> ClipRequest:
 
 
 def _cmd_record(args: argparse.Namespace) -> int:
-    clip = record(_clip_request(args, args.out))
+    clip = record(_clip_request(args, args.out), progress_s=5.0)
     outcomes = ", ".join(
         f"seed {r['seed']}: {'success' if r['is_success'] else 'no success'} after {r['steps']} steps"
         for r in clip["records"]
@@ -336,7 +337,7 @@ def _cmd_list(args: argparse.Namespace) -> int:
     print("policies:")
     for p in list_policies():
         flag = " (privileged)" if p.privileged else ""
-        flag += f" (learned, {p.algo})" if p.learned else ""
+        flag += f" (learned: {zoo_training(p.name)})" if p.learned else ""
         print(f"  {p.name} [{p.env_id}]{flag}: {p.description}")
     return 0
 

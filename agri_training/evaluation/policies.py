@@ -14,6 +14,7 @@ from typing import Any
 import gymnasium as gym
 
 from agri_baselines import list_policies, make_policy, policy_spec
+from agri_envs import env_version
 from agri_envs.scenarios import scenario as get_scenario
 from agri_training.learned import zoo  # noqa: F401  (registers the trained policies by name)
 from agri_training.learned.policy import LearnedPolicy, is_run_path, read_config, refuse_pickled
@@ -65,8 +66,10 @@ def resolve_env_kwargs(request: EvalRequest, base: Mapping[str, Any] | None = No
         base: Preset arguments (one level of the scenario); defaults to the scenario's own.
 
     Raises:
-        ValueError: When a user argument contradicts what the policy needs, or the policy drives another env.
+        ValueError: For an unknown env id (listing the known ones), when a user argument contradicts what the
+            policy needs, or the policy drives another env.
     """
+    env_version(request.env_id)  # a misspelled env id is named as such before anything else
     kwargs: dict[str, Any] = {}
     if base is not None:
         kwargs.update(base)

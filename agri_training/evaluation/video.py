@@ -34,6 +34,7 @@ from typing import Any
 import numpy as np
 
 import agri_envs
+from agri_training.core.progress import Heartbeat, format_duration
 from agri_training.evaluation.episode import run_episode
 from agri_training.evaluation.policies import EvalRequest, load_policy, resolve_env_kwargs
 
@@ -86,8 +87,14 @@ class ClipRequest:
             raise ValueError(f"fps must be > 0, got {self.fps}")
 
 
-def record(request: ClipRequest) -> dict[str, Any]:
+def record(request: ClipRequest, progress_s: float | None = None) -> dict[str, Any]:
     """Run the episodes, rendering every step; write the clip (or show the window).
+
+    Args:
+        request: What to record.
+        progress_s: When given, print a line when recording starts and then every ``progress_s`` seconds
+            (episode, step, frames kept, elapsed time; then the writing of the clip), and one at the end:
+            a long episode at full frame rate takes minutes and writes a large file.
 
     Returns:
         ``{"records": [...], "frames": n, "size": (width, height), "fps": f, "out": path or None}``.
@@ -106,28 +113,53 @@ def record(request: ClipRequest) -> dict[str, Any]:
     env = agri_envs.make(request.env_id, **{**kwargs, "render_mode": "rgb_array" if headless else "human"})
     frames: list[np.ndarray] = []
     records = []
+    now = {"episode": 1, "step": 0, "writing": False, "done": False}
+
+    def status(elapsed: float) -> str:
+        if now["done"]:
+            return f"recording: done, {len(frames)} frames in {format_duration(elapsed)}"
+        if now["writing"]:
+            return f"recording: writing {request.out} ({len(frames)} frames), {format_duration(elapsed)} elapsed"
+        return (
+            f"recording: episode {now['episode']}/{request.episodes}, step {now['step']}, {len(frames)} frames "
+            f"kept, {format_duration(elapsed)} elapsed"
+        )
+
+    heartbeat = None
+    if progress_s is not None:
+        where = f" into {request.out}" if request.out is not None else ""
+        print(f"recording {request.policy} on {request.env_id}, seed {request.seed}{where}", flush=True)
+        heartbeat = Heartbeat(status, progress_s)
 
     def on_step(step: int) -> bool:
+        now["step"] = step
         if step % request.every == 0:
             frame = env.render()
             if headless and frame is not None:
                 frames.append(shrink_frame(np.asarray(frame, dtype=np.uint8), request.scale))
         return request.max_steps is not None and step >= request.max_steps
 
-    try:
-        for i in range(request.episodes):
-            policy = load_policy(request.policy, env)  # a fresh policy per episode, as the evaluator does
-            records.append(run_episode(env, policy, request.seed + i, None, on_step)["record"])
-        fps = request.fps or max(1.0, float(_render_fps(env)) / request.every)
-    finally:
-        env.close()
     out = None
-    if request.out is not None:
-        if not frames:
-            raise ValueError(f"{request.env_id} rendered no frames")
-        out = Path(request.out)
-        out.parent.mkdir(parents=True, exist_ok=True)
-        write_clip(frames, out, fps)
+    try:
+        try:
+            for i in range(request.episodes):
+                now["episode"] = i + 1
+                policy = load_policy(request.policy, env)  # a fresh policy per episode, as the evaluator does
+                records.append(run_episode(env, policy, request.seed + i, None, on_step)["record"])
+            fps = request.fps or max(1.0, float(_render_fps(env)) / request.every)
+        finally:
+            env.close()
+        if request.out is not None:
+            if not frames:
+                raise ValueError(f"{request.env_id} rendered no frames")
+            out = Path(request.out)
+            out.parent.mkdir(parents=True, exist_ok=True)
+            now["writing"] = True
+            write_clip(frames, out, fps)
+        now["done"] = True
+    finally:
+        if heartbeat is not None:
+            heartbeat.stop()
     size = (int(frames[0].shape[1]), int(frames[0].shape[0])) if frames else None
     return {"records": records, "frames": len(frames), "size": size, "fps": fps, "out": out}
 

@@ -8,12 +8,13 @@ report treat them like baselines; :mod:`agri_training.evaluation` imports it.
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
 from agri_baselines import PolicySpec, register_policy
 from agri_envs.arm.presets import REACH_PRESET
-from agri_training.learned.policy import LearnedPolicy
+from agri_training.learned.policy import LearnedPolicy, read_config
 
 #: Where the committed trained policies live (one folder per registered name).
 ZOO_DIR = Path(__file__).resolve().parent.parent / "zoo"
@@ -26,6 +27,31 @@ SHARED_FOLDERS = {"sac-her-grape-vine-eq11": "sac-her-grape-vine"}
 def zoo_path(name: str) -> Path:
     """Folder of a committed trained policy (its own, or the one it shares: :data:`SHARED_FOLDERS`)."""
     return ZOO_DIR / SHARED_FOLDERS.get(name, name)
+
+
+def how_trained(config: Mapping[str, Any]) -> str:
+    """How a run was trained, in a few words, from its resolved ``config.yaml``.
+
+    ``imitation of harik-apf-gt, 8 DAgger rounds`` for a run of ``timesteps: 0`` with a ``pretrain`` block;
+    ``imitation of apoorva-chain, 4 DAgger rounds, then PPO`` when the clone was fine-tuned; ``SAC + HER`` or
+    ``PPO`` for a run that learned from its reward alone.
+    """
+    algo = str(config.get("algo", "?")).upper() + (" + HER" if config.get("her") else "")
+    pretrain = config.get("pretrain")
+    if not isinstance(pretrain, Mapping):
+        return algo
+    teacher = pretrain.get("policy") or pretrain.get("dataset", "a baseline")
+    parts = [f"imitation of {teacher}"]
+    rounds = int(pretrain.get("dagger_rounds") or 0)
+    if rounds:
+        parts.append(f"{rounds} DAgger rounds")
+    text = ", ".join(parts)
+    return text if not config.get("timesteps") else f"{text}, then {algo}"
+
+
+def zoo_training(name: str) -> str:
+    """How a committed trained policy was trained (:func:`how_trained` of its zoo folder's config)."""
+    return how_trained(read_config(zoo_path(name)))
 
 
 def load_zoo_policy(env: Any, name: str) -> LearnedPolicy:

@@ -57,6 +57,11 @@ def test_evaluate_errors_are_clear(tmp_path, capsys):
     assert evaluate_with("full_scan=false") == 2 and "needs full_scan=True" in capsys.readouterr().err
     rc = main(["evaluate", "--env", "agri_envs/GreenhouseNav-v2", "--policy", "nope", "--out", "x.json"])
     assert rc == 2 and "unknown policy" in capsys.readouterr().err
+    # a misspelled env id is named as such first, not reported as the policy driving another env
+    rc = main(["evaluate", "--env", "agri_envs/GreenhouseNav-v9", "--policy", "harik-apf-gt", "--out", "x.json"])
+    err = capsys.readouterr().err
+    assert rc == 2 and "unknown env id 'agri_envs/GreenhouseNav-v9'; known: agri_envs/GrapeHarvest-v1" in err
+    assert "drives" not in err
 
 
 def test_failures_are_counted_by_cause():
@@ -94,3 +99,13 @@ def test_list_names_every_env_family(capsys):
     envs = capsys.readouterr().out.split("scenarios:")[0]
     for env_id in ("GreenhouseNav-v2", "GreenhouseCoverage-v2", "robot_chain_v1", "GrapeHarvest-v1"):
         assert env_id in envs
+
+
+def test_list_says_how_each_learned_policy_was_trained(capsys):
+    assert main(["list"]) == 0
+    policies = capsys.readouterr().out.split("policies:")[1]
+    assert "dagger-greenhouse-nav [agri_envs/GreenhouseNav-v2] (privileged) (learned: imitation of harik-apf-gt, 8 " \
+        "DAgger rounds)" in policies
+    assert "ppo-chain [robot_chain_v1] (learned: imitation of apoorva-chain, 4 DAgger rounds, then PPO)" in policies
+    assert "sac-her-grape-reach [agri_envs/GrapeHarvest-v1] (learned: SAC + HER)" in policies
+    assert "(learned, ppo)" not in policies

@@ -165,7 +165,7 @@ def test_a_registered_trained_policy_loads_by_name(tiny_run, monkeypatch, capsys
     env = gym.make(ENV_ID, localization="ground_truth", **TINY_ENV)
     assert isinstance(load_policy(spec.name, env), LearnedPolicy)
     assert main(["list"]) == 0
-    assert f"{spec.name} [{ENV_ID}] (privileged) (learned, ppo)" in capsys.readouterr().out
+    assert f"{spec.name} [{ENV_ID}] (privileged) (learned: PPO)" in capsys.readouterr().out
 
 
 def test_train_env_kwargs_reach_the_training_envs_only(tmp_path):

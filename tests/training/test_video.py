@@ -11,7 +11,11 @@ def test_record_writes_a_gif_with_several_frames_of_one_size(tmp_path, capsys):
     out = tmp_path / "clips" / "x.gif"
     argv = ["record", "--env", "agri_envs/GreenhouseNav-v2", "--policy", "harik-apf-gt", "--seed", "0"]
     assert main([*argv, "--out", str(out), "--max-steps", "12"]) == 0
-    assert "13 frames of 800x524" in capsys.readouterr().out
+    printed = capsys.readouterr().out
+    assert "13 frames of 800x524" in printed
+    # a progress line at the start and one at the end (and every 5 s between: a long episode takes minutes)
+    assert "recording harik-apf-gt on agri_envs/GreenhouseNav-v2, seed 0 into " in printed
+    assert "recording: done, 13 frames in " in printed
     im = Image.open(out)
     assert im.n_frames == 13
     sizes = set()
