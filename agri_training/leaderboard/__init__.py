@@ -37,6 +37,7 @@ from agri_training.leaderboard.markdown import (
     metric_label,
     metric_scale,
     paired_values,
+    rank_key,
     render_markdown,
     write_markdown,
 )
@@ -113,6 +114,7 @@ __all__ = [
     "policy_argument",
     "policy_reference",
     "print_problems",
+    "rank_key",
     "render_markdown",
     "robustness_lines",
     "run_blocks",

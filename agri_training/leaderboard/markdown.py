@@ -26,7 +26,8 @@ from agri_training.leaderboard.suites import (
 )
 
 
-def _sort_key(entry: Mapping[str, Any], rank_by: Sequence[RankKey]) -> tuple[float, ...]:
+def rank_key(entry: Mapping[str, Any], rank_by: Sequence[RankKey]) -> tuple[float, ...]:
+    """Sort key of an entry on its suite's ranking keys (best first; a missing metric ranks last)."""
     key = []
     for r in rank_by:
         v = entry["summary"].get(r.metric)
@@ -235,7 +236,7 @@ def render_markdown(entries: Sequence[Mapping[str, Any]], suites: Sequence[Suite
         lines += [f"## {env_id}", ""]
         for suite in (s for s in suites if s.env_id == env_id):
             group = sorted(
-                by_suite.get(suite.name, []), key=lambda e: (_sort_key(e, suite.rank_by), e["policy"]["name"])
+                by_suite.get(suite.name, []), key=lambda e: (rank_key(e, suite.rank_by), e["policy"]["name"])
             )
             lines += [f"### {suite.name} (v{suite.version})", "", suite.description, ""]
             levels = len(suite.levels())

@@ -12,7 +12,7 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
-from agri_baselines import PolicySpec, register_policy
+from agri_baselines import PolicySpec, policy_spec, register_policy
 from agri_envs.arm.presets import REACH_PRESET
 from agri_training.learned.policy import LearnedPolicy, read_config
 
@@ -50,7 +50,12 @@ def how_trained(config: Mapping[str, Any]) -> str:
 
 
 def zoo_training(name: str) -> str:
-    """How a committed trained policy was trained (:func:`how_trained` of its zoo folder's config)."""
+    """How a registered trained policy was trained: :func:`how_trained` of its zoo folder's config.
+
+    A learned policy registered without a folder here says its registered algorithm (``PPO``).
+    """
+    if not (zoo_path(name) / "config.yaml").is_file():
+        return str(policy_spec(name).algo).upper()
     return how_trained(read_config(zoo_path(name)))
 
 

@@ -19,7 +19,7 @@ import inspect
 import re
 import sys
 import typing
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -28,7 +28,8 @@ import numpy as np
 import agri_envs
 from agri_baselines import PolicySpec, list_policies
 from agri_envs.scenarios import list_scenarios
-from agri_training.learned import zoo  # noqa: F401  (registers the shipped learned policies: they get pages too)
+from agri_training.leaderboard import find_suite, load_entries, rank_key
+from agri_training.learned.zoo import zoo_training  # (importing zoo registers the shipped learned policies)
 
 #: Env families of the site: (page name, env id, preset ids that share the page).
 ENV_PAGES = (
@@ -113,21 +114,140 @@ API_PAGES = (
     ),
 )
 
-#: The repository's docs/ folder, and the hand-written guides of it that the site carries (in mkdocs.yml's nav).
+#: The repository's docs/ folder: the hand-written guides the site carries, and its stylesheet.
 DOCS_DIR = Path(__file__).resolve().parents[2] / "docs"
-GUIDE_PAGES = ("datasets.md",)
+
+#: The guides (``docs/NAME.md``, in mkdocs.yml's nav in this order): (file, title, what it covers).
+GUIDES = (
+    ("install.md", "Install and set up", "what `make report`, `make test` and `make docs` install and run, and how long"),
+    ("usage.md", "Using the envs", "`gym.make` and `make_vec`, scenes, localization, your own map, the chain, the arm"),
+    ("scenarios.md", "Scenarios and baselines", "the papers' experiments as presets, and the controllers that drive them"),
+    ("evaluation.md", "Evaluate, watch, record", "`agri evaluate`, its JSON, `agri watch` and `agri record`, in Python"),
+    ("training.md", "Training and imitation", "`agri train`, hyperparameter YAML, cloning and DAgger, the recipes"),
+    ("datasets.md", "Datasets", "Minari datasets of any policy on any env (`agri dataset`), cloning from them"),
+    ("leaderboard.md", "Leaderboard and report", "pinned suites, entries, statistics, verify, `agri report`"),
+    ("submissions.md", "Submit a policy", "your policy on every suite of its env, verified by CI"),
+    ("scaling.md", "Every core, or a cluster", "worker processes, Ray, sweeps and tuning; where the time goes"),
+    ("benchmarks.md", "Benchmarks", "steps per second, planning and SLAM times next to their peers"),
+    ("layout.md", "Code layout", "the packages, their layers, and where each part lives"),
+)
+#: Stylesheet of the site (mkdocs.yml's ``extra_css``): images fit the page; the home page's gallery grid.
+EXTRA_CSS = "css/extra.css"
+
+#: The home page's gallery: env page name -> (paper, what it reproduces, the suite whose best scores it shows).
+GALLERY = {
+    "greenhouse-nav": (
+        "Harik & Korsæth 2018",
+        "A LIDAR rover drives a loop of waypoints between greenhouse rows among walking people, on the true pose, "
+        "odometry or its own Hector SLAM (Figs. 6-17: the simulated loop, plant development, the office corridor, "
+        "repeatability).",
+        "greenhouse-sim-loop",
+    ),
+    "greenhouse-coverage": (
+        "González et al. 2009",
+        "The tracked Fitorobot with seven sonars drives every corridor of a Mediterranean greenhouse end to end "
+        "without touching the crop: corridors neither straight nor equally wide, echoes slipping into the foliage.",
+        "coverage-almeria",
+    ),
+    "robot-chain": (
+        "Apoorva et al. 2018",
+        "A chain of robots (PettingZoo) follows its leader along an A* path across an office to the goal, around "
+        "obstacles dropped on the way: ghost robot, sonar potential field, elastic strip.",
+        "chain-office",
+    ),
+    "grape-harvest": (
+        "Luo et al. 2018",
+        "A 6-DOF arm (pybullet) cuts 2-5 grape clusters at their peduncles without touching their anti-collision "
+        "boxes, and returns home (Table 2: energy-optimal order, APF path points).",
+        "grape-table2",
+    ),
+}
 
 INDEX = """\
 # agri_envs
 
-Gymnasium / PettingZoo environments for agricultural robots, with the controllers of published papers as
-scripted baselines and learned policies (stable-baselines3) benchmarked against them. The README is the
-short path in (set-up, `agri` commands); these pages document each env in full, each
-[policy](policies/index.md), [demonstration datasets](datasets.md), and the [Python API](api/index.md).
-
-| env | page |
-|---|---|
+Gymnasium / PettingZoo environments for agricultural robots, with the controllers of four papers as scripted
+baselines and learned policies (stable-baselines3) benchmarked against them on pinned, held-out suites whose
+every number CI re-computes. Each env below opens its page: a frame, the contract (spaces, rewards, episode
+end), every argument with its default and range, its scenarios and policies.
 """
+
+
+def best_scores(suite_name: str, entries: Sequence[Mapping[str, Any]]) -> dict[str, Mapping[str, Any] | None]:
+    """The first scripted and the first learned entry of a suite in the leaderboard's ranking (or None)."""
+    rank_by = find_suite(suite_name).rank_by
+    ranked = sorted(
+        (e for e in entries if e["suite"]["name"] == suite_name),
+        key=lambda e: (rank_key(e, rank_by), e["policy"]["name"]),
+    )
+    return {
+        kind: next((e for e in ranked if (e["policy"]["kind"] == "learned") == (kind == "learned")), None)
+        for kind in ("scripted", "learned")
+    }
+
+
+def _score(entry: Mapping[str, Any] | None) -> str:
+    if entry is None:
+        return "none yet"
+    s = entry["summary"]
+    low, high = s["success_rate_ci"]
+    mark = " (privileged)" if entry["policy"].get("privileged") else ""
+    return f"[`{entry['policy']['name']}`](policies/{entry['policy']['name']}.md){mark} {s['success_rate']:.2f} [{low:.2f}, {high:.2f}]"
+
+
+def index_page(entries: Sequence[Mapping[str, Any]]) -> str:
+    """The home page: a gallery of the envs (frame, paper, best scores) with the guides beside it."""
+    cards = []
+    for name, env_id, _ in ENV_PAGES:
+        paper, what, suite = GALLERY[name]
+        best = best_scores(suite, entries)
+        episodes = next((e["summary"]["episodes"] for e in entries if e["suite"]["name"] == suite), 0)
+        cards += [
+            '<div class="env-card" markdown="1">',
+            "",
+            f"### [{env_id.split('/')[-1]}]({name}.md)",
+            "",
+            f"[![{env_id} at reset]({name}.png)]({name}.md)",
+            "",
+            f"`{env_id}` · **{paper}.** {what}",
+            "",
+            f"Success on `{suite}` ({episodes} held-out episodes, 95 % interval): best scripted "
+            f"{_score(best['scripted'])}; best learned {_score(best['learned'])}.",
+            "",
+            "</div>",
+        ]
+    guides = [f"- [{title}]({page}): {what}" for page, title, what in GUIDES]
+    return "\n".join(
+        [
+            INDEX,
+            '<div class="row" markdown="1">',
+            '<div class="col-lg-8" markdown="1">',
+            "",
+            "## Environments",
+            "",
+            '<div class="env-gallery" markdown="1">',
+            *cards,
+            "</div>",
+            "</div>",
+            '<div class="col-lg-4" markdown="1">',
+            "",
+            "## Guides",
+            "",
+            *guides,
+            "",
+            "## Reference",
+            "",
+            "- [Policies](policies/index.md): every scripted and learned policy, what it needs, how it was trained",
+            "- [Python API](api/index.md): rendered from the docstrings",
+            "",
+            "Scores are read from the committed leaderboard entries (`leaderboard/entries/`) when the site is built: "
+            "the first scripted and the first learned policy in the suite's ranking.",
+            "",
+            "</div>",
+            "</div>",
+            "",
+        ]
+    )
 
 
 def _range_text(meta: Mapping[str, Any]) -> str:
@@ -208,12 +328,17 @@ def env_page(name: str, env_id: str, aliases: tuple[str, ...], out_dir: Path) ->
     if policies:
         lines += ["## Policies", "", "| policy | kind | privileged | what it is |", "|---|---|---|---|"]
         lines += [
-            f"| `{p.name}` | {'learned (' + str(p.algo) + ')' if p.learned else 'baseline'} | "
+            f"| `{p.name}` | {_kind(p)} | "
             f"{'yes' if p.privileged else 'no'} | {_cell(p.description)} |"
             for p in policies
         ]
         lines.append("")
     return "\n".join(lines)
+
+
+def _kind(spec: PolicySpec) -> str:
+    """``baseline``, or ``learned (how)``: how it was trained, from its zoo folder's config."""
+    return f"learned ({zoo_training(spec.name)})" if spec.learned else "baseline"
 
 
 def _qualified(obj: Any) -> str:
@@ -224,7 +349,7 @@ def policy_page(spec: PolicySpec) -> str:
     """A policy's page: what it is, what it needs, and the API of its factory and of the class it returns."""
     module, attr = spec.entry_point.split(":")
     factory = getattr(importlib.import_module(module), attr)
-    kind = f"learned ({spec.algo})" if spec.learned else "scripted baseline"
+    kind = _kind(spec) if spec.learned else "scripted baseline"
     needs = ", ".join(f"`{k}={v!r}`" for k, v in spec.env_kwargs.items()) or "none beyond the suite's"
     env_page_name = next((n for n, e, aliases in ENV_PAGES if spec.env_id in (e, *aliases)), None)
     env_link = f"[`{spec.env_id}`](../{env_page_name}.md)" if env_page_name else f"`{spec.env_id}`"
@@ -272,21 +397,19 @@ def build_docs_source(out_dir: Path) -> list[Path]:
     """Write the site's Markdown pages and frames into ``out_dir``; return the pages."""
     out_dir.mkdir(parents=True, exist_ok=True)
     pages = []
-    index = [INDEX.rstrip("\n")]
     for name, env_id, aliases in ENV_PAGES:
         path = out_dir / f"{name}.md"
         path.write_text(env_page(name, env_id, aliases, out_dir))
         pages.append(path)
-        index.append(f"| `{env_id}` | [{name}]({name}.md) |")
     index_path = out_dir / "index.md"
-    index_path.write_text("\n".join(index) + "\n")
+    index_path.write_text(index_page(load_entries()))
     (out_dir / "policies").mkdir(exist_ok=True)
     listing = ["# Policies", "", "| policy | env | kind | privileged | what it is |", "|---|---|---|---|---|"]
     for spec in list_policies():
         path = out_dir / "policies" / f"{spec.name}.md"
         path.write_text(policy_page(spec))
         pages.append(path)
-        kind = f"learned ({spec.algo})" if spec.learned else "baseline"
+        kind = _kind(spec)
         listing.append(
             f"| [{spec.name}]({spec.name}.md) | `{spec.env_id}` | {kind} | {'yes' if spec.privileged else 'no'} | "
             f"{_cell(spec.description)} |"
@@ -300,10 +423,12 @@ def build_docs_source(out_dir: Path) -> list[Path]:
         pages.append(path)
         listing.append(f"| [{title}]({name}.md) | {_cell(what)} |")
     (out_dir / "api" / "index.md").write_text("\n".join(listing) + "\n")
-    for name in GUIDE_PAGES:  # guides written by hand, kept in the repository's docs/
+    for name, _, _ in GUIDES:  # guides written by hand, kept in the repository's docs/
         path = out_dir / name
         path.write_text((DOCS_DIR / name).read_text())
         pages.append(path)
+    (out_dir / EXTRA_CSS).parent.mkdir(parents=True, exist_ok=True)
+    (out_dir / EXTRA_CSS).write_text((DOCS_DIR / EXTRA_CSS).read_text())
     return [index_path, *pages]
 
 
