@@ -119,10 +119,14 @@ DOCS_DIR = Path(__file__).resolve().parents[2] / "docs"
 
 #: The guides (``docs/NAME.md``, in mkdocs.yml's nav in this order): (file, title, what it covers).
 GUIDES = (
-    ("install.md", "Install and set up", "what `make report`, `make test` and `make docs` install and run, and how long"),
+    ("install.md", "Install and set up", "what `make report`, `make test`, `make docs` install and run, how long"),
     ("usage.md", "Using the envs", "`gym.make` and `make_vec`, scenes, localization, your own map, the chain, the arm"),
-    ("scenarios.md", "Scenarios and baselines", "the papers' experiments as presets, and the controllers that drive them"),
-    ("evaluation.md", "Evaluate, watch, record", "`agri evaluate`, its JSON, `agri watch` and `agri record`, in Python"),
+    ("scenarios.md", "Scenarios and baselines", "the papers' experiments as presets, the controllers that drive them"),
+    (
+        "evaluation.md",
+        "Evaluate, watch, record",
+        "`agri evaluate` and its JSON, `agri watch`, `agri record`, in Python",
+    ),
     ("training.md", "Training and imitation", "`agri train`, hyperparameter YAML, cloning and DAgger, the recipes"),
     ("datasets.md", "Datasets", "Minari datasets of any policy on any env (`agri dataset`), cloning from them"),
     ("leaderboard.md", "Leaderboard and report", "pinned suites, entries, statistics, verify, `agri report`"),
@@ -192,7 +196,8 @@ def _score(entry: Mapping[str, Any] | None) -> str:
     s = entry["summary"]
     low, high = s["success_rate_ci"]
     mark = " (privileged)" if entry["policy"].get("privileged") else ""
-    return f"[`{entry['policy']['name']}`](policies/{entry['policy']['name']}.md){mark} {s['success_rate']:.2f} [{low:.2f}, {high:.2f}]"
+    name = entry["policy"]["name"]
+    return f"[`{name}`](policies/{name}.md){mark} {s['success_rate']:.2f} [{low:.2f}, {high:.2f}]"
 
 
 def index_page(entries: Sequence[Mapping[str, Any]]) -> str:
@@ -328,8 +333,7 @@ def env_page(name: str, env_id: str, aliases: tuple[str, ...], out_dir: Path) ->
     if policies:
         lines += ["## Policies", "", "| policy | kind | privileged | what it is |", "|---|---|---|---|"]
         lines += [
-            f"| `{p.name}` | {_kind(p)} | "
-            f"{'yes' if p.privileged else 'no'} | {_cell(p.description)} |"
+            f"| `{p.name}` | {_kind(p)} | {'yes' if p.privileged else 'no'} | {_cell(p.description)} |"
             for p in policies
         ]
         lines.append("")

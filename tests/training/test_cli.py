@@ -104,8 +104,10 @@ def test_list_names_every_env_family(capsys):
 def test_list_says_how_each_learned_policy_was_trained(capsys):
     assert main(["list"]) == 0
     policies = capsys.readouterr().out.split("policies:")[1]
-    assert "dagger-greenhouse-nav [agri_envs/GreenhouseNav-v2] (privileged) (learned: imitation of harik-apf-gt, 8 " \
+    assert (
+        "dagger-greenhouse-nav [agri_envs/GreenhouseNav-v2] (privileged) (learned: imitation of harik-apf-gt, 8 "
         "DAgger rounds)" in policies
+    )
     assert "ppo-chain [robot_chain_v1] (learned: imitation of apoorva-chain, 4 DAgger rounds, then PPO)" in policies
     assert "sac-her-grape-reach [agri_envs/GrapeHarvest-v1] (learned: SAC + HER)" in policies
     assert "(learned, ppo)" not in policies
