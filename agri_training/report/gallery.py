@@ -369,7 +369,8 @@ def policy_page(spec: PolicySpec) -> str:
         f"| privileged | {'yes: it uses what a real robot lacks (see below)' if spec.privileged else 'no'} |",
         f"| env arguments it needs | {_cell(needs)} |",
         f"| evaluate | `agri evaluate --env {spec.env_id} --policy {spec.name} --episodes 20 --out result.json` |",
-        f"| watch | `agri record --env {spec.env_id} --policy {spec.name} --seed 0 --out clip.mp4` |",
+        f"| watch | `agri record --env {spec.env_id} --policy {spec.name} --seed 0 --every 2 --scale 0.5 "
+        "--out clip.mp4` (a small clip: every 2nd frame at half size) |",
     ]
     if spec.train_command:
         lines.append(f"| trained with | `{_cell(spec.train_command)}` |")
