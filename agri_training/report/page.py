@@ -167,8 +167,10 @@ def level_results(
     """The evaluator's per-level result documents of the rows, with traces of the episodes to be plotted.
 
     Traced: per level, the first seed of the lead policy (the first unprivileged one) and the first failed
-    seed of every policy. With ``clips`` (and ``out_dir``), every policy also gets a clip of one success and
-    one failure per suite (where it has both), recorded while its episode is re-run: the first traced
+    seed of every policy; nothing of a stress suite, which the report shows as its robustness matrix (its many
+    levels would re-run a failure of nearly every policy at every level). With ``clips`` (and ``out_dir``),
+    every policy also gets a clip of one success and one failure per suite (where it has both), recorded
+    while its episode is re-run: the first traced
     episode of that outcome, or else its first episode of that outcome. A row that carries its traces (a
     quick look) is not re-run for them; its clips are only the lead policy's.
     """
@@ -180,6 +182,9 @@ def level_results(
             levels = r.entry["levels"]
             seeds: list[list[int]] = []
             for level in levels:
+                if r.suite.stress:
+                    seeds.append([])
+                    continue
                 first = r is lead and r.suite.traces > 0 and level["episodes"]
                 chosen = [level["episodes"][0]["seed"]] if first else []
                 if first and r.suite.campaign_runs > 1:  # and the first later run of its first campaign
@@ -189,7 +194,7 @@ def level_results(
                     chosen.append(failed[0])
                 seeds.append(chosen)
             films: dict[tuple[int, int], str] = {}
-            if clips and out_dir is not None and (r.traces is None or r is lead):
+            if clips and out_dir is not None and (r.traces is None or r is lead) and not r.suite.stress:
                 for outcome, name in ((True, "success"), (False, "failure")):
                     traced = [(k, s) for k, ss in enumerate(seeds) for s in ss]
                     where = [(k, s) for k, s in traced if _record_of(levels[k], s).get("is_success") == outcome]

@@ -1,6 +1,7 @@
 """Pinned suites, leaderboard entries, verify (passes as committed, fails on an altered number or a stale
 LEADERBOARD.md) and the generated page."""
 
+import dataclasses
 import json
 import shutil
 from pathlib import Path
@@ -350,3 +351,27 @@ def test_cross_track_reads_in_centimetres_and_campaign_parts_are_named():
     assert lb.episode_values(entry, "later_runs_mean_episode_time") == ([101.0, 103.0], False)
     assert lb.episode_values(entry, "first_run_success_rate") == ([True, False], True)
     assert lb.episode_values(entry, "success_rate") == ([True, True, False, True], True)
+
+
+def test_stress_suites_cover_every_family_from_the_default_outward():
+    import agri_envs
+
+    stress = [s for s in lb.load_suites() if s.stress]
+    families = {agri_envs.env_ids().index(s.env_id) for s in stress}
+    assert len(families) == 4  # GreenhouseNav, GreenhouseCoverage, robot_chain, GrapeHarvest
+    for env_id in {s.env_id for s in stress}:
+        suites = [s for s in stress if s.env_id == env_id]
+        assert len({s.stress for s in suites}) >= 3, (env_id, [s.name for s in suites])
+        env = agri_envs.make(env_id)
+        config = getattr(env, "unwrapped", env).config
+        env.close()
+        for suite in suites:
+            assert suite.episodes >= lb.MIN_EPISODES and suite.seed_start >= lb.HELD_OUT_SEED
+            names, rows = suite.sweep
+            # the first level is the env's default along the swept arguments: the matrix reads outward from it
+            first = dict(zip(names, rows[0], strict=True))
+            assert first == {k: getattr(config, k) for k in names}, (suite.name, first)
+            # and every level is a valid env (the loader does not build envs; a level the config refuses is a
+            # suite that cannot run)
+            for _, kwargs in suite.levels()[1:]:
+                type(config)(**{k: v for k, v in kwargs.items() if k in {f.name for f in dataclasses.fields(config)}})
