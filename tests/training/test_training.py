@@ -118,7 +118,7 @@ def test_pickled_code_in_a_checkpoint_never_runs(tiny_run, tmp_path):
         load_weights(evil / "policy.pt")
     assert not marker.exists()
     with pytest.raises(UnsafeCheckpointError, match="unpickling"):
-        load_policy(str(tmp_path / "model.zip"), env)
+        load_policy(str(tmp_path / "model.pkl"), env)
 
 
 def test_hyperparameters_resolve_and_stay_strict(tmp_path):
