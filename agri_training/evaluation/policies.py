@@ -48,7 +48,7 @@ class EvalRequest:
     record_traces: int = 1
     label: str | None = None
     campaign_runs: int = 1
-    env_kwargs_from: str = "the env arguments given"
+    env_kwargs_from: str = "the request's env_kwargs"
 
     def __post_init__(self) -> None:
         if self.episodes < 1:
