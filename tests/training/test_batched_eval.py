@@ -114,7 +114,7 @@ def test_a_failing_episode_of_a_batch_is_named_by_its_seed(monkeypatch):
     from agri_baselines.harik_apf import HarikApfPolicy
     from agri_envs.rover.greenhouse_nav import GreenhouseNavEnv
 
-    reset, predict, make = GreenhouseNavEnv.reset, HarikApfPolicy.predict, parallel.load_policy
+    reset, predict, make = GreenhouseNavEnv.reset, HarikApfPolicy.predict, parallel.build_policy
 
     def remember_seed(self, *, seed=None, options=None):
         self.test_seed = seed
@@ -132,7 +132,7 @@ def test_a_failing_episode_of_a_batch_is_named_by_its_seed(monkeypatch):
 
     monkeypatch.setattr(GreenhouseNavEnv, "reset", remember_seed)
     monkeypatch.setattr(HarikApfPolicy, "predict", flaky)
-    monkeypatch.setattr(parallel, "load_policy", load)
+    monkeypatch.setattr(parallel, "build_policy", load)
     kwargs, _ = resolve_env_kwargs(EvalRequest(NAV, "harik-apf-gt", env_kwargs={"n_rows": 1, "row_length": 3.0}))
     with pytest.raises(EpisodeError, match=r"seed 12 of harik-apf-gt .*FloatingPointError: pose became NaN"):
         run_episodes([EpisodeJob(NAV, kwargs, "harik-apf-gt", 10, batch=4)], workers=1)
