@@ -139,11 +139,11 @@ class PolicyRef:
 
 
 def shown_path(path: Path, root: Path) -> str:
-    """``path`` relative to ``root`` when inside it, else as it is (what an entry records)."""
+    """``path`` relative to ``root`` when inside it, else absolute (what an entry records)."""
     try:
         return str(path.resolve().relative_to(root))
     except ValueError:
-        return str(path)
+        return str(path.resolve())
 
 
 def resolve_policy(policy: str | PolicyRef | Any, name: str | None = None, root: Path | None = None) -> PolicyRef:

@@ -29,6 +29,7 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
+import agri_envs
 from agri_training.learned.inference import dense_layer, exp, fold_sum, tanh
 from agri_training.learned.sidecar import FlatNormalization, read_sidecar
 
@@ -403,6 +404,8 @@ class OnnxPolicy:
 
     def __init__(self, path: Path, env: Any) -> None:
         self.path = Path(path)
+        if agri_envs.is_parallel_env(env):
+            raise ValueError(f"{self.path}: ONNX policies drive single-agent envs, not the PettingZoo env {env}")
         self.graph = load_graph(self.path)
         sidecar = read_sidecar(self.path)
         self.normalization: FlatNormalization | None = sidecar.normalization

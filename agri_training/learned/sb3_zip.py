@@ -34,6 +34,7 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
+import agri_envs
 from agri_training.learned.inference import PolicyNetwork
 from agri_training.learned.sidecar import read_sidecar
 from agri_training.learned.torch_zip import read_state_dict
@@ -234,6 +235,8 @@ class Sb3ZipPolicy:
 
     def __init__(self, path: Path, env: Any) -> None:
         self.path = Path(path)
+        if agri_envs.is_parallel_env(env):
+            raise ValueError(f"{self.path}: SB3 zips drive single-agent envs, not the PettingZoo env {env}")
         model = load_sb3_zip(self.path)
         observation_space, action_space = env.observation_space, env.action_space
         env_name = getattr(getattr(env, "spec", None), "id", None) or type(getattr(env, "unwrapped", env)).__name__

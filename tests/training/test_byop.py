@@ -321,6 +321,12 @@ def test_onnx_and_sb3_zip_entries_submit_and_verify_bit_for_bit(env, tmp_path, c
     assert {e["policy"]["kind"] for e in entries} == {"onnx", "sb3-zip"}
     assert all(e["policy"]["sha256"] and e["levels"][0]["env_kwargs"] == TINY for e in entries)
     assert main(["leaderboard", *common, "verify", "--workers", "1", "--quiet"]) == 0, capsys.readouterr().err
+    coverage = agri_envs.make("agri_envs/GreenhouseCoverage-v1")
+    with pytest.raises(ValueError, match="made for another env"):
+        load_policy(str(zip_file), coverage)
+    with pytest.raises(ValueError, match=r"input has \d+ values, .* has \d+"):
+        load_policy(str(onnx_file), coverage)
+    coverage.close()
     assert "verified 2 entries exactly" in capsys.readouterr().out
     onnx_file.write_bytes(onnx_file.read_bytes() + b"\x00")
     assert main(["leaderboard", *common, "verify", "--workers", "1", "--quiet"]) == 1
