@@ -107,7 +107,10 @@ class OnnxGraph:
         constants: dict[str, np.ndarray] = {}
         for tensor in graph.initializer:
             if tensor.data_location == onnx.TensorProto.EXTERNAL:
-                raise ValueError(f"{where}: tensor {tensor.name!r} is stored outside the file; save it in one file")
+                raise ValueError(
+                    f"{where}: tensor {tensor.name!r} is stored outside the file (its sha256 would not pin the "
+                    "weights): export one file, torch.onnx.export(..., external_data=False)"
+                )
             constants[tensor.name] = _array(onnx, tensor)
         nodes = []
         for k, node in enumerate(graph.node):

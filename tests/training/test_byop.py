@@ -89,6 +89,28 @@ def test_a_policy_is_resolved_once_into_a_typed_reference():
         resolve_policy("nope")
 
 
+def test_an_evaluation_looks_its_policy_up_once(monkeypatch):
+    import agri_baselines
+    from agri_training.evaluation import reference
+    from agri_training.evaluation.evaluate import evaluate
+
+    calls = {"policy_spec": 0, "is_run_path": 0}
+
+    def counted(name, real):
+        def wrapper(*args, **kwargs):
+            calls[name] += 1
+            return real(*args, **kwargs)
+
+        return wrapper
+
+    for name in calls:
+        monkeypatch.setattr(reference, name, counted(name, getattr(reference, name)))
+    monkeypatch.setattr(agri_baselines, "policy_spec", counted("policy_spec", agri_baselines.policy_spec))
+    small = {k: v for k, v in TINY.items() if k != "localization"}
+    doc = evaluate(EvalRequest(NAV, "harik-apf-gt", episodes=3, env_kwargs=small), progress=False, batch=2)
+    assert doc["summary"]["episodes"] == 3 and calls == {"policy_spec": 1, "is_run_path": 1}
+
+
 # ---------------------------------------------------------------- ONNX
 
 
@@ -153,6 +175,10 @@ def test_onnx_bad_input_gets_a_named_error(env, tmp_path):
               str(custom))  # fmt: skip
     with pytest.raises(ValueError, match="custom operator domain 'evil.ops'"):
         resolve_policy(str(custom))
+    outside = tmp_path / "outside.onnx"
+    onnx.save_model(onnx.load(str(softplus)), str(outside), save_as_external_data=True, size_threshold=0)
+    with pytest.raises(ValueError, match="stored outside the file.*external_data=False"):
+        resolve_policy(str(outside))
     (tmp_path / "junk.onnx").write_bytes(b"\x00not a model" * 10)
     with pytest.raises(ValueError, match="not an ONNX model"):
         resolve_policy(str(tmp_path / "junk.onnx"))
