@@ -234,10 +234,10 @@ def _file_reference(path: Path, name: str | None, base: Path) -> PolicyRef:
     sidecar: Sidecar = read_sidecar(path)
     if path.suffix == ".onnx":
         check_onnx_file(path)
-        kind, needs_torch = "onnx", False
+        kind = "onnx"
     else:
         check_sb3_zip(path)
-        kind, needs_torch = "sb3-zip", False
+        kind = "sb3-zip"
     return PolicyRef(
         kind=kind,
         name=name or sidecar.name or path.stem,
@@ -249,8 +249,7 @@ def _file_reference(path: Path, name: str | None, base: Path) -> PolicyRef:
         privileged=sidecar.privileged,
         env_id=sidecar.env_id,
         env_kwargs=dict(sidecar.env_kwargs),
-        observation_only=True,
-        needs_torch=needs_torch,
+        observation_only=True,  # neither imports torch: the ONNX graph and the SB3 tensors are read here
         sidecar_sha256=sha256_file(sidecar.path) if sidecar.path is not None else None,
     )
 
