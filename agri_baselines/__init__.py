@@ -211,7 +211,7 @@ register_policy(
 register_policy(
     PolicySpec(
         name="gonzalez-deliberative",
-        env_id="agri_envs/GreenhouseCoverage-v1",
+        env_id="agri_envs/GreenhouseCoverage-v2",
         entry_point="agri_baselines.gonzalez_policies:make_gonzalez_deliberative",
         env_kwargs={"localization": "ground_truth"},
         privileged=True,
@@ -221,7 +221,7 @@ register_policy(
 register_policy(
     PolicySpec(
         name="gonzalez-pseudo-reactive",
-        env_id="agri_envs/GreenhouseCoverage-v1",
+        env_id="agri_envs/GreenhouseCoverage-v2",
         entry_point="agri_baselines.gonzalez_policies:make_gonzalez_pseudo_reactive",
         env_kwargs={"localization": "odometry"},
         description="González 2009: behaviours, 2+2 turn rule, centering, peak filter (eq. 1), sensory map (eq. 2)",
@@ -230,7 +230,7 @@ register_policy(
 register_policy(
     PolicySpec(
         name="gonzalez-hybrid",
-        env_id="agri_envs/GreenhouseCoverage-v1",
+        env_id="agri_envs/GreenhouseCoverage-v2",
         entry_point="agri_baselines.gonzalez_policies:make_gonzalez_hybrid",
         env_kwargs={"localization": "odometry"},
         description="González 2009, Fig. 2: first run pseudo-reactive, later runs deliberative on its sensory map",

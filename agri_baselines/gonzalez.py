@@ -9,7 +9,7 @@ Pure algorithms (no Gymnasium) first:
   rule (two turns to one side, then two to the other, each measured by the compass and stopped at 90 deg);
   the front sonar slowing the robot; the centering (Fig. 7) and inclined-corridor (Fig. 8) processes.
 
-Then the SB3-style policies for ``agri_envs/GreenhouseCoverage-v1`` (``gonzalez-deliberative``,
+Then the SB3-style policies for ``agri_envs/GreenhouseCoverage-v2`` (``gonzalez-deliberative``,
 ``gonzalez-pseudo-reactive``, ``gonzalez-hybrid``) as thin adapters over them.
 """
 

@@ -1,4 +1,4 @@
-"""SB3-style policies of González et al. (2009) for ``agri_envs/GreenhouseCoverage-v1``.
+"""SB3-style policies of González et al. (2009) for ``agri_envs/GreenhouseCoverage-v2``.
 
 * ``gonzalez-deliberative`` (privileged): at each episode start it takes the greenhouse's map from the
   env's documented privileged accessor ``true_map()`` (the paper's digital map), plans the corridor-covering

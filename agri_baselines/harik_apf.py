@@ -23,10 +23,12 @@ from __future__ import annotations
 import dataclasses
 import math
 from collections.abc import Callable
-from typing import Any
+from typing import Any, cast
 
 import numba
 import numpy as np
+
+from agri_envs.rover.config import GreenhouseNavConfig
 
 
 @dataclasses.dataclass(frozen=True)
@@ -48,6 +50,8 @@ class HarikApfParams:
         step_back_distance: How far the robot backs off when the safety stop triggers (m).
         step_back_speed: Backing speed (m/s).
         rear_clearance: No stepping back when the rear sonar sees something closer than this (m).
+        braking_accel: The robot's deceleration (m/s^2), for the speed cap before obstacles (:meth:`governed_speed`).
+        reaction_time: Time between two commands (s), travelled before braking starts.
     """
 
     u_max: float = 0.5
@@ -64,11 +68,63 @@ class HarikApfParams:
     step_back_distance: float = 0.05
     step_back_speed: float = 0.1
     rear_clearance: float = 0.3
+    braking_accel: float = 1.0
+    reaction_time: float = 1.0 / 15.0
 
     @property
     def k_att(self) -> float:
         """Attractive gain of eq. 12, chosen so that eq. 13 is continuous at ``d_max``."""
         return 2.0 * self.u_max / self.d_max**2
+
+    def governed_speed(self, u: float, front: float) -> float:
+        """``u`` capped so that the robot stops short of the paper's stop distance from what is ``front`` m ahead.
+
+        Not in the paper, and never binding at its speeds: there the stop distance is the fixed 0.35 m, and the
+        safety stop acts below it. A faster robot slows as the gap closes instead of running into the stop
+        from full speed, which at 2 m/s would leave it stopping and starting (the stop distance grows with
+        the stop distance would have to grow with the speed, and then block it in front of every post).
+        """
+        budget = _braking(*_PAPER_BRAKING) + (front - self.front_stop_distance)
+        if u <= 0.0 or budget <= 0.0 or _braking(u, self.braking_accel, self.reaction_time) <= budget:
+            return u
+        a, t = self.braking_accel, self.reaction_time
+        return a * (math.sqrt(t * t + 2.0 * budget / a) - t)  # the speed whose braking distance is the budget
+
+    def for_robot(
+        self, max_speed: float, max_turn_rate: float, max_accel: float, control_period: float
+    ) -> HarikApfParams:
+        """These gains adapted to a robot with other limits than the env's default one (0.6 m/s, 1.2 rad/s, 1 m/s^2).
+
+        The paper's saturations are fractions of its robot's limits: ``u_max`` is 5/6 of the speed limit and
+        ``r_max`` 2/3 of the turn-rate limit. An env with another ``max_speed`` or ``max_turn_rate`` gets the
+        same fractions, so the controller drives as fast, relative to the robot, as the time limit (which scales
+        with the limits) assumes; it slows before obstacles ahead as its braking needs (:meth:`governed_speed`,
+        from ``max_accel``). With the default limits every value is the paper's, bit for bit (a ratio of
+        equal floats is exactly 1).
+        """
+        return dataclasses.replace(
+            self,
+            u_max=self.u_max * (max_speed / DEFAULT_LIMITS["max_speed"]),
+            r_max=self.r_max * (max_turn_rate / DEFAULT_LIMITS["max_turn_rate"]),
+            braking_accel=max_accel,
+            reaction_time=control_period,
+        )
+
+
+def _braking(u: float, accel: float, reaction_time: float) -> float:
+    """Distance (m) to stop from ``u`` (m/s): one reaction time of travel, then braking at ``accel``."""
+    return u * u / (2.0 * accel) + u * reaction_time
+
+
+#: Speed (m/s), deceleration (m/s^2) and reaction time (s) the paper's front stop distance was set for.
+_PAPER_BRAKING = (0.5, 1.0, 1.0 / 15.0)
+
+#: The limits of GreenhouseNav's default robot, for which the paper's gains (:class:`HarikApfParams`) are set.
+DEFAULT_LIMITS: dict[str, float] = {
+    f.name: float(cast(float, f.default))
+    for f in dataclasses.fields(GreenhouseNavConfig)
+    if f.name in ("max_speed", "max_turn_rate", "max_accel")
+}
 
 
 @dataclasses.dataclass(frozen=True)
@@ -263,6 +319,7 @@ class HarikApfController:
         # detection acts whatever u is, also in a turn on the spot (u = 0, eq. 14): in a corridor the
         # robot faces the wall halfway through a 180 deg turn, steps back and keeps turning until the
         # front is free (sec. 3.4, Figs. 14-15: d stays almost constant while alpha decreases).
+        u = p.governed_speed(u, front)
         if front < p.front_stop_distance:
             if not self.blocked:
                 self.blocked = True
@@ -399,10 +456,22 @@ def robot_geometry(env: Any) -> RobotGeometry:
     )
 
 
+def robot_params(env: Any, d_min: float) -> HarikApfParams:
+    """The paper's gains, waypoint radius ``d_min``, adapted to the env's robot (:meth:`HarikApfParams.for_robot`)."""
+    cfg = env.unwrapped.config
+    period = cfg.control_period * cfg.frame_skip  # the controller acts once per env step
+    return HarikApfParams(d_min=d_min).for_robot(cfg.max_speed, cfg.max_turn_rate, cfg.max_accel, period)
+
+
 def make_harik_apf_gt(env: Any) -> HarikApfPolicy:
     """``harik-apf-gt``: the controller on the ground-truth pose (privileged). Env: ``full_scan=True``.
 
     The controller's ``d_min`` (eq. 13) is the env's waypoint radius (the paper's 30 cm by default).
+
+    Env arguments it adapts to: ``waypoint_radius`` (its ``d_min``), ``max_speed``, ``max_turn_rate`` and
+    ``max_accel`` (its saturations and front stop distance, :meth:`HarikApfParams.for_robot`), the scene and
+    its scale (read from the observation). It ignores the reward weights and ``time_limit_*`` (it drives the
+    same whatever the limit) and needs ``frame_skip=1`` to act at the paper's 15 Hz.
     """
     e = env.unwrapped
     cfg = e.config
@@ -414,7 +483,7 @@ def make_harik_apf_gt(env: Any) -> HarikApfPolicy:
         e.robot_spec.max_speed,
         e.robot_spec.max_reverse_speed,
         e.robot_spec.max_turn_rate,
-        params=HarikApfParams(d_min=cfg.waypoint_radius),
+        params=robot_params(env, cfg.waypoint_radius),
     )
 
 
@@ -488,7 +557,7 @@ def make_harik_apf_slam(env: Any, localization_margin: float = 0.1, slam_config:
         spec.max_speed,
         spec.max_reverse_speed,
         spec.max_turn_rate,
-        params=HarikApfParams(d_min=d_min),
+        params=robot_params(env, d_min),
         slam_config=slam_config,
     )
 

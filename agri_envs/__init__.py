@@ -95,9 +95,9 @@ def register_envs() -> None:
             entry_point="agri_envs.arm.grape_harvest:GrapeHarvestEnv",
             kwargs=dict(REACH_PRESET),
         )
-    if "agri_envs/GreenhouseCoverage-v1" not in registry:  # the env truncates itself at its mission-sized limit
+    if "agri_envs/GreenhouseCoverage-v2" not in registry:  # the env truncates itself at its mission-sized limit
         register(
-            id="agri_envs/GreenhouseCoverage-v1",
+            id="agri_envs/GreenhouseCoverage-v2",
             entry_point="agri_envs.coverage.greenhouse_coverage:GreenhouseCoverageEnv",
             vector_entry_point="agri_envs.coverage.vector:GreenhouseCoverageVectorEnv",
         )
@@ -142,7 +142,7 @@ def env_version(env_id: str) -> str:
 #: Gymnasium ids whose env declares a training distribution -> its config class (``module:Class``).
 _DISTRIBUTION_CONFIGS: dict[str, str] = {
     "agri_envs/GreenhouseNav-v2": "agri_envs.rover.config:GreenhouseNavConfig",
-    "agri_envs/GreenhouseCoverage-v1": "agri_envs.coverage.config:GreenhouseCoverageConfig",
+    "agri_envs/GreenhouseCoverage-v2": "agri_envs.coverage.config:GreenhouseCoverageConfig",
 }
 
 

@@ -220,6 +220,20 @@ class BatchedEnv(VectorEnv[dict[str, np.ndarray], np.ndarray, np.ndarray]):
             infos,
         )
 
+    # Typed as SyncVectorEnv types them (a tuple per sub-env), which VectorEnv's annotations do not foresee.
+    @property
+    def np_random_seed(self) -> tuple[int, ...]:  # type: ignore[override]
+        """The sub-envs' seeds, as ``SyncVectorEnv`` reports them: ``(42, 43, ...)`` after ``reset(seed=42)``.
+
+        A sub-env not yet seeded draws a random seed on the first access (Gymnasium's ``Env.np_random_seed``).
+        """
+        return tuple(env.np_random_seed for env in self.envs)
+
+    @property  # type: ignore[misc]
+    def np_random(self) -> tuple[np.random.Generator, ...]:  # type: ignore[override]
+        """The sub-envs' generators (the ones the batched loop draws from), as ``SyncVectorEnv`` gives them."""
+        return tuple(env.np_random for env in self.envs)
+
     def render(self) -> tuple[np.ndarray, ...] | None:
         """One ``rgb_array`` frame per sub-env, as the single env draws it (None without a render mode)."""
         if self.render_mode is None:

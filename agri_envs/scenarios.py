@@ -235,7 +235,7 @@ register_scenario(
         "leader's A* path; an obstacle drops onto the path ahead of the leader (Fig. 8d).",
     )
 )
-_COVER = "agri_envs/GreenhouseCoverage-v1"
+_COVER = "agri_envs/GreenhouseCoverage-v2"
 register_scenario(
     Scenario(
         _COVER,

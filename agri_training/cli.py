@@ -14,6 +14,7 @@ from agri_baselines import list_policies
 from agri_envs.scenarios import list_scenarios
 from agri_training import leaderboard as lb
 from agri_training.core.yaml_values import load_yaml
+from agri_training.datasets import DatasetRequest, default_dataset_id, default_env, make_dataset
 from agri_training.evaluation.batched import BATCH_SIZE
 from agri_training.evaluation.evaluate import EvalRequest, evaluate, format_summary
 from agri_training.evaluation.parallel import EpisodeError
@@ -59,6 +60,28 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
     out.write_text(json.dumps(result, indent=1))
     print(format_summary(result))
     print(f"wrote {out}")
+    return 0
+
+
+def _cmd_dataset(args: argparse.Namespace) -> int:
+    env_id = args.env or default_env(args.policy)
+    request = DatasetRequest(
+        env_id=env_id,
+        policy=args.policy,
+        dataset_id=args.dataset_id or default_dataset_id(env_id, args.policy),
+        episodes=args.episodes,
+        seed=args.seed,
+        scenario=args.scenario,
+        env_kwargs=parse_env_kwargs(args.env_kwargs or []),
+        training_distribution=args.training_distribution,
+        overwrite=args.overwrite,
+    )
+    done = make_dataset(request, workers=args.workers, ray=args.ray, progress=not args.quiet)
+    print(
+        f"wrote {done['dataset_id']} ({done['path']}): {done['episodes']} episodes, {done['trajectories']} Minari "
+        f"episodes, {done['steps']} steps, {done['successes']} successes, {done['size_mb']:.1f} MB in "
+        f"{done['seconds']:.0f} s; load it with minari.load_dataset({done['dataset_id']!r})"
+    )
     return 0
 
 
@@ -245,8 +268,14 @@ def _cmd_leaderboard(args: argparse.Namespace) -> int:
     if args.action == "submit":
         suites = lb.load_suites(suites_dir)
         pairs: list[tuple[lb.Suite, Any]]  # (suite, a resolved policy or an entry's policy record)
-        if args.all:
-            pairs = lb.all_baseline_pairs(s for s in suites if not args.env or s.env_id == args.env)
+        if args.all:  # optionally only the suites named (every registered policy on each)
+            named = set(args.suite or [])
+            unknown = named - {s.name for s in suites}
+            if unknown:
+                raise ValueError(f"unknown suites {sorted(unknown)}; `agri leaderboard suites` lists them")
+            pairs = lb.all_baseline_pairs(
+                s for s in suites if (not args.env or s.env_id == args.env) and (not named or s.name in named)
+            )
         else:
             if not args.suite or not args.policy:
                 raise ValueError("submit needs --suite and --policy (or --all for every baseline on every suite)")
@@ -279,9 +308,15 @@ def _cmd_leaderboard(args: argparse.Namespace) -> int:
         entries = [e for e in entries if str(Path(e["_path"]).resolve()) in wanted]
         if len(entries) != len(wanted):
             raise ValueError(f"not an entry under {entries_dir}: {sorted(wanted)}")
-    problems, seconds = lb.timed(
-        lb.verify_entries, entries, suites_dir, args.workers, args.rtol, not args.quiet, args.ray, args.batch
-    )
+    if args.sample is not None:
+        problems, seconds = lb.timed(
+            lb.verify_sample, entries, args.sample, suites_dir, args.workers, args.rtol, not args.quiet, args.ray,
+            args.batch,
+        )
+    else:
+        problems, seconds = lb.timed(
+            lb.verify_entries, entries, suites_dir, args.workers, args.rtol, not args.quiet, args.ray, args.batch
+        )
     if not args.no_markdown and not lb.leaderboard_is_current(md, entries_dir, suites_dir):
         problems.append(f"{md} is stale: run `agri leaderboard render` and commit it")
     if problems:
@@ -289,6 +324,8 @@ def _cmd_leaderboard(args: argparse.Namespace) -> int:
         lb.print_problems(problems)
         return 1
     tol = "exactly" if args.rtol == 0 else f"within rtol {args.rtol:g}"
+    if args.sample is not None:
+        tol += f" (a sample: {args.sample} episode(s) per level re-run, every summary recomputed)"
     print(f"verified {len(entries)} entries {tol} in {seconds:.0f} s ({args.workers} worker(s)); {md.name} is current")
     return 0
 
@@ -390,6 +427,32 @@ def build_parser() -> argparse.ArgumentParser:
     add_scale_arguments(ev)
     add_batch_argument(ev)
     ev.set_defaults(func=_cmd_evaluate)
+    ds = sub.add_parser(
+        "dataset",
+        help="run a policy over seeds S, S+1, ... and write its episodes as a Minari dataset (MINARI_DATASETS_PATH)",
+    )
+    ds.add_argument("--policy", required=True, help="registered policy name (agri list) or an `agri train` run")
+    ds.add_argument("--env", default=None, help="env id (default: the registered policy's env)")
+    ds.add_argument(
+        "--dataset-id",
+        default=None,
+        help="Minari id (default agri/ENV/POLICY-v0, e.g. agri/GreenhouseNav-v2/harik-apf-gt-v0)",
+    )
+    ds.add_argument("--episodes", type=int, default=100, help="episodes to record (default 100)")
+    ds.add_argument(
+        "--seed", type=int, default=0, help="seed of the first episode; episode i runs seed S+i, all below 100000"
+    )
+    ds.add_argument("--scenario", default=None, help="named preset of env arguments (agri list)")
+    ds.add_argument("--env-kwargs", nargs="*", action="extend", metavar="KEY=VALUE", help="extra env arguments")
+    ds.add_argument(
+        "--training-distribution",
+        action="store_true",
+        help="draw each episode's scene from the env's training distribution (scene_distribution=training)",
+    )
+    ds.add_argument("--overwrite", action="store_true", help="replace a dataset already under the id")
+    ds.add_argument("--quiet", action="store_true", help="no progress bar or progress lines")
+    add_scale_arguments(ds)
+    ds.set_defaults(func=_cmd_dataset)
     va = sub.add_parser(
         "validate",
         help="choose a learned policy's weights: evaluate runs (and their checkpoints) on validation seeds of "
@@ -503,7 +566,9 @@ def build_parser() -> argparse.ArgumentParser:
         help="registered policy name, an `agri train` run folder, a .onnx or SB3 .zip file, or module:attribute",
     )
     su.add_argument("--name", default=None, help="display name of a learned, ONNX, SB3 or Python policy")
-    su.add_argument("--all", action="store_true", help="every registered baseline on every suite of its env")
+    su.add_argument(
+        "--all", action="store_true", help="every registered policy on every suite of its env (or on the --suite named)"
+    )
     su.add_argument("--env", default=None, help="with --all: only this env id")
     add_scale_arguments(su)
     add_batch_argument(su)
@@ -514,6 +579,14 @@ def build_parser() -> argparse.ArgumentParser:
     add_batch_argument(ve)
     ve.add_argument("--rtol", type=float, default=0.0, help="relative tolerance for floats (default 0: exact)")
     ve.add_argument("--no-markdown", action="store_true", help="do not check that LEADERBOARD.md is current")
+    ve.add_argument(
+        "--sample",
+        type=int,
+        default=None,
+        metavar="N",
+        help="re-run only N evenly spaced episodes (whole campaigns) of every level of every entry, and recompute "
+        "every summary from the committed records (make test: 1; default: every episode)",
+    )
     ve.add_argument("--quiet", action="store_true")
     board.set_defaults(func=_cmd_leaderboard)
     ls = sub.add_parser("list", help="registered envs, scenarios and baselines")

@@ -1,4 +1,4 @@
-"""Speed of GreenhouseCoverage-v1 and of González's coverage planner, with peers measured in the same run.
+"""Speed of GreenhouseCoverage-v2 and of González's coverage planner, with peers measured in the same run.
 
 * env steps/s (random actions, contacts do not end the episode), next to Gymnasium's BipedalWalker-v3;
 * ``agri_baselines.coverage_path`` on a 50 x 30 m greenhouse rasterised at 5 cm cells (goal: < 100 ms),
@@ -86,7 +86,7 @@ def peak_filter_effect(seeds: int) -> np.ndarray:
     from agri_baselines import make_policy
     from agri_baselines.gonzalez import peak_filter
 
-    env = gym.make("agri_envs/GreenhouseCoverage-v1", localization="ground_truth")
+    env = gym.make("agri_envs/GreenhouseCoverage-v2", localization="ground_truth")
     policy = make_policy("gonzalez-deliberative", env)
     out = []
     for seed in range(seeds):
@@ -127,14 +127,14 @@ def main() -> None:
     print(f"  peer: skimage skeletonize(free)     {skel:8.1f} ms  (the plain GVD alone, no search)")
     print(f"  peer: scipy distance_transform_edt  {edt:8.1f} ms")
 
-    cov = steps_per_second("agri_envs/GreenhouseCoverage-v1", args.steps, args.runs, terminate_on_contact=False)
+    cov = steps_per_second("agri_envs/GreenhouseCoverage-v2", args.steps, args.runs, terminate_on_contact=False)
     try:
         walker = steps_per_second("BipedalWalker-v3", args.steps, args.runs)
         peer = f"{walker:10.0f} steps/s"
     except Exception as exc:  # box2d missing: say so instead of a number
         peer = f"unavailable ({type(exc).__name__}: pip install box2d)"
     print("env steps/s (random actions, one process, median of runs):")
-    print(f"  agri_envs/GreenhouseCoverage-v1  {cov:10.0f} steps/s")
+    print(f"  agri_envs/GreenhouseCoverage-v2  {cov:10.0f} steps/s")
     print(f"  peer: BipedalWalker-v3           {peer}")
 
     if args.filter_seeds > 0:

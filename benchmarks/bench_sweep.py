@@ -11,7 +11,7 @@ The script also checks that the sweep's seeds 0 and 1 reproduce the sequential r
 
     python benchmarks/bench_sweep.py                       # PPO on GreenhouseNav-v2, 32768 steps per run
     python benchmarks/bench_sweep.py --ray                 # also the sweep as Ray tasks (--ray local)
-    python benchmarks/bench_sweep.py --timesteps 8192 --env agri_envs/GreenhouseCoverage-v1
+    python benchmarks/bench_sweep.py --timesteps 8192 --env agri_envs/GreenhouseCoverage-v2
 """
 
 from __future__ import annotations

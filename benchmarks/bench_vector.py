@@ -28,7 +28,7 @@ from bench_grape import peer, reset_ms
 import agri_envs  # noqa: F401
 
 NAV = "agri_envs/GreenhouseNav-v2"
-COVERAGE = "agri_envs/GreenhouseCoverage-v1"
+COVERAGE = "agri_envs/GreenhouseCoverage-v2"
 WALKER = "BipedalWalker-v3"
 
 

@@ -164,7 +164,7 @@ def startup_parts() -> dict[str, Any]:
     out["worker pool start-up (forkserver, preload, 2 workers)"] = time.perf_counter() - t0
 
     # one representative (env, policy) per env family, as the suites run them
-    nav, coverage = "agri_envs/GreenhouseNav-v2", "agri_envs/GreenhouseCoverage-v1"
+    nav, coverage = "agri_envs/GreenhouseNav-v2", "agri_envs/GreenhouseCoverage-v2"
     families = {
         "GreenhouseNav, harik-apf (Hector SLAM)": (nav, "greenhouse-sim-loop", "harik-apf"),
         "GreenhouseNav, ppo-greenhouse-nav": (nav, "greenhouse-sim-loop", "ppo-greenhouse-nav"),

@@ -19,6 +19,7 @@ TRAINING_LAYERS = (
     ("agri_training.learned",),
     ("agri_training.evaluation",),
     ("agri_training.leaderboard",),
+    ("agri_training.datasets",),
     ("agri_training.report",),
     ("agri_training.train",),
     ("agri_training.sweep",),
@@ -29,8 +30,8 @@ TRAINING_LAYERS = (
 #: them optional (torch and what builds on it, plotting, Ray, pybullet, video).
 DEFERRABLE = {
     "torch", "stable_baselines3", "sb3_contrib", "supersuit", "matplotlib", "ray", "optuna", "pybullet",
-    "pybullet_data", "moviepy", "imageio", "imageio_ffmpeg", "pygame", "tqdm", "tensorboard", "psutil", "numba", "onnx",
-    "scipy", "PIL", "mkdocs",
+    "pybullet_data", "moviepy", "imageio", "imageio_ffmpeg", "pygame", "tqdm", "tensorboard", "psutil", "numba",
+    "scipy", "PIL", "mkdocs", "minari", "h5py", "onnx",
 }  # fmt: skip
 
 

@@ -1,4 +1,4 @@
-"""Arguments of ``agri_envs/GreenhouseCoverage-v1``: one strict, typed, frozen dataclass (``gym.make`` keywords)."""
+"""Arguments of ``agri_envs/GreenhouseCoverage-v2``: one strict, typed, frozen dataclass (``gym.make`` keywords)."""
 
 from __future__ import annotations
 
@@ -17,7 +17,7 @@ LOCALIZATION_MODES = ("odometry", "ground_truth")
 
 @dataclasses.dataclass(frozen=True)
 class GreenhouseCoverageConfig(StrictConfig):
-    """Arguments of ``agri_envs/GreenhouseCoverage-v1`` (each one a ``gym.make`` keyword)."""
+    """Arguments of ``agri_envs/GreenhouseCoverage-v2`` (each one a ``gym.make`` keyword)."""
 
     # Scene
     n_rows: int = param(4, "rows of plants (the corridors are the n_rows + 1 spaces beside them)", low=1, high=12)

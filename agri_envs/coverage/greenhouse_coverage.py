@@ -1,4 +1,4 @@
-"""GreenhouseCoverage-v1: the tracked Fitorobot drives every corridor of a Mediterranean greenhouse (González 2009)."""
+"""GreenhouseCoverage-v2: the tracked Fitorobot drives every corridor of a Mediterranean greenhouse (González 2009)."""
 
 from __future__ import annotations
 
@@ -57,7 +57,7 @@ class GreenhouseCoverageEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
     | ``compass`` | (2,) | ``(1 + sin h) / 2, (1 + cos h) / 2`` of the compass heading h (noise and bias) |
     | ``velocity`` | (2,) | ``(1 + v / max_speed) / 2, (1 + w / max_turn_rate) / 2`` measured by the track encoders |
     | ``pose`` | (4,) | ``x / pose_scale[0], y / pose_scale[1], (1 + sin), (1 + cos) / 2`` of the pose estimate (1) |
-    | ``memory`` | (2, 16, 16) | the robot's own map around it (2): cells it drove over; cells its sonars echoed from |
+    | ``memory`` | (512,) | the robot's own map around it (2), flat: cells it drove over; cells its sonars echoed from |
 
     (1) ``localization="odometry"``: the encoders' distance integrated along the compass heading (it
     drifts, and it is rotated by the compass bias); ``"ground_truth"``: the true pose (privileged).
@@ -66,8 +66,9 @@ class GreenhouseCoverageEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
     control period the cell under the estimated centre is marked visited (channel 0) and the cell of each
     sonar echo on the sonar's axis is marked (channel 1: the sensory map of González's eq. 2). The
     observation is the 8 x 8 m window centred on the robot and turned with its estimated heading: row
-    ``a`` lies ``(a - 7.5) * 0.5`` m ahead, column ``b`` as far to the left. It is built from the
-    robot's own readings only, so it drifts with the odometry, as a real robot's would.
+    ``a`` lies ``(a - 7.5) * 0.5`` m ahead, column ``b`` as far to the left. The key holds that
+    ``(channel, a, b)`` grid flattened in C order: ``obs["memory"].reshape(2, 16, 16)`` gives it back. It is
+    built from the robot's own readings only, so it drifts with the odometry, as a real robot's would.
 
     ## Sensors
 
@@ -190,9 +191,9 @@ class GreenhouseCoverageEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
 
     Example::
 
-        env = gym.make("agri_envs/GreenhouseCoverage-v1", n_rows=6, row_bend=0.1, vegetation_echo_prob=0.3)
+        env = gym.make("agri_envs/GreenhouseCoverage-v2", n_rows=6, row_bend=0.1, vegetation_echo_prob=0.3)
 
-    Batched: ``gym.make_vec("agri_envs/GreenhouseCoverage-v1", num_envs=64, **kwargs)`` steps 64 of these worlds
+    Batched: ``gym.make_vec("agri_envs/GreenhouseCoverage-v2", num_envs=64, **kwargs)`` steps 64 of these worlds
     in one compiled loop (:class:`~agri_envs.coverage.vector.GreenhouseCoverageVectorEnv`), each sub-env's
     episodes bit for bit this env's for the same seed and actions (its memory and progress reward included).
 
@@ -213,6 +214,10 @@ class GreenhouseCoverageEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
       covering serpentine, turns included); with v0's reward PPO parked after the first corridor. New
       argument ``scene_distribution``; ``info["subgoal_index"]``. Dynamics, sensors, the other reward terms,
       termination and time limits are unchanged. Later, without a version change: the batched form again.
+    * v2: the ``memory`` observation is a flat ``(512,)`` vector (the same values, the ``(2, 16, 16)`` grid in
+      C order), so that learners take it as it is: SB3 reads a float box of image shape as an image that
+      should be uint8 and warns. Everything else is unchanged; a policy that flattened v1's ``memory``
+      (SB3's ``MultiInputPolicy`` does) sees the same input.
 
     ## References
 
@@ -294,7 +299,8 @@ class GreenhouseCoverageEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
                 "compass": box(0.0, 1.0, (2,), np.float32),
                 "velocity": box(0.0, 1.0, (2,), np.float32),
                 "pose": box(0.0, 1.0, (4,), np.float32),
-                "memory": box(0.0, 1.0, self.memory.shape, np.float32),
+                # Flat (the (2, 16, 16) view in C order): a float image would make SB3 want uint8 (v2).
+                "memory": box(0.0, 1.0, (math.prod(self.memory.shape),), np.float32),
             }
         )
         self.action_space = spaces.Box(-1.0, 1.0, (2,), np.float32)
@@ -450,7 +456,7 @@ class GreenhouseCoverageEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
                 0.0,
                 1.0,
             ),
-            "memory": self.memory.view(estimate),
+            "memory": self.memory.view(estimate).reshape(-1),
         }
 
     def _info(self, outcome: dict[str, Any]) -> dict[str, Any]:

@@ -1,6 +1,6 @@
-"""GreenhouseCoverage-v1 as a native Gymnasium ``VectorEnv``: N greenhouses covered together in one compiled loop.
+"""GreenhouseCoverage-v2 as a native Gymnasium ``VectorEnv``: N greenhouses covered together in one compiled loop.
 
-``gym.make_vec("agri_envs/GreenhouseCoverage-v1", num_envs=N, **kwargs)`` builds
+``gym.make_vec("agri_envs/GreenhouseCoverage-v2", num_envs=N, **kwargs)`` builds
 :class:`GreenhouseCoverageVectorEnv`. Each sub-env is a
 :class:`~agri_envs.coverage.greenhouse_coverage.GreenhouseCoverageEnv` whose own ``reset`` sets every episode
 up (a greenhouse drawn from ``scene_distribution`` too); :func:`_step_worlds` then steps all the worlds
@@ -360,9 +360,9 @@ def _step_worlds(rngs: Any, actions: np.ndarray, active: np.ndarray, c: _Constan
 
 
 class GreenhouseCoverageVectorEnv(BatchedEnv):
-    """``num_envs`` GreenhouseCoverage-v1 worlds stepped together: the native vector form of the env.
+    """``num_envs`` GreenhouseCoverage-v2 worlds stepped together: the native vector form of the env.
 
-    Made by ``gym.make_vec("agri_envs/GreenhouseCoverage-v1", num_envs=N, **kwargs)`` (or directly), with every
+    Made by ``gym.make_vec("agri_envs/GreenhouseCoverage-v2", num_envs=N, **kwargs)`` (or directly), with every
     argument of the single env (see :class:`~agri_envs.coverage.greenhouse_coverage.GreenhouseCoverageEnv`), the
     same spaces per sub-env and the same episodes: sub-env ``i`` gives what ``gym.make(id, **kwargs)`` gives for
     the same seed and actions, bit for bit. Episodes are set up by the single env's own ``reset``; the steps
@@ -375,7 +375,7 @@ class GreenhouseCoverageVectorEnv(BatchedEnv):
 
     Example::
 
-        envs = gym.make_vec("agri_envs/GreenhouseCoverage-v1", num_envs=64, n_rows=6)
+        envs = gym.make_vec("agri_envs/GreenhouseCoverage-v2", num_envs=64, n_rows=6)
         obs, info = envs.reset(seed=0)
         obs, reward, terminated, truncated, info = envs.step(envs.action_space.sample())
 
@@ -493,7 +493,7 @@ class GreenhouseCoverageVectorEnv(BatchedEnv):
             compass=obs["compass"],
             velocity=obs["velocity"],
             pose_obs=obs["pose"],
-            memory=obs["memory"],
+            memory=obs["memory"].reshape(n, *first.memory.shape),  # a view: the kernel writes the flat key
             sonar_m=np.zeros((n, len(first.sonars))),
             hard=np.zeros((n, len(first.sonars))),
             sensor_poses=np.zeros((n, len(first.sonars), 3)),

@@ -26,6 +26,8 @@ class EpisodeOutput(TypedDict):
 
     record: EpisodeRecord
     trace: dict[str, Any] | None
+    #: With ``EpisodeJob(record=True)``: the recorded trajectories (``agri_training.core.datasets.EpisodeSteps``).
+    steps: NotRequired[list[Any]]
 
 
 class TraceDocument(TypedDict):

@@ -41,6 +41,7 @@ from agri_training.core.documents import EpisodeOutput
 from agri_training.core.pool import limit_torch_threads, run_items
 from agri_training.evaluation.batched import run_batch
 from agri_training.evaluation.episode import run_episode
+from agri_training.evaluation.recording import StepRecorder
 from agri_training.evaluation.reference import PolicyRef, build_policy, resolve_policy
 
 #: Per-process cache of built envs (and their trace keys), keyed by :meth:`EpisodeJob.config_key`. A worker
@@ -67,6 +68,9 @@ class EpisodeJob:
         batch: Episodes on seeds ``seed .. seed + batch - 1``, each with a fresh policy, stepped together in
             the env's batched form (:mod:`agri_training.evaluation.batched`); their records are the
             reference loop's. Only for policies that :func:`~agri_training.evaluation.batched.batchable` allows.
+        record: Keep every step for a dataset (:class:`~agri_training.evaluation.recording.StepRecorder`): the
+            episode's output then also holds ``steps``, its trajectories. One episode a job (no campaign, no
+            batch).
     """
 
     env_id: str
@@ -76,6 +80,7 @@ class EpisodeJob:
     trace: bool = False
     runs: int = 1
     batch: int = 1
+    record: bool = False
 
     def __post_init__(self) -> None:
         if not isinstance(self.policy, PolicyRef):
@@ -90,6 +95,8 @@ class EpisodeJob:
             raise ValueError(
                 f"a job is a campaign (runs > 1) or a batch (batch > 1), got runs={self.runs}, batch={self.batch}"
             )
+        if self.record and self.episodes > 1:
+            raise ValueError(f"a recording job runs one episode, got runs={self.runs}, batch={self.batch}")
 
     @property
     def ref(self) -> PolicyRef:
@@ -215,7 +222,12 @@ def run_job(job: EpisodeJob) -> dict[str, Any]:
             policy = build_policy(job.ref, env)
             limit_torch_threads()  # loading an SB3 checkpoint imports torch
             stage = "episode"
-            outs = run_campaign(env, policy, job.seed, job.runs, trace_keys if job.trace else None)
+            if job.record:
+                recorder = StepRecorder(env)
+                outs = [run_episode(recorder, policy, job.seed, trace_keys if job.trace else None)]
+                outs[0]["steps"] = recorder.episodes()
+            else:
+                outs = run_campaign(env, policy, job.seed, job.runs, trace_keys if job.trace else None)
     except Exception as exc:  # reported to the caller with the job's seed
         if stage == "episode":  # the envs may be left mid-episode in a bad state: rebuild them next time
             if (built := _CACHE.pop(job.config_key(), None)) is not None:

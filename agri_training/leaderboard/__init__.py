@@ -20,9 +20,11 @@ from agri_training.leaderboard.entries import (
     policy_reference,
     print_problems,
     run_blocks,
+    sample_indices,
     slug,
     timed,
     verify_entries,
+    verify_sample,
     write_entry,
 )
 from agri_training.leaderboard.markdown import (
@@ -38,6 +40,16 @@ from agri_training.leaderboard.markdown import (
     paired_values,
     render_markdown,
     write_markdown,
+)
+from agri_training.leaderboard.robustness import (
+    SUCCESS_FLOOR,
+    Drop,
+    env_family,
+    failure_counts,
+    failure_kind,
+    first_drop,
+    robustness_lines,
+    stress_suites,
 )
 from agri_training.leaderboard.suites import (
     ENTRIES_DIR,
@@ -60,6 +72,7 @@ from agri_training.leaderboard.suites import (
 
 __all__ = [
     "Block",
+    "Drop",
     "ENTRIES_DIR",
     "ENTRY_FORMAT",
     "HELD_OUT_SEED",
@@ -69,6 +82,7 @@ __all__ = [
     "MIN_EPISODES",
     "ROOT",
     "RankKey",
+    "SUCCESS_FLOOR",
     "SUITES_DIR",
     "Suite",
     "all_baseline_pairs",
@@ -77,9 +91,13 @@ __all__ = [
     "compare_entries",
     "entry_path",
     "entry_record",
+    "env_family",
     "episode_values",
     "evaluate_entries",
+    "failure_counts",
+    "failure_kind",
     "find_suite",
+    "first_drop",
     "is_conditional",
     "leaderboard_is_current",
     "load_entries",
@@ -98,11 +116,15 @@ __all__ = [
     "policy_reference",
     "print_problems",
     "render_markdown",
+    "robustness_lines",
     "run_blocks",
+    "sample_indices",
     "sha256_file",
     "slug",
+    "stress_suites",
     "timed",
     "verify_entries",
+    "verify_sample",
     "write_entry",
     "write_markdown",
 ]

@@ -386,6 +386,104 @@ def verify_entries(
     return problems
 
 
+def sample_indices(episodes: int, campaign_runs: int, per_level: int) -> list[int]:
+    """The episodes of a level that a sampled verify re-runs: ``per_level`` of them (whole campaigns), evenly spaced.
+
+    Deterministic: the first episode (campaign) always, then evenly spaced ones; all of them when ``per_level``
+    covers the level.
+
+    Raises:
+        ValueError: For ``per_level < 1``.
+    """
+    if per_level < 1:
+        raise ValueError(f"the sample must hold at least one episode per level, got {per_level}")
+    starts = list(range(0, episodes, campaign_runs))
+    n = min(per_level, len(starts))
+    picked = [starts[(k * len(starts)) // n] for k in range(n)]
+    return [start + run for start in picked for run in range(campaign_runs)]
+
+
+def verify_sample(
+    entries: Sequence[Mapping[str, Any]],
+    per_level: int,
+    suites_dir: Path | str = SUITES_DIR,
+    workers: int | None = 1,
+    rtol: float = 0.0,
+    progress: bool = True,
+    ray: str | None = None,
+    batch: int = BATCH_SIZE,
+) -> list[str]:
+    """Verify every entry on a deterministic sample of its episodes, and every summary on its committed records.
+
+    Each level of each entry re-runs the episodes :func:`sample_indices` picks (seeded as in the suite, so
+    each is the very episode the entry counted) and compares their records with the committed ones; the
+    level summaries and the pooled summary are recomputed from the committed records and compared with the
+    committed summaries. An entry whose suite changed is stale, as in :func:`verify_entries`. Every suite,
+    policy and level is checked; a number changed anywhere in an entry is caught (in a record that is
+    re-run, by the re-run; in a summary, by the recomputation); a record that is not re-run is checked only
+    through the summaries it feeds.
+
+    Returns:
+        Problems, one line each (empty when all reproduce).
+    """
+    problems: list[str] = []
+    requests: list[EvalRequest] = []
+    checks: list[tuple[str, list[Mapping[str, Any]]]] = []
+    costs: list[list[float]] = []
+    for entry in entries:
+        name = f"{entry['suite']['name']}/{entry['policy']['name']}"
+        try:
+            suite = find_suite(entry["suite"]["name"], suites_dir)
+            if suite.sha256 != entry["suite"]["sha256"] or suite.version != entry["suite"]["version"]:
+                problems.append(f"{name}: stale, made for suite version {entry['suite']['version']}; regenerate it")
+                continue
+            policy = policy_from_entry(entry["policy"])
+        except ValueError as exc:
+            problems.append(f"{name}: {exc}")
+            continue
+        problems += [f"{name}: {d}" for d in _summary_problems(suite, entry, rtol)]
+        levels = suite.levels()
+        if [lv["label"] for lv in entry["levels"]] != [label for label, _ in levels]:
+            problems.append(f"{name}: its levels are not the suite's ({len(entry['levels'])} != {len(levels)})")
+            continue
+        for (label, kwargs), level in zip(levels, entry["levels"], strict=True):
+            picked = sample_indices(suite.episodes, suite.campaign_runs, per_level)
+            for first in picked[:: suite.campaign_runs]:
+                n = suite.campaign_runs
+                requests.append(
+                    EvalRequest(
+                        env_id=suite.env_id,
+                        policy=policy,
+                        episodes=n,
+                        seed=suite.seed_start + first,
+                        env_kwargs=dict(kwargs),
+                        label=label,
+                        campaign_runs=n,
+                        env_kwargs_from=f"suite {suite.name}",
+                    )
+                )
+                committed = level["episodes"][first : first + n]
+                checks.append((f"{name} [{label}]", committed))
+                costs.append([float(e.get("wall_time_s") or 0.0) for e in committed])
+    fresh = evaluate_many(requests, progress=progress, workers=workers, ray=ray, batch=batch, costs=costs)
+    for (where, committed), doc in zip(checks, fresh, strict=True):
+        records = [entry_record(e) for e in doc["episodes"]]
+        problems += [f"{where}: {d}" for d in compare_documents(committed, records, rtol, "episodes")]
+    return problems
+
+
+def _summary_problems(suite: Suite, entry: Mapping[str, Any], rtol: float) -> list[str]:
+    """Differences between an entry's committed summaries and those recomputed from its committed records."""
+    out = []
+    for level in entry["levels"]:
+        fresh = jsonable(summarize(list(level["episodes"])))
+        out += compare_documents(level["summary"], fresh, rtol, f"levels[{level['label']}].summary")
+    pooled = [e for lv in entry["levels"] for e in lv["episodes"]]
+    strata = [lv["label"] for lv in entry["levels"] for _ in lv["episodes"]]
+    fresh = jsonable(summarize(pooled, strata if suite.sweep else None))
+    return out + compare_documents(entry["summary"], fresh, rtol, "summary")
+
+
 def timed(fn: Any, *args: Any, **kwargs: Any) -> tuple[Any, float]:
     """``(fn(*args, **kwargs), seconds)``."""
     t0 = time.perf_counter()

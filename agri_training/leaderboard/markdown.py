@@ -14,6 +14,7 @@ from typing import Any
 from agri_training.core.stats import format_interval, paired_comparison
 from agri_training.evaluation.evaluate import INTERVALS_NOTE
 from agri_training.leaderboard.entries import load_entries
+from agri_training.leaderboard.robustness import SUCCESS_FLOOR, level_success, robustness_lines
 from agri_training.leaderboard.suites import (
     ENTRIES_DIR,
     LEADERBOARD_MD,
@@ -220,7 +221,11 @@ def policy_kind(policy: Mapping[str, Any]) -> str:
 
 
 def render_markdown(entries: Sequence[Mapping[str, Any]], suites: Sequence[Suite]) -> str:
-    """LEADERBOARD.md: per env and suite, every entry ranked, with 95 % intervals; privileged ones marked."""
+    """LEADERBOARD.md: per env and suite, every entry ranked, with 95 % intervals; privileged ones marked.
+
+    Stress suites add each policy's success by level, and each env with stress suites ends with its
+    robustness lines (:func:`~agri_training.leaderboard.robustness.robustness_lines`).
+    """
     lines = [
         "# agri_envs leaderboard",
         "",
@@ -248,9 +253,17 @@ def render_markdown(entries: Sequence[Mapping[str, Any]], suites: Sequence[Suite
             )
             lines += [f"### {suite.name} (v{suite.version})", "", suite.description, ""]
             levels = len(suite.levels())
+            swept = " and ".join(f"`{p}`" for p in suite.sweep[0]) if suite.sweep else ""
+            # one argument: its values; several changed together: each level's assignment
+            one = suite.sweep is not None and len(suite.sweep[0]) == 1
+            values = ", ".join(
+                f"`{row[0]}`" if one else f"`{v}`"
+                for row, v in zip(suite.sweep[1] if suite.sweep else [], suite.level_values(), strict=False)
+            )
             lines.append(
-                f"Seeds {suite.seed_start}-{suite.seed_start + suite.episodes - 1}"
-                + (f" at each of {levels} levels of `{suite.sweep[0]}`" if suite.sweep else "")
+                (f"Stress suite, axis **{suite.stress}**. " if suite.stress else "")
+                + f"Seeds {suite.seed_start}-{suite.seed_start + suite.episodes - 1}"
+                + (f" at each of {levels} levels of {swept} ({values})" if suite.sweep else "")
                 + (
                     f", in {suite.episodes // suite.campaign_runs} campaigns of {suite.campaign_runs} runs "
                     "(one world and one policy each)"
@@ -268,6 +281,7 @@ def render_markdown(entries: Sequence[Mapping[str, Any]], suites: Sequence[Suite
                 ["#", "policy", "kind", "episodes"]
                 + [f"{metric_label(r.metric)} {'↑' if r.higher_is_better else '↓'}" for r in suite.rank_by]
                 + ["vs #1"]
+                + (["success by level"] if suite.stress else [])
             )
             lines += ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
             first = suite.rank_by[0]
@@ -288,9 +302,33 @@ def render_markdown(entries: Sequence[Mapping[str, Any]], suites: Sequence[Suite
                 else:
                     c = compare_entries(e, group[0], first.metric, first.higher_is_better)
                     cells.append("n/a" if c is None else ("worse" if c.verdict == "worse" else "not distinguishable"))
+                if suite.stress:
+                    cells.append(level_rates(e))
                 lines.append("| " + " | ".join(cells) + " |")
             lines.append("")
+        robust = robustness_lines(env_id, suites, entries)
+        if robust:
+            lines += [
+                f"### Robustness: where each policy first drops below {SUCCESS_FLOOR:.2f} success",
+                "",
+                "On each stress suite above (levels from the env's default out to its limits), the first level "
+                f"whose success falls below {SUCCESS_FLOOR:.2f}, with its interval, and the dominant kind of "
+                "failure there (crash, stall, time-out; see `agri_training/leaderboard/robustness.py`).",
+                "",
+                *robust,
+                "",
+            ]
     return "\n".join(lines).rstrip() + "\n"
+
+
+def level_rates(entry: Mapping[str, Any]) -> str:
+    """An entry's success rate at each level, in order: ``1.00 / 0.95 / 0.60`` (below the floor in bold)."""
+    rates = []
+    for level in entry["levels"]:
+        k, n = level_success(level)
+        text = f"{k / n:.2f}" if n else "-"
+        rates.append(f"**{text}**" if n and k / n < SUCCESS_FLOOR - 1e-9 else text)
+    return " / ".join(rates)
 
 
 def leaderboard_is_current(

@@ -9,6 +9,9 @@ A suite is ``leaderboard/suites/<name>.yaml`` (format: ``docs/leaderboard.md``):
     description: Harik sec. 3.4 ...
     env_kwargs: {scene: corridor, n_people: 1}   # pinned here, not looked up by scenario name
     sweep: {parameter: growth, values: [0.0, 0.5, 1.0]}   # optional: one level per value
+    # or several arguments changed together, one row of values per level:
+    # sweep: {parameters: [n_robots, office_width], values: [[4, 14.0], [32, 28.0]]}
+    stress: crowd                    # optional: a stress suite, sweeping this robustness axis (needs a sweep)
     seeds: {start: 100000, episodes: 20}           # per level; held out: start >= 100000
     campaign: {runs: 4}              # optional: episodes in campaigns of 4 runs, one policy per campaign
     fewer_episodes: why              # required in a committed suite with under 20 episodes per level
@@ -85,6 +88,7 @@ _SUITE_KEYS = (
     "traces",
     "rank_by",
     "generalization",
+    "stress",
 )
 
 
@@ -102,7 +106,8 @@ class Suite:
         rank_by: Summary keys to rank by, most important first (at least one).
         description: What the suite reproduces.
         scenario: Named preset the arguments were copied from, or None.
-        sweep: Optional ``(argument, values)``: one level per value.
+        sweep: Optional ``(arguments, rows)``: one level per row, each row the values of ``arguments`` at that
+            level (``sweep: {parameter: P, values: [...]}`` is the one-argument form).
         traces: Episodes per level re-run with per-step traces for the report's plots, >= 0.
         generalization: Every level lies outside the env's training distribution (checked here).
         campaign_runs: Runs per campaign (``campaign: {runs: R}``): the episodes of a level are driven in
@@ -112,6 +117,9 @@ class Suite:
             env that can run it.
         fewer_episodes: Why a level has fewer than :data:`MIN_EPISODES` episodes ("" when it has enough);
             committed suites must give a reason (a test checks it).
+        stress: The robustness axis a stress suite sweeps (``crowd``, ``speed``, ``corridor-width``, ...), or
+            None for a paper or generalization suite. A stress suite sweeps from the env's default out to the
+            limits its config allows, so the report can say at which level each policy breaks.
         sha256: Hash of the file's bytes (set by :func:`load_suite`).
     """
 
@@ -124,12 +132,13 @@ class Suite:
     rank_by: tuple[RankKey, ...]
     description: str = ""
     scenario: str | None = None
-    sweep: tuple[str, tuple[Any, ...]] | None = None
+    sweep: tuple[tuple[str, ...], tuple[tuple[Any, ...], ...]] | None = None
     traces: int = 1
     generalization: bool = False
     campaign_runs: int = 1
     policies: tuple[str, ...] | None = None
     fewer_episodes: str = ""
+    stress: str | None = None
     sha256: str = ""
 
     def __post_init__(self) -> None:
@@ -147,8 +156,21 @@ class Suite:
             raise ValueError("rank_by must name at least one summary key")
         if self.traces < 0:
             raise ValueError(f"traces must be >= 0, got {self.traces}")
-        if self.sweep is not None and (not self.sweep[1] or self.sweep[0] in self.env_kwargs):
-            raise ValueError(f"sweep must give values for an argument not also in env_kwargs, got {self.sweep!r}")
+        if self.sweep is not None:
+            names, rows = self.sweep
+            if not names or len(set(names)) != len(names) or set(names) & set(self.env_kwargs):
+                raise ValueError(f"sweep must name distinct arguments not also in env_kwargs, got {list(names)}")
+            if not rows or any(len(row) != len(names) for row in rows):
+                raise ValueError(f"sweep must give, per level, one value for each of {list(names)}, got {rows!r}")
+            if len({repr(row) for row in rows}) != len(rows):
+                raise ValueError(f"sweep levels must differ, got {rows!r}")
+        if self.stress is not None:
+            if not re.fullmatch(r"[a-z0-9][a-z0-9-]*", self.stress):
+                raise ValueError(f"stress must name an axis (lowercase letters, digits and '-'), got {self.stress!r}")
+            if self.sweep is None or len(self.sweep[1]) < 2:
+                raise ValueError(f"stress: {self.stress} needs a sweep of at least 2 levels along its axis")
+            if self.generalization:
+                raise ValueError("a suite is a stress suite or a generalization suite, not both")
         if self.generalization:
             verdict = outside_training(self)
             if verdict is None:
@@ -184,8 +206,16 @@ class Suite:
         """``(label, env_kwargs)`` of each level: one, or one per sweep value."""
         if self.sweep is None:
             return [(self.name, dict(self.env_kwargs))]
-        key, values = self.sweep
-        return [(f"{self.name} {key}={v}", {**self.env_kwargs, key: v}) for v in values]
+        names, rows = self.sweep
+        return [
+            (" ".join([self.name, *(f"{k}={v}" for k, v in zip(names, row, strict=True))]),
+             {**self.env_kwargs, **dict(zip(names, row, strict=True))})
+            for row in rows
+        ]
+
+    def level_values(self) -> list[str]:
+        """Each level's swept values, short (``n_people=8``; ``n_robots=32 office_width=28``), for plot axes."""
+        return [label.removeprefix(self.name).strip() or self.name for label, _ in self.levels()]
 
 
 def outside_training(suite: Suite) -> dict[str, dict[str, list[str]]] | None:
@@ -200,6 +230,30 @@ def outside_training(suite: Suite) -> dict[str, dict[str, list[str]]] | None:
         return None
     distribution, defaults = declared
     return {label: distribution.outside(kwargs, defaults) for label, kwargs in suite.levels()}
+
+
+def parse_sweep(doc: Any) -> tuple[tuple[str, ...], tuple[tuple[Any, ...], ...]] | None:
+    """A suite's ``sweep`` mapping as ``(arguments, rows)``: one argument, or several changed together.
+
+    Raises:
+        ValueError: For a malformed mapping.
+    """
+    if doc is None:
+        return None
+    if isinstance(doc, Mapping) and set(doc) == {"parameter", "values"} and isinstance(doc["values"], list):
+        return (str(doc["parameter"]),), tuple((v,) for v in doc["values"])
+    if (
+        isinstance(doc, Mapping)
+        and set(doc) == {"parameters", "values"}
+        and isinstance(doc["parameters"], list)
+        and isinstance(doc["values"], list)
+        and all(isinstance(row, list) for row in doc["values"])
+    ):
+        return tuple(str(p) for p in doc["parameters"]), tuple(tuple(row) for row in doc["values"])
+    raise ValueError(
+        "sweep must be {parameter: NAME, values: [...]} or {parameters: [NAME, ...], values: [[...], ...]} "
+        f"(one row per level), got {doc!r}"
+    )
 
 
 def parse_suite(doc: Mapping[str, Any], sha256: str = "") -> Suite:
@@ -217,11 +271,7 @@ def parse_suite(doc: Mapping[str, Any], sha256: str = "") -> Suite:
     seeds = doc["seeds"]
     if not isinstance(seeds, Mapping) or set(seeds) != {"start", "episodes"}:
         raise ValueError(f"seeds must be a mapping with exactly 'start' and 'episodes', got {seeds!r}")
-    sweep = doc.get("sweep")
-    if sweep is not None:
-        if not isinstance(sweep, Mapping) or set(sweep) != {"parameter", "values"}:
-            raise ValueError(f"sweep must be a mapping with exactly 'parameter' and 'values', got {sweep!r}")
-        sweep = (str(sweep["parameter"]), tuple(sweep["values"]))
+    sweep = parse_sweep(doc.get("sweep"))
     campaign = doc.get("campaign")
     if campaign is not None and (not isinstance(campaign, Mapping) or set(campaign) != {"runs"}):
         raise ValueError(f"campaign must be a mapping with exactly 'runs', got {campaign!r}")
@@ -249,6 +299,7 @@ def parse_suite(doc: Mapping[str, Any], sha256: str = "") -> Suite:
         campaign_runs=int(campaign["runs"]) if campaign else 1,
         policies=tuple(policies) if policies is not None else None,
         fewer_episodes=str(doc.get("fewer_episodes") or "").strip(),
+        stress=str(doc["stress"]) if doc.get("stress") is not None else None,
         sha256=sha256,
     )
 

@@ -27,6 +27,19 @@ Before PPO's first rollout, :func:`pretrain_from_baseline`
    shows it. The baseline keeps the memory it builds from what it is shown (a chain's recorded trails, a
    state machine's phase), so its labels answer the learner's run, as the baseline would go on from there.
 
+The demonstrations may come from a Minari dataset that ``agri dataset`` wrote instead of a live run::
+
+    pretrain: {dataset: agri/GreenhouseNav-v2/harik-apf-gt-v0, epochs: 10}
+
+Its episodes are read as step 1 would have recorded them: the dataset's env must be the training env (its id,
+and its arguments up to what the baseline adds). Where those arguments change more than extra observation keys,
+the training env replays each episode's recorded actions from its seed in lockstep, exactly as beside a live
+baseline, and must agree on every reward and end. ``seed`` and ``episodes`` keep their meaning: the dataset's
+episodes of seeds ``seed .. seed + episodes - 1`` are the demonstrations (the dataset must hold them all), and
+DAgger's seeds follow; ``policy`` (the labeller of DAgger rounds) defaults to the dataset's and must be it. Cloned
+from a dataset, the demonstrations (and so the weights) equal those of the same baseline driven live on the
+same seeds.
+
 A PettingZoo env (the robot chain) is cloned the same way into the parameter-shared policy: every agent's
 decision is one sample, each agent's decisions one trajectory for the returns, and the baseline is the
 multi-agent policy that commands every agent at once (``apoorva-chain``).
@@ -47,6 +60,7 @@ import numpy as np
 
 import agri_envs
 from agri_baselines import make_policy, policy_spec
+from agri_training.core import datasets
 from agri_training.learned.policy import ObservationReplay, observation_chain
 
 
@@ -55,7 +69,8 @@ class PretrainSpec:
     """The ``pretrain`` block of a hyperparameter file.
 
     Attributes:
-        policy: Registered baseline of the env whose actions are cloned.
+        policy: Registered baseline of the env whose actions are cloned (with ``dataset``: the dataset's policy,
+            the default; DAgger rounds need it registered).
         episodes: Demonstration episodes, >= 1.
         epochs: Passes over the demonstrations, >= 1.
         seed: First demonstration seed (``seed .. seed + episodes - 1``), below 100000.
@@ -72,9 +87,10 @@ class PretrainSpec:
             component ``i`` is below ``x`` count ``w`` times in the action loss. A rare, decisive action (a
             safety stop's step back: about 1 % of harik-apf-gt's decisions) is otherwise smoothed away by the
             mean-squared fit.
+        dataset: Minari id of an ``agri dataset`` dataset to clone from instead of driving the baseline.
     """
 
-    policy: str
+    policy: str = ""
     episodes: int = 100
     epochs: int = 10
     seed: int = 50_000
@@ -85,8 +101,11 @@ class PretrainSpec:
     dagger_epochs: int = 10
     dagger_noise: float = 0.0
     emphasize: Mapping[str, float] | None = None
+    dataset: str | None = None
 
     def __post_init__(self) -> None:
+        if not self.policy and not self.dataset:
+            raise ValueError("pretrain: give policy (a baseline to drive) or dataset (a Minari id of its episodes)")
         if self.emphasize is not None:
             given = dict(self.emphasize)
             if sorted(given) != ["action", "below", "weight"]:
@@ -281,6 +300,121 @@ def demonstrate(
     )
 
 
+def demonstrate_dataset(spec: PretrainSpec, config: Mapping[str, Any]) -> tuple[PretrainSpec, Demonstrations]:
+    """Step 1 from a dataset's episodes instead of a live baseline (see the module doc).
+
+    Args:
+        spec: The ``pretrain`` block, with ``dataset``.
+        config: The resolved training config.
+
+    Returns:
+        The spec with the dataset's policy; the demonstrations of its episodes on seeds ``spec.seed ..``.
+
+    Raises:
+        ValueError: When the dataset is missing, lacks one of the seeds, ran another env or another policy than
+            ``spec.policy``, or its arguments change the training env's dynamics.
+    """
+    assert spec.dataset is not None
+    dataset = datasets.load(spec.dataset)
+    described = datasets.describe(dataset)
+    meta = dataset.storage.metadata[datasets.METADATA_KEY]
+    if spec.policy and spec.policy != meta["policy"]:
+        raise ValueError(f"pretrain: dataset {spec.dataset} was driven by {meta['policy']}, not {spec.policy}")
+    spec = dataclasses.replace(spec, policy=str(meta["policy"]))
+    seeds = range(spec.seed, spec.seed + spec.episodes)
+    env_id = config["env_id"]
+    if described.env_id != env_id:
+        raise ValueError(f"pretrain: dataset {spec.dataset} ran {described.env_id}, not {env_id}")
+    learner_kwargs = {**config["env_kwargs"], **config.get("train_env_kwargs", {})}
+    recorded = described.make()
+    learner_env = agri_envs.make(env_id, **learner_kwargs)
+    # What the dataset's arguments change beyond extra observation keys (and the time limit, which gym.make holds).
+    unwrapped: Any = learner_env.unwrapped
+    changed = unwrapped.config.differences(recorded.unwrapped.config.to_dict())
+    if not described.parallel and learner_env.spec.max_episode_steps != recorded.spec.max_episode_steps:
+        changed.append("max_episode_steps")
+    recorded.close()
+    if described.parallel:
+        learner_env.close()
+        if changed:
+            raise ValueError(f"pretrain: dataset {spec.dataset}'s {env_id} differs from the training env in {changed}")
+        return spec, _dataset_agents(dataset, seeds)
+    space = learner_env.observation_space
+    keys = list(space.spaces) if isinstance(space, gym.spaces.Dict) else None
+    _, chain = observation_chain(learner_env, config.get("wrappers", []))
+    replay = ObservationReplay(chain)
+    own = learner_env if changed else None
+    repeat = int(config.get("action_repeat", 1))
+    observations: list[Any] = []
+    actions: list[np.ndarray] = []
+    rewards: list[float] = []
+    ends: list[bool] = []
+    successes = runs = 0
+    for meta_ep, episode in datasets.episodes(dataset, seeds):
+        seed = int(meta_ep["seed"])
+        runs += 1
+
+        def recorded_obs(t: int, ep: Any = episode) -> Any:
+            if isinstance(ep.observations, Mapping):
+                return {k: v[t] for k, v in ep.observations.items()}
+            return ep.observations[t]
+
+        shown = own.reset(seed=seed)[0] if own is not None else recorded_obs(0)
+        for step, action in enumerate(episode.actions):
+            if step % repeat == 0:  # a decision of the learner, as in demonstrate()
+                seen = {k: shown[k] for k in keys} if keys is not None else shown
+                observations.append(replay(seen, new_episode=step == 0))
+                actions.append(np.clip(np.asarray(action, dtype=np.float32), -1.0, 1.0))
+                rewards.append(0.0)
+                ends.append(False)
+            reward = float(episode.rewards[step])
+            if own is not None:
+                shown, own_reward, *own_ends, _ = own.step(action)
+                if (own_reward, *own_ends) != (reward, episode.terminations[step], episode.truncations[step]):
+                    raise ValueError(
+                        f"pretrain: dataset {spec.dataset}'s arguments {dict(described.env_kwargs)} change {env_id}'s "
+                        f"dynamics (seed {seed}, step {step}: reward {reward} against the training env's {own_reward})"
+                    )
+            else:
+                shown = recorded_obs(step + 1)
+            rewards[-1] += reward
+        if len(episode.actions) and (episode.terminations[-1] or episode.truncations[-1]):
+            ends[-1] = True
+            successes += int(bool(episode.infos["is_success"][-1]))
+    learner_env.close()
+    if not actions:
+        raise ValueError(f"pretrain: dataset {spec.dataset} holds no steps")
+    return spec, Demonstrations(
+        _stack(observations), np.stack(actions), np.array(rewards), np.array(ends), successes, runs
+    )
+
+
+def _dataset_agents(dataset: Any, seeds: Sequence[int]) -> Demonstrations:
+    """:func:`demonstrate_dataset` on a PettingZoo env: every agent's episode one trajectory, as live."""
+    observations, actions, rewards, ends = [], [], [], []
+    successes, runs, first_agent = 0, set(), None
+    for meta, episode in datasets.episodes(dataset, seeds):
+        first_agent = first_agent or meta["agent"]
+        runs.add(int(meta["run"]))
+        steps = len(episode.actions)
+        observations.append(np.asarray(episode.observations[:steps], dtype=np.float32))
+        actions.append(np.clip(np.asarray(episode.actions, dtype=np.float32), -1.0, 1.0))
+        rewards.append(np.asarray(episode.rewards, dtype=np.float64))
+        agent_ends = np.zeros(steps, dtype=bool)
+        agent_ends[-1] = True
+        ends.append(agent_ends)
+        if meta["agent"] == first_agent:  # the first agent's info speaks for the team
+            successes += int(bool(episode.infos["is_success"][-1]))
+    return Demonstrations(
+        np.concatenate(observations),
+        np.concatenate(actions),
+        np.concatenate(rewards),
+        np.concatenate(ends),
+        successes,
+        len(runs),
+    )
+
+
 def _demonstrate_agents(
     spec: PretrainSpec, env_id: str, env_kwargs: Mapping[str, Any], seeds: Sequence[int], learner: Learner | None
 ) -> Demonstrations:
@@ -407,7 +541,10 @@ def pretrain_from_baseline(model: Any, venv: Any, config: Mapping[str, Any]) -> 
 
     spec = PretrainSpec.from_config(config["pretrain"])
     gamma = float(config["algo_kwargs"].get("gamma", 0.99))
-    demos = demonstrate(spec, config)
+    if spec.dataset:
+        spec, demos = demonstrate_dataset(spec, config)
+    else:
+        demos = demonstrate(spec, config)
     baseline_success, first_skipped = demos.successes / demos.episodes, demos.skipped
     if venv is not None:
         _set_statistics(venv, demos, gamma)
@@ -435,6 +572,7 @@ def pretrain_from_baseline(model: Any, venv: Any, config: Mapping[str, Any]) -> 
     _, (last_action, last_value) = losses[-1]  # the last batch of the last fit
     return {
         "policy": spec.policy,
+        **({"dataset": spec.dataset} if spec.dataset else {}),
         "episodes": spec.episodes,
         "seeds": [spec.seed, spec.seed + spec.episodes - 1],
         "baseline_success_rate": baseline_success,

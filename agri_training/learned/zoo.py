@@ -99,7 +99,7 @@ register_policy(
 register_policy(
     PolicySpec(
         name="dagger-greenhouse-coverage",
-        env_id="agri_envs/GreenhouseCoverage-v1",
+        env_id="agri_envs/GreenhouseCoverage-v2",
         entry_point="agri_training.learned.zoo:load_zoo_policy",
         env_kwargs={},
         description="Learned by imitation (agri_training/zoo/dagger-greenhouse-coverage): sonars read as left-right "
@@ -107,7 +107,7 @@ register_policy(
         "env's training distribution with 8 DAgger rounds, no PPO steps",
         learned=True,
         algo="ppo",
-        train_command="agri train --env agri_envs/GreenhouseCoverage-v1 --algo ppo --seed 2 --out runs/cov-dagger-s2",
+        train_command="agri train --env agri_envs/GreenhouseCoverage-v2 --algo ppo --seed 2 --out runs/cov-dagger-s2",
     )
 )
 

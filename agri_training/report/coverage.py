@@ -1,4 +1,4 @@
-"""Report section of GreenhouseCoverage-v1 (González 2009): coverage table and the paper's figures.
+"""Report section of GreenhouseCoverage-v2 (González 2009): coverage table and the paper's figures.
 
 * planned path over the map with the driven trajectory (Figs. 10-12);
 * raw and peak-filtered lateral sonar series along a corridor (Fig. 9, eq. 1);
@@ -198,7 +198,7 @@ def plot_sensory_map(result: dict[str, Any], seed: int, episode: dict[str, Any],
 
 
 def report_section(results: list[dict[str, Any]], out_dir: Path) -> str:
-    """Markdown (with PNG plots written to ``out_dir``) for the GreenhouseCoverage-v1 results.
+    """Markdown (with PNG plots written to ``out_dir``) for the GreenhouseCoverage-v2 results.
 
     Args:
         results: Evaluation result documents (``agri_training.evaluate``), one per policy and scenario.

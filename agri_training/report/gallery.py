@@ -33,7 +33,7 @@ from agri_training.learned import zoo  # noqa: F401  (registers the shipped lear
 #: Env families of the site: (page name, env id, preset ids that share the page).
 ENV_PAGES = (
     ("greenhouse-nav", "agri_envs/GreenhouseNav-v2", ()),
-    ("greenhouse-coverage", "agri_envs/GreenhouseCoverage-v1", ()),
+    ("greenhouse-coverage", "agri_envs/GreenhouseCoverage-v2", ()),
     ("robot-chain", "robot_chain_v1", ()),
     ("grape-harvest", "agri_envs/GrapeHarvest-v1", ("agri_envs/GrapeHarvestReach-v1",)),
 )
@@ -90,6 +90,12 @@ API_PAGES = (
         ),
     ),
     (
+        "datasets",
+        "agri_training.datasets",
+        "Minari datasets of any policy on any env (agri dataset): the request, the format, the step recorder.",
+        ("agri_training.datasets", "agri_training.core.datasets", "agri_training.evaluation.recording"),
+    ),
+    (
         "leaderboard",
         "agri_training.leaderboard",
         "Pinned suites, entries, verify and LEADERBOARD.md (format: docs/leaderboard.md in the repository).",
@@ -113,13 +119,17 @@ API_PAGES = (
     ),
 )
 
+#: The repository's docs/ folder, and the hand-written guides of it that the site carries (in mkdocs.yml's nav).
+DOCS_DIR = Path(__file__).resolve().parents[2] / "docs"
+GUIDE_PAGES = ("datasets.md",)
+
 INDEX = """\
 # agri_envs
 
 Gymnasium / PettingZoo environments for agricultural robots, with the controllers of published papers as
 scripted baselines and learned policies (stable-baselines3) benchmarked against them. The README is the
 short path in (set-up, `agri` commands); these pages document each env in full, each
-[policy](policies/index.md), and the [Python API](api/index.md).
+[policy](policies/index.md), [demonstration datasets](datasets.md), and the [Python API](api/index.md).
 
 | env | page |
 |---|---|
@@ -296,6 +306,10 @@ def build_docs_source(out_dir: Path) -> list[Path]:
         pages.append(path)
         listing.append(f"| [{title}]({name}.md) | {_cell(what)} |")
     (out_dir / "api" / "index.md").write_text("\n".join(listing) + "\n")
+    for name in GUIDE_PAGES:  # guides written by hand, kept in the repository's docs/
+        path = out_dir / name
+        path.write_text((DOCS_DIR / name).read_text())
+        pages.append(path)
     return [index_path, *pages]
 
 

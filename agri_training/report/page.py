@@ -44,13 +44,14 @@ from agri_training.evaluation.reference import PolicyRef, build_policy
 from agri_training.evaluation.video import shrink_frame, write_clip
 from agri_training.learned.zoo import ZOO_DIR
 from agri_training.report.generalization import generalization_section
+from agri_training.report.robustness import glance_table, robustness_section
 
 #: Per-env report sections: env id -> ``"module:function"`` (see the module docstring).
 SECTION_HOOKS: dict[str, str] = {
     "agri_envs/GreenhouseNav-v2": "agri_training.report.rover:report_section",
     "agri_envs/GrapeHarvest-v1": "agri_training.report.arm:report_section",
     "robot_chain_v1": "agri_training.report.chain:report_section",
-    "agri_envs/GreenhouseCoverage-v1": "agri_training.report.coverage:report_section",
+    "agri_envs/GreenhouseCoverage-v2": "agri_training.report.coverage:report_section",
 }
 
 #: Success rates the papers report, as (successes, trials, source), per suite name: our rate is compared
@@ -784,6 +785,10 @@ def leaderboard_table(group: Sequence[Row]) -> list[str]:
     """The suite's ranked table with intervals (as in LEADERBOARD.md) plus where each number came from."""
     md = lb.render_markdown([r.entry for r in group], [group[0].suite])
     body = md.split(f"### {group[0].suite.name} (v{group[0].suite.version})", 1)[1].strip().splitlines()
+    # up to the next heading (a stress suite's env section ends with its robustness lines, drawn elsewhere here)
+    body = body[: next((i for i, line in enumerate(body) if line.startswith("#")), len(body))]
+    while body and not body[-1].strip():
+        body.pop()
     fresh = [r.entry["policy"]["name"] for r in group if not r.committed]
     if fresh:
         body += [
@@ -830,7 +835,7 @@ def build_report(
     runs = find_runs(runs_dir) + zoo_runs()
     env_ids = list(dict.fromkeys(s.env_id for s in suites))
 
-    parts = ["# agri_envs evaluation report", "", INTRO]
+    parts = ["# agri_envs evaluation report", ""]
     if episodes is not None:
         parts += [
             f"**Smoke test, not results. Quick look: {episodes} episodes per suite level** (`--episodes "
@@ -840,37 +845,21 @@ def build_report(
             "run `agri report` without `--episodes`.",
             "",
         ]
-    parts += ["Envs in this report:", ""]
-    parts += [f"- [{e}](#{_anchor(e)})" for e in env_ids]
-    parts += ["", "## Who wins where", ""]
-    claims_all = []
-    for env_id in env_ids:
-        for suite in (s for s in suites if s.env_id == env_id):
-            group = [r for r in rows if r.suite.name == suite.name]
-            if len(group) > 1:
-                claims_all += comparison_table(group)[1]
-            for r in group:
-                line = paper_rate_line(r)
-                if line:
-                    claims_all.append(f"{suite.name}: {line}")
-    parts += [f"- {c}" for c in claims_all] or ["Only one policy per suite so far: nothing to compare."]
-    parts += [
-        "",
-        "No learned policy has an entry yet: the comparisons are between the baselines. Submit one with "
-        "`agri leaderboard submit --suite all --policy RUN_DIR` (docs/leaderboard.md)."
-        if not any(r.entry["policy"]["kind"] == "learned" for r in rows)
-        else "",
-        "",
-    ]
+    shown = [(r.suite, r.entry) for r in rows]
+    parts += glance_lines(env_ids, suites, shown)
+    parts += ["## How to read this report", "", INTRO]
     for env_id in env_ids:
         env_suites = [s for s in suites if s.env_id == env_id]
         parts += [f"## {env_id}", "", _env_blurb(env_id), ""]
+        robust = robustness_section(env_id, suites, shown, out_dir)
+        if robust:
+            parts += [f"### {_robustness_heading(env_id)}", "", *robust, ""]
         parts += ["### Leaderboard", "", INTERVALS_NOTE, ""]
         for suite in env_suites:
             group = [r for r in rows if r.suite.name == suite.name]
             parts += [f"#### {suite.name} (v{suite.version})", "", *leaderboard_table(group), ""]
-            if len(group) > 1:
-                table, _ = comparison_table(group)
+            table = comparison_table(group)[0] if len(group) > 1 else []
+            if len(table) > 2:  # a header alone (no pair to compare) is not shown
                 parts += [
                     "Paired comparisons on the same seeds: difference X - Y of the means (or rates) with its "
                     "95 % interval, the probability that X does better than Y on a random pair of episodes, "
@@ -902,6 +891,7 @@ def build_report(
             except ImportError as exc:
                 section = f"(plots unavailable: {exc})"
             parts += ["### Paper reproduction and plots", "", section, ""]
+    parts += who_wins_where(env_ids, suites, rows)
     commits = sorted({r.entry["git_commit"][:10] for r in rows})
     parts += [
         "## How this report was made",
@@ -930,6 +920,112 @@ def _anchor(text: str) -> str:
     return re.sub(r"[^a-z0-9]+", "-", text.lower()).strip("-")
 
 
+def _robustness_heading(env_id: str) -> str:
+    return f"{env_id}: robustness under stress"
+
+
+def glance_lines(
+    env_ids: Sequence[str], suites: Sequence[lb.Suite], shown: Sequence[tuple[lb.Suite, Mapping[str, Any]]]
+) -> list[str]:
+    """The page's opening: per env, every policy's success on every suite, in one table each.
+
+    Args:
+        env_ids: The envs of the report, in order.
+        suites: The report's suites.
+        shown: ``(suite, entry)`` pairs of the report.
+
+    Returns:
+        Markdown lines: the ``At a glance`` heading, a legend, and one table per env.
+    """
+    lines = [
+        "## At a glance",
+        "",
+        "Success rate of every policy on every suite, over the suite's held-out episodes: the papers' suites, "
+        "the generalization suites (scenes outside every training range) and the stress suites (one axis swept "
+        f"from the env's default out to its limits). **Bold**: below {lb.SUCCESS_FLOOR:.2f}. A stress cell pools "
+        "its levels; ▾ gives its worst level, and the cell is bold when that level is. **P**: privileged (uses "
+        "what a real robot lacks, such as the true pose). `-`: no entry. Intervals, paired comparisons and plots "
+        "are in each env's section below.",
+        "",
+    ]
+    for env_id in env_ids:
+        table = glance_table(env_id, shown)
+        if not table:
+            continue
+        where = f"[details](#{_anchor(env_id)})"
+        if lb.stress_suites(suites, env_id):
+            where += f", [robustness matrix](#{_anchor(_robustness_heading(env_id))})"
+        lines += [f"**{env_id}** ({where})", "", *table, ""]
+    return lines
+
+
+def success_claims(group: Sequence[Row]) -> list[str]:
+    """The paired differences on a suite's first ranking key whose interval excludes zero, as sentences."""
+    suite = group[0].suite
+    first = suite.rank_by[0]
+    fmt = "{:+" + lb.metric_format(first.metric)[2:]
+    claims = []
+    for a, b in _pairs(group):
+        c = compare(a.entry, b.entry, first.metric, first.higher_is_better)
+        if c is None or c.verdict not in ("better", "worse"):
+            continue
+        f = lb.metric_scale(first.metric)
+        diff = f"{fmt.format(c.difference * f)} [{fmt.format(c.ci[0] * f)}, {fmt.format(c.ci[1] * f)}]"
+        verb = "beats" if c.verdict == "better" else "is worse than"
+        na, nb = a.entry["policy"]["name"], b.entry["policy"]["name"]
+        claims.append(f"{suite.name}: `{na}` {verb} `{nb}` on {_metric_name(first.metric)} ({diff}).")
+    return claims
+
+
+def who_wins_where(env_ids: Sequence[str], suites: Sequence[lb.Suite], rows: Sequence[Row]) -> list[str]:
+    """The paired differences on each suite's first ranking key that the intervals support; the rest collapsed.
+
+    Args:
+        env_ids: The envs of the report, in order.
+        suites: The report's suites.
+        rows: The report's rows.
+
+    Returns:
+        Markdown lines: the ``Who wins where`` section.
+    """
+    short: list[str] = []
+    every: list[str] = []
+    for env_id in env_ids:
+        for suite in (s for s in suites if s.env_id == env_id):
+            group = [r for r in rows if r.suite.name == suite.name]
+            if len(group) > 1:
+                short += success_claims(group)
+                every += comparison_table(group)[1]
+            for r in group:
+                line = paper_rate_line(r)
+                if line:
+                    short.append(f"{suite.name}: {line}")
+    lines = [
+        "## Who wins where",
+        "",
+        "Only the differences on each suite's first ranking key (success) whose paired 95 % interval excludes "
+        "zero; each suite's table above has every pair and metric.",
+        "",
+    ]
+    lines += [f"- {c}" for c in short] or ["No paired difference on success is supported by its interval."]
+    if every:
+        lines += [
+            "",
+            f"<details><summary>Every paired claim, on every ranking metric ({len(every)})</summary>",
+            "",
+            *(f"- {c}" for c in every),
+            "",
+            "</details>",
+        ]
+    if not any(r.entry["policy"]["kind"] == "learned" for r in rows):
+        lines += [
+            "",
+            "No learned policy has an entry yet: the comparisons are between the baselines. Submit one with "
+            "`agri leaderboard submit --suite all --policy RUN_DIR` (docs/leaderboard.md).",
+        ]
+    return [*lines, ""]
+
+
 def markdown_to_html(md: str, title: str) -> str:
     """Render the report's small Markdown subset (headings, tables, images, lists, links, paragraphs) as HTML."""
 
@@ -947,7 +1043,8 @@ def markdown_to_html(md: str, title: str) -> str:
         f"<!doctype html><html><head><meta charset='utf-8'><title>{html.escape(title)}</title>",
         "<style>body{font-family:sans-serif;max-width:1150px;margin:auto;padding:1em;line-height:1.4}"
         "table{border-collapse:collapse;margin:0.5em 0}td,th{border:1px solid #bbb;padding:3px 8px;font-size:0.9em}"
-        "th{background:#eee}code{background:#f4f4f4;padding:0 2px}img{display:block;margin:0.5em 0}</style>"
+        "th{background:#eee}code{background:#f4f4f4;padding:0 2px}img{display:block;margin:0.5em 0}"
+        "img,video{max-width:100%;height:auto}summary{cursor:pointer;font-weight:bold}</style>"
         "</head><body>",
     ]
     lines = md.splitlines()
@@ -955,6 +1052,10 @@ def markdown_to_html(md: str, title: str) -> str:
     while i < len(lines):
         line = lines[i]
         if line.startswith("<!--"):
+            i += 1
+            continue
+        if line.startswith(("<details>", "</details>")):  # a collapsed block: its Markdown inside is rendered
+            out.append(line)
             i += 1
             continue
         if line.startswith("<video ") and line.endswith("</video>"):  # a clip: loads only when played

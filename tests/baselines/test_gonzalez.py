@@ -202,7 +202,7 @@ def test_regulated_lookahead_keeps_a_u_turn_within_a_tenth_of_what_a_fixed_one_c
 def test_a_corridor_cut_into_short_pieces_is_still_planned():
     """Fully grown plants in 1.5 m corridors: junctions at every gap in the rows cut one corridor's diagram
     into pieces shorter than min_corridor_length; together they are a corridor (it was skipped)."""
-    env = gym.make("agri_envs/GreenhouseCoverage-v1", growth=1.0, vegetation_echo_prob=0.3, corridor_width=1.5)
+    env = gym.make("agri_envs/GreenhouseCoverage-v2", growth=1.0, vegetation_echo_prob=0.3, corridor_width=1.5)
     env.reset(seed=8000)
     occ, res, origin = env.unwrapped.true_map()
     plan = plan_coverage(occ, res, env.unwrapped.robot.pose[:2] - np.asarray(origin))
@@ -251,7 +251,7 @@ def test_deliberative_tracks_its_plan_in_corridors_and_turns():
     """González Fig. 12: under 10 cm on a turn. Measured against the plan, on the true pose."""
     from agri_training.evaluation.episode import run_episode
 
-    env = gym.make("agri_envs/GreenhouseCoverage-v1", localization="ground_truth", n_rows=3, row_length=6.0)
+    env = gym.make("agri_envs/GreenhouseCoverage-v2", localization="ground_truth", n_rows=3, row_length=6.0)
     record = run_episode(env, make_policy("gonzalez-deliberative", env), 7, None)["record"]
     assert record["is_success"]
     assert record["cross_track_turns_max"] < 0.10 and record["cross_track_corridors_max"] < 0.10, record
@@ -271,7 +271,7 @@ def test_peak_filter_on_known_series():
 
 def test_vegetation_echoes_and_peak_filter_std_reduction():
     """A lateral sonar along a corridor: slips are long and foliage-only; eq. 1 cuts the std by >= 3x."""
-    env = gym.make("agri_envs/GreenhouseCoverage-v1", localization="ground_truth", vegetation_echo_prob=0.15)
+    env = gym.make("agri_envs/GreenhouseCoverage-v2", localization="ground_truth", vegetation_echo_prob=0.15)
     policy = make_policy("gonzalez-deliberative", env)
     obs, info = env.reset(seed=4)
     raw = []
@@ -354,7 +354,7 @@ def test_mouth_detector_leaves_reaching_into_the_corridor_close_it_only_briefly(
 )
 def test_pseudo_reactive_enters_each_corridor_near_its_centre_line(kw, bound):
     # Seed 8002 at growth 1.0 failed before the entry logic (turned 0.33 m off the centre line, into the crop).
-    env = gym.make("agri_envs/GreenhouseCoverage-v1", localization="odometry", **kw)
+    env = gym.make("agri_envs/GreenhouseCoverage-v2", localization="odometry", **kw)
     policy = make_policy("gonzalez-pseudo-reactive", env)
     obs, _ = env.reset(seed=8002)
     centres = np.array(env.unwrapped.layout.corridors)
@@ -377,7 +377,7 @@ def test_pseudo_reactive_enters_each_corridor_near_its_centre_line(kw, bound):
 
 
 def test_deliberative_solves_default_preset():
-    env = gym.make("agri_envs/GreenhouseCoverage-v1", localization="ground_truth", n_rows=2, row_length=6.0)
+    env = gym.make("agri_envs/GreenhouseCoverage-v2", localization="ground_truth", n_rows=2, row_length=6.0)
     from agri_training.evaluation.episode import run_episode
 
     out = run_episode(env, make_policy("gonzalez-deliberative", env), 0, None)["record"]
@@ -387,7 +387,7 @@ def test_deliberative_solves_default_preset():
 def test_pseudo_reactive_solves_preset_and_returns_its_sensory_map():
     from agri_training.evaluation.episode import run_episode
 
-    env = gym.make("agri_envs/GreenhouseCoverage-v1", localization="odometry", n_rows=2, row_length=6.0)
+    env = gym.make("agri_envs/GreenhouseCoverage-v2", localization="odometry", n_rows=2, row_length=6.0)
     out = run_episode(env, make_policy("gonzalez-pseudo-reactive", env), 1, None)["record"]
     assert out["is_success"] and out["crop_contacts"] == 0 and out["turns"] == 4
     echoes = np.array(out["sensory_map"])
@@ -479,7 +479,7 @@ def test_anchor_corridors_bad_input(kw, match):
 def test_hybrid_plans_its_second_run_on_the_first_runs_map():
     from agri_training.evaluation.episode import run_episode
 
-    env = gym.make("agri_envs/GreenhouseCoverage-v1", localization="odometry", n_rows=2, row_length=6.0, layout_seed=1)
+    env = gym.make("agri_envs/GreenhouseCoverage-v2", localization="odometry", n_rows=2, row_length=6.0, layout_seed=1)
     policy = make_policy("gonzalez-hybrid", env)
     first = run_episode(env, policy, 0, None)["record"]
     second = run_episode(env, policy, 1, None)["record"]
@@ -497,7 +497,7 @@ def _hybrid_campaign(layout, runs, row_length, encoder_scale_std):
     from agri_training.evaluation.episode import run_episode
 
     env = gym.make(
-        "agri_envs/GreenhouseCoverage-v1",
+        "agri_envs/GreenhouseCoverage-v2",
         localization="odometry",
         n_rows=2,
         row_length=row_length,
@@ -537,7 +537,7 @@ def test_report_section_writes_the_figures(tmp_path):
 
     kw = {"n_rows": 1, "row_length": 5.0}
     results = [
-        evaluate(EvalRequest("agri_envs/GreenhouseCoverage-v1", name, 1, 0, env_kwargs=kw), progress=False)
+        evaluate(EvalRequest("agri_envs/GreenhouseCoverage-v2", name, 1, 0, env_kwargs=kw), progress=False)
         for name in ("gonzalez-deliberative", "gonzalez-pseudo-reactive")
     ]
     md = report_section(results, tmp_path)

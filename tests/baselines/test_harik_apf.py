@@ -319,3 +319,26 @@ def test_compiled_scan_zones_are_the_numpy_statement_bit_for_bit(controller):
         args = (scan, controller._cos, controller._sin, *controller._mount, rb.lidar_max_range - 1e-6)
         geometry = (0.5 * rb.length, 0.5 * rb.width, p.front_margin, p.side_lookahead)
         assert scan_zones(*args, *geometry) == scan_zones_reference(*args, *geometry)
+
+
+def test_gains_follow_the_robots_limits_and_are_the_papers_at_the_default():
+    assert HarikApfParams().for_robot(0.6, 1.2, 1.0, 1 / 15) == HarikApfParams()  # bit for bit
+    fast = HarikApfParams().for_robot(1.2, 2.4, 0.5, 1 / 15)
+    assert fast.u_max == pytest.approx(1.0) and fast.r_max == pytest.approx(1.6) and fast.braking_accel == 0.5
+    paper = HarikApfParams()
+    # the speed cap never binds at the paper's speeds (the safety stop acts below 0.35 m)
+    for u in np.linspace(0.0, paper.u_max, 11):
+        for front in (0.35, 0.4, 1.0, math.inf):
+            assert paper.governed_speed(float(u), front) == u
+    # a fast robot slows so that it can stop before the paper's stop distance
+    for front in (0.4, 0.8, 1.2):
+        u = fast.governed_speed(fast.u_max, front)
+        braking = u * u / (2 * fast.braking_accel) + u * fast.reaction_time
+        assert u < fast.u_max and braking == pytest.approx(0.5**2 / 2 + 0.5 / 15 + front - 0.35)
+
+
+@pytest.mark.parametrize("kwargs", [{"max_speed": 1.0}, {"max_speed": 2.0, "max_turn_rate": 2.0}, {"max_accel": 0.1}])
+def test_drives_any_valid_robot_within_the_time_limit(kwargs):
+    # the time limit scales with the robot's limits; Harik's fixed u_max = 0.5 timed out every episode at 1 m/s
+    infos = run({"n_rows": 2, "row_length": 5.0, "n_people": 0, **kwargs}, range(2))
+    assert all(i["is_success"] and not i["collision"] for i in infos), infos

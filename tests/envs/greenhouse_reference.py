@@ -1,8 +1,8 @@
-"""Digests of GreenhouseNav-v2 and GreenhouseCoverage-v1 rollouts, to keep episodes seed-identical across refactorings.
+"""Digests of GreenhouseNav-v2 and GreenhouseCoverage-v2 rollouts, to keep episodes seed-identical across refactorings.
 
 ``tests/data/greenhouse_digests.json`` holds the digests the two envs gave before their resets were made
 fast (pymunk worlds moved instead of rebuilt, static scenes cached): GreenhouseNav's as recorded then,
-GreenhouseCoverage-v1's and the ``distribution`` cases' recorded on the ``learn2d`` branch before it merged the
+GreenhouseCoverage-v2's and the ``distribution`` cases' recorded on the ``learn2d`` branch before it merged the
 fast resets (commit a6d4610, whose GreenhouseNav digests equal the recorded ones); ``test_greenhouse_env.py`` and
 ``test_coverage_env.py`` recompute them. Write the file anew only for a deliberate change of the envs'
 episodes (which also bumps their versions):
@@ -23,7 +23,7 @@ import agri_envs  # noqa: F401
 from agri_envs.scenes import EXAMPLE_MAP
 
 NAV_ID = "agri_envs/GreenhouseNav-v2"
-COVERAGE_ID = "agri_envs/GreenhouseCoverage-v1"
+COVERAGE_ID = "agri_envs/GreenhouseCoverage-v2"
 MAP_WAYPOINTS = [[1.0, 0.6], [8.6, 0.6], [8.6, 2.2], [1.0, 2.2]]
 
 #: GreenhouseNav-v2 arguments whose episodes are pinned (``max_episode_steps`` goes to ``gym.make``).
@@ -62,7 +62,7 @@ NAV_CASES: dict[str, dict] = {
     "distribution": {"scene_distribution": "training", "max_episode_steps": 120},
 }
 
-#: GreenhouseCoverage-v1 arguments whose episodes are pinned.
+#: GreenhouseCoverage-v2 arguments whose episodes are pinned.
 COVERAGE_CASES: dict[str, dict] = {
     "default": {},
     "ground-truth": {"localization": "ground_truth", "n_rows": 2, "row_length": 5.0},

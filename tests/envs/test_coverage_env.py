@@ -1,7 +1,8 @@
-"""GreenhouseCoverage-v1: API checkers, determinism, pickling, config strictness, bad input, rendering, task."""
+"""GreenhouseCoverage-v2: API checkers, determinism, pickling, config strictness, bad input, rendering, task."""
 
 import math
 import pickle
+import warnings
 
 import gymnasium as gym
 import numpy as np
@@ -12,8 +13,9 @@ from rollouts import assert_same, rollout
 import agri_envs  # noqa: F401
 from agri_envs.coverage.config import GreenhouseCoverageConfig
 from agri_envs.coverage.task import CoverageTask, CoverageWeights, serpentine_subgoals
+from agri_envs.scenarios import list_scenarios
 
-ENV_ID = "agri_envs/GreenhouseCoverage-v1"
+ENV_ID = "agri_envs/GreenhouseCoverage-v2"
 SMALL = {"n_rows": 1, "row_length": 4.0}
 
 
@@ -54,7 +56,39 @@ def test_observations_normalised_and_info_keys():
             assert v.dtype == np.float32 and np.all((v >= 0) & (v <= 1)), k
     for key in ("coverage", "cross_track", "max_cross_track", "crop_contacts", "is_success", "n_corridors"):
         assert key in info
-    assert set(obs) == {"sonar", "compass", "velocity", "pose", "memory"} and obs["memory"].shape == (2, 16, 16)
+    assert set(obs) == {"sonar", "compass", "velocity", "pose", "memory"} and obs["memory"].shape == (512,)
+
+
+@pytest.mark.parametrize(
+    "kwargs",
+    [{}, {"scene_distribution": "training"}, *(dict(sc.env_kwargs) for sc in list_scenarios(ENV_ID))],
+    ids=lambda kw: "-".join(f"{k}={v}" for k, v in kw.items()) or "default",
+)
+def test_sb3_check_env_takes_every_coverage_id_without_a_warning(kwargs):
+    # v1's memory was a float32 (2, 16, 16) box: SB3 read it as an image that should be uint8 and warned.
+    from stable_baselines3.common.env_checker import check_env as sb3_check_env
+
+    coverage_ids = [i for i in gym.registry if i.startswith("agri_envs/GreenhouseCoverage")]
+    assert coverage_ids == [ENV_ID]  # the project keeps only the current version
+    for env_id in coverage_ids:
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            sb3_check_env(gym.make(env_id, **kwargs).unwrapped, warn=True, skip_render_check=True)
+        assert not [str(w.message) for w in caught], "SB3's checker warned"
+
+
+def test_memory_is_the_flat_view_in_c_order_in_both_forms():
+    env = gym.make(ENV_ID, **SMALL)
+    obs, _ = env.reset(seed=4)
+    for _ in range(30):
+        obs, *_ = env.step(np.array([1.0, 0.2], np.float32))
+    assert obs["memory"].shape == (512,) and obs["memory"].sum() > 0
+    envs = gym.make_vec(ENV_ID, num_envs=2, **SMALL)
+    vobs, _ = envs.reset(seed=4)
+    for _ in range(30):
+        vobs, *_ = envs.step(np.tile(np.array([1.0, 0.2], np.float32), (2, 1)))
+    assert vobs["memory"].shape == (2, 512) and np.array_equal(vobs["memory"][0], obs["memory"])
+    envs.close()
 
 
 def test_bad_actions_and_config():
@@ -145,10 +179,11 @@ def test_a_corridor_with_exactly_the_margin_is_accepted(kwargs):
 def test_memory_marks_the_driven_trail_behind_the_robot_and_echoes_beside_it():
     env = gym.make(ENV_ID, n_rows=2, growth=0.3, terminate_on_contact=False)
     obs, _ = env.reset(seed=2)
-    assert obs["memory"][0].sum() == 1 and obs["memory"][0, 7:9, 7:9].sum() == 1  # the start cell, under the robot
+    grid = obs["memory"].reshape(2, 16, 16)  # the flat key in C order
+    assert grid[0].sum() == 1 and grid[0, 7:9, 7:9].sum() == 1  # the start cell, under the robot
     for _ in range(60):  # straight ahead, 2 m into the first corridor
         obs, *_ = env.step(np.array([1.0, 0.0], np.float32))
-    visited, echo = obs["memory"]
+    visited, echo = obs["memory"].reshape(2, 16, 16)
     # Rows are ahead (a), columns to the left (b); the robot sits between cells 7 and 8 of each.
     behind = visited[:8, 6:10].sum(axis=1)
     assert np.all(behind[-4:] >= 1) and visited[10:].sum() == 0 and visited[:, :5].sum() == 0
@@ -167,7 +202,7 @@ def test_memory_is_the_robots_own_estimate():
         obs, info = env.reset(seed=1)
         for _ in range(50):
             obs, _, _, _, info = env.step(np.array([1.0, 0.0], np.float32))
-        trail = np.argwhere(obs["memory"][0])
+        trail = np.argwhere(obs["memory"].reshape(2, 16, 16)[0])
         assert np.all(trail[:, 0] <= 8) and np.all(np.abs(trail[:, 1] - 7.5) <= 1.5)
         grids.append(env.unwrapped.memory.grid[0].copy())
         paths.append((info["x"], info["y"]))

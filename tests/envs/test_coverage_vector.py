@@ -15,7 +15,7 @@ from vector_oracle import assert_contacts_agree, assert_same
 import agri_envs  # noqa: F401
 from agri_envs.coverage.vector import GreenhouseCoverageVectorEnv
 
-ENV_ID = "agri_envs/GreenhouseCoverage-v1"
+ENV_ID = "agri_envs/GreenhouseCoverage-v2"
 #: A small greenhouse the steered sub-envs can cover: one row, two corridors of 3 m, 1 m bins.
 SMALL = {"n_rows": 1, "row_length": 3.0, "bin_length": 1.0, "growth": 0.0, "layout_seed": 5}
 

@@ -10,7 +10,7 @@ from agri_envs.rover.config import GreenhouseNavConfig
 from agri_envs.scenes.distribution import Choice, IntRange, SceneDistribution, SceneFamily, Uniform
 
 NAV = "agri_envs/GreenhouseNav-v2"
-COVER = "agri_envs/GreenhouseCoverage-v1"
+COVER = "agri_envs/GreenhouseCoverage-v2"
 CONFIGS = {NAV: GreenhouseNavConfig, COVER: GreenhouseCoverageConfig}
 
 

@@ -76,10 +76,10 @@ def test_traces_and_reruns_match_the_reference_loop(monkeypatch):
 
 
 def test_which_policies_run_batched(monkeypatch):
-    assert has_batched_form(NAV) and has_batched_form("agri_envs/GreenhouseCoverage-v1")
+    assert has_batched_form(NAV) and has_batched_form("agri_envs/GreenhouseCoverage-v2")
     assert not has_batched_form("robot_chain_v1") and not has_batched_form("agri_envs/GrapeHarvest-v1")
     ref = resolve_policy
-    assert not batchable("agri_envs/GreenhouseCoverage-v1", ref("gonzalez-pseudo-reactive"))  # it reads the env
+    assert not batchable("agri_envs/GreenhouseCoverage-v2", ref("gonzalez-pseudo-reactive"))  # it reads the env
     assert batchable(NAV, ref("harik-apf")) and batchable(NAV, ref("ppo-greenhouse-nav"))
     assert batchable(NAV, ref(str(ZOO_DIR / "ppo-greenhouse-nav")))  # a run folder: a learned policy
     assert not batchable("agri_envs/GrapeHarvest-v1", ref("luo-apf"))

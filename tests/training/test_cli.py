@@ -92,5 +92,5 @@ def test_evaluate_help_explains_every_option(capsys):
 def test_list_names_every_env_family(capsys):
     assert main(["list"]) == 0
     envs = capsys.readouterr().out.split("scenarios:")[0]
-    for env_id in ("GreenhouseNav-v2", "GreenhouseCoverage-v1", "robot_chain_v1", "GrapeHarvest-v1"):
+    for env_id in ("GreenhouseNav-v2", "GreenhouseCoverage-v2", "robot_chain_v1", "GrapeHarvest-v1"):
         assert env_id in envs

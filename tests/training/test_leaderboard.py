@@ -48,6 +48,14 @@ def test_suite_loader(tmp_path):
     swept = lb.parse_suite({**SUITE, "sweep": {"parameter": "growth", "values": [0.0, 1.0]}})
     assert [label for label, _ in swept.levels()] == ["tiny-rover growth=0.0", "tiny-rover growth=1.0"]
     assert swept.levels()[1][1]["growth"] == 1.0
+    # several arguments changed together, one row per level (a longer chain needs a bigger office)
+    both = lb.parse_suite(
+        {**SUITE, "stress": "plants", "sweep": {"parameters": ["growth", "n_trees"], "values": [[0.0, 0], [1.0, 4]]}}
+    )
+    labels = ["tiny-rover growth=0.0 n_trees=0", "tiny-rover growth=1.0 n_trees=4"]
+    assert [label for label, _ in both.levels()] == labels
+    assert both.levels()[1][1] == {**SUITE["env_kwargs"], "growth": 1.0, "n_trees": 4}
+    assert both.stress == "plants" and both.level_values() == ["growth=0.0 n_trees=0", "growth=1.0 n_trees=4"]
 
 
 @pytest.mark.parametrize(
@@ -60,6 +68,11 @@ def test_suite_loader(tmp_path):
         ({"episodes": 3}, "unknown suite keys"),
         ({"name": "Bad Name"}, "name"),
         ({"sweep": {"parameter": "n_rows", "values": [1]}}, "sweep"),
+        ({"sweep": {"parameters": ["growth", "n_trees"], "values": [[0.5]]}}, "one value for each"),
+        ({"sweep": {"parameters": ["growth"], "values": [[0.5], [0.5]]}}, "levels must differ"),
+        ({"sweep": {"parameter": "growth", "values": 0.5}}, "sweep must be"),
+        ({"stress": "crowd"}, "needs a sweep of at least 2 levels"),
+        ({"stress": "Crowd", "sweep": {"parameter": "growth", "values": [0.0, 1.0]}}, "stress must name an axis"),
         ({"rank_by": [{"metric": "success rate"}]}, "rank_by metric"),
         ({"campaign": {"runs": 3}}, "campaign.runs must be >= 1 and divide"),
         ({"campaign": 2}, "campaign must be a mapping"),
@@ -74,7 +87,7 @@ def test_bad_suites_are_rejected(change, message):
 
 def test_generalization_suites_lie_outside_the_training_distribution():
     committed = {s.env_id: s for s in lb.load_suites() if s.generalization}
-    assert set(committed) == {"agri_envs/GreenhouseNav-v2", "agri_envs/GreenhouseCoverage-v1"}
+    assert set(committed) == {"agri_envs/GreenhouseNav-v2", "agri_envs/GreenhouseCoverage-v2"}
     for suite in committed.values():
         for label, families in lb.outside_training(suite).items():
             assert families and all(families.values()), (label, families)
@@ -151,7 +164,7 @@ def test_entry_records_what_it_needs(board):
 def test_entries_keep_each_episodes_scalars_and_report_traces_its_whole_record():
     # gonzalez-pseudo-reactive records its sensory map and odometry path per episode (episode_metrics): the
     # entry keeps the numbers, a traced episode (which the report plots) keeps the whole record.
-    coverage = {**SUITE, "env_id": "agri_envs/GreenhouseCoverage-v1", "env_kwargs": {"n_rows": 1, "row_length": 3.0}}
+    coverage = {**SUITE, "env_id": "agri_envs/GreenhouseCoverage-v2", "env_kwargs": {"n_rows": 1, "row_length": 3.0}}
     suite = lb.parse_suite({**coverage, "seeds": {"start": 100000, "episodes": 1}})
     traces: list = []
     (entry,) = lb.evaluate_entries(
@@ -189,6 +202,39 @@ def test_verify_fails_on_an_altered_number(board, tmp_path, capsys):
         f"tiny-rover/harik-apf-gt: summary.mean_episode_time: committed 1.0 != reproduced "
         f"{doc['levels'][0]['summary']['mean_episode_time']!r}"
     ]
+
+
+def test_sampled_verify_reruns_picked_episodes_and_recomputes_every_summary(board, tmp_path, capsys):
+    assert lb.sample_indices(20, 1, 1) == [0] and lb.sample_indices(20, 1, 3) == [0, 6, 13]
+    assert lb.sample_indices(20, 4, 2) == [0, 1, 2, 3, 8, 9, 10, 11]  # whole campaigns
+    assert lb.sample_indices(2, 1, 5) == [0, 1]
+    suites, entries, md = copy_board(board, tmp_path)
+    assert cli(suites, entries, md, "verify", "--sample", "1", "--workers", "1", "--quiet") == 0
+    assert "a sample: 1 episode(s) per level re-run" in capsys.readouterr().out
+    path = next(entries.glob("*/*.json"))
+    committed = path.read_text()
+    # a record that is re-run (episode 0) is caught by the re-run and by the summaries it feeds
+    doc = json.loads(committed)
+    doc["levels"][0]["episodes"][0]["path_length"] += 1e-9
+    path.write_text(json.dumps(doc, indent=1))
+    problems = lb.verify_sample(lb.load_entries(entries), 1, suites, progress=False)
+    assert any("[tiny-rover]: episodes[0].path_length" in p for p in problems)
+    assert any("summary.mean_path_length" in p for p in problems)
+    # a record that is not re-run (episode 1) is caught through the summaries
+    doc = json.loads(committed)
+    doc["levels"][0]["episodes"][1]["episode_time"] += 1.0
+    path.write_text(json.dumps(doc, indent=1))
+    problems = lb.verify_sample(lb.load_entries(entries), 1, suites, progress=False)
+    assert problems and all("summary" in p for p in problems)
+    # and a summary edited alone
+    doc = json.loads(committed)
+    doc["summary"]["success_rate"] = 0.5
+    path.write_text(json.dumps(doc, indent=1))
+    assert lb.verify_sample(lb.load_entries(entries), 1, suites, progress=False) == [
+        "tiny-rover/harik-apf-gt: summary.success_rate: committed 0.5 != reproduced 1.0"
+    ]
+    with pytest.raises(ValueError, match="at least one episode"):
+        lb.sample_indices(20, 1, 0)
 
 
 def test_verify_fails_on_a_stale_leaderboard_page(board, tmp_path, capsys):

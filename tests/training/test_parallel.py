@@ -55,12 +55,12 @@ def test_pool_documents_equal_serial():
 def test_a_campaign_keeps_its_policy_between_runs():
     """gonzalez-hybrid in one job of two runs: the second run plans on the first run's sensory map."""
     kw = {"localization": "odometry", "n_rows": 2, "row_length": 6.0, "layout_seed": 4}
-    result = run_job(EpisodeJob("agri_envs/GreenhouseCoverage-v1", kw, "gonzalez-hybrid", 4, runs=2))
+    result = run_job(EpisodeJob("agri_envs/GreenhouseCoverage-v2", kw, "gonzalez-hybrid", 4, runs=2))
     first, second = (out["record"] for out in result["outs"])
     assert first["hybrid_deliberative"] == 0 and second["hybrid_deliberative"] == 1
     assert [first["campaign_run"], second["campaign_run"], second["seed"]] == [0, 1, 5]
     # episode by episode, every run is a fresh policy's first
-    alone = run_job(EpisodeJob("agri_envs/GreenhouseCoverage-v1", kw, "gonzalez-hybrid", 5))
+    alone = run_job(EpisodeJob("agri_envs/GreenhouseCoverage-v2", kw, "gonzalez-hybrid", 5))
     assert alone["outs"][0]["record"]["hybrid_deliberative"] == 0
 
 

@@ -356,7 +356,7 @@ def test_an_episode_the_baseline_cannot_act_in_is_left_out(tmp_path, monkeypatch
 def test_a_learner_with_odometry_sees_its_odometry_while_a_privileged_baseline_demonstrates(tmp_path):
     from agri_training.learned.pretrain import PretrainSpec, demonstrate
 
-    coverage = "agri_envs/GreenhouseCoverage-v1"
+    coverage = "agri_envs/GreenhouseCoverage-v2"
     hp = {
         "env_kwargs": {"max_episode_steps": 150},
         "wrappers": [],

@@ -288,7 +288,7 @@ def test_wrappers_without_a_vector_form_are_refused_on_the_vector_path(tmp_path)
         resolve_config(grape)
     hp = {"vec_env": "vector", "train_wrappers": [{"ExpertStart": {"policy": "gonzalez-pseudo-reactive"}}]}
     with pytest.raises(ValueError, match="ExpertStart has no vector form.*vec_env: dummy"):
-        resolve_config(TrainRequest("agri_envs/GreenhouseCoverage-v1", "ppo", tmp_path, overrides=hp))
+        resolve_config(TrainRequest("agri_envs/GreenhouseCoverage-v2", "ppo", tmp_path, overrides=hp))
 
 
 def test_update_threads_take_the_idle_cores_at_most(tmp_path):
