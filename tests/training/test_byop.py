@@ -347,7 +347,7 @@ def test_onnx_and_sb3_zip_entries_submit_and_verify_bit_for_bit(env, tmp_path, c
     assert {e["policy"]["kind"] for e in entries} == {"onnx", "sb3-zip"}
     assert all(e["policy"]["sha256"] and e["levels"][0]["env_kwargs"] == TINY for e in entries)
     assert main(["leaderboard", *common, "verify", "--workers", "1", "--quiet"]) == 0, capsys.readouterr().err
-    coverage = agri_envs.make("agri_envs/GreenhouseCoverage-v1")
+    coverage = agri_envs.make("agri_envs/GreenhouseCoverage-v2")
     with pytest.raises(ValueError, match="made for another env"):
         load_policy(str(zip_file), coverage)
     with pytest.raises(ValueError, match=r"input has \d+ values, .* has \d+"):
