@@ -318,6 +318,8 @@ def test_evaluate_suite_takes_live_objects(tmp_path):
     assert doc["levels"][0]["env_kwargs"] == dict(suite.env_kwargs)
     with pytest.raises(ValueError, match="live Python object"):
         agri_training.evaluate_suite(lambda obs: np.zeros(2), suite, workers=2)
+    with pytest.raises(ValueError, match="needs localization='odometry', but suite tiny-nav sets localization="):
+        agri_training.evaluate_suite(lambda obs: np.zeros(2), suite, env_kwargs={"localization": "odometry"})
 
 
 def _tiny_suite(tmp_path: Path) -> lb.Suite:
