@@ -20,6 +20,7 @@ import agri_training.leaderboard as lb
 from agri_training.cli import main
 from agri_training.evaluation.policies import EvalRequest, load_policy, resolve_env_kwargs
 from agri_training.evaluation.reference import resolve_policy
+from agri_training.learned.inference import dense_layer
 from agri_training.learned.onnx_policy import OnnxPolicy
 from agri_training.learned.sb3_zip import Sb3ZipPolicy
 
@@ -184,6 +185,40 @@ def test_onnx_bad_input_gets_a_named_error(env, tmp_path):
         resolve_policy(str(tmp_path / "junk.onnx"))
 
 
+def test_onnx_interpreter_runs_the_shape_operators_as_numpy_does():
+    from onnx import TensorProto, helper, numpy_helper
+
+    from agri_training.learned.onnx_policy import OnnxGraph
+
+    rng = np.random.default_rng(0)
+    w = rng.normal(size=(6, 4))
+    nodes = [
+        helper.make_node("Unsqueeze", ["x", "axes"], ["x3"]),  # (b, 6) -> (b, 1, 6)
+        helper.make_node("Squeeze", ["x3", "axes"], ["x2"]),
+        helper.make_node("MatMul", ["x2", "w"], ["h"]),
+        helper.make_node("Sub", ["h", "c"], ["h1"]),
+        helper.make_node("Mul", ["h1", "c"], ["h2"]),
+        helper.make_node("Div", ["h2", "d"], ["h3"]),
+        helper.make_node("Concat", ["h3", "h"], ["cat"], axis=1),
+        helper.make_node("Reshape", ["cat", "shape"], ["r"]),
+        helper.make_node("Flatten", ["r"], ["flat"], axis=1),
+        helper.make_node("Clip", ["flat", "lo", "hi"], ["y"]),
+    ]
+    inits = [numpy_helper.from_array(a, n) for n, a in (
+        ("axes", np.array([1])), ("w", w.astype(np.float32)), ("c", np.full(4, 0.5, np.float32)),
+        ("d", np.full(4, 3.0, np.float32)), ("shape", np.array([0, 2, 4])), ("lo", np.array(-1.0, np.float32)),
+        ("hi", np.array(1.0, np.float32)))]  # fmt: skip
+    graph = helper.make_graph(nodes, "g", [helper.make_tensor_value_info("x", TensorProto.FLOAT, ["b", 6])],
+                              [helper.make_tensor_value_info("y", TensorProto.FLOAT, None)], inits)  # fmt: skip
+    model = helper.make_model(graph, opset_imports=[helper.make_opsetid("", 17)])
+    parsed = OnnxGraph.parse(model.SerializeToString())
+    x = rng.normal(size=(3, 6)).astype(np.float32).astype(np.float64)
+    h = x @ w.astype(np.float32).astype(np.float64)
+    want = np.clip(np.concatenate([(h - 0.5) * 0.5 / 3.0, h], axis=1), -1, 1)
+    np.testing.assert_allclose(parsed.run(x), want, rtol=1e-12, atol=1e-12)
+    assert parsed.input_width == 6
+
+
 # ---------------------------------------------------------------- SB3 zips
 
 
@@ -208,9 +243,14 @@ def no_unpickling(monkeypatch):
     monkeypatch.setattr(torch, "load", refuse)
 
 
-@pytest.mark.parametrize("algo", ["PPO", "SAC", "TD3", "TQC"])
-def test_sb3_zip_predicts_what_sb3_predicts_without_unpickling(env, tmp_path, monkeypatch, algo):
-    policy = "MultiInputPolicy"
+@pytest.mark.parametrize(
+    "algo, policy",
+    [("PPO", "MultiInputPolicy"), ("SAC", "MultiInputPolicy"), ("TD3", "MultiInputPolicy"),
+     ("TQC", "MultiInputPolicy"), ("SAC", "MlpPolicy")],
+)  # fmt: skip
+def test_sb3_zip_predicts_what_sb3_predicts_without_unpickling(env, tmp_path, monkeypatch, algo, policy):
+    if policy == "MlpPolicy":  # a Box observation: the env's, flattened
+        env = gym.wrappers.FlattenObservation(env)
     import sb3_contrib
     import stable_baselines3
 
@@ -227,6 +267,7 @@ def test_sb3_zip_predicts_what_sb3_predicts_without_unpickling(env, tmp_path, mo
     def refuse(*args, **kwargs):
         raise AssertionError("something was unpickled")
 
+    dense_layer(np.zeros((1, 1)), np.zeros((1, 1)), np.zeros(1), 0)  # numba reads its own cache index with pickle
     for name in ("Unpickler", "load", "loads"):
         monkeypatch.setattr(pickle, name, refuse)
     monkeypatch.setattr(pickle._Unpickler, "find_class", refuse)
@@ -348,6 +389,8 @@ def test_onnx_and_sb3_zip_entries_submit_and_verify_bit_for_bit(env, tmp_path, c
     entries = lb.load_entries(tmp_path / "entries")
     assert {e["policy"]["kind"] for e in entries} == {"onnx", "sb3-zip"}
     assert all(e["policy"]["sha256"] and e["levels"][0]["env_kwargs"] == TINY for e in entries)
+    page = (tmp_path / "LB.md").read_text()
+    assert "| onnx (`" in page and "| sb3-zip (`" in page
     assert main(["leaderboard", *common, "verify", "--workers", "1", "--quiet"]) == 0, capsys.readouterr().err
     coverage = agri_envs.make("agri_envs/GreenhouseCoverage-v2")
     with pytest.raises(ValueError, match="made for another env"):
