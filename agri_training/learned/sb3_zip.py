@@ -60,7 +60,6 @@ EXPORT_HINT = (
 #: Policy keyword arguments that change the network beyond its tensors' shapes, or the observations it sees.
 _UNSUPPORTED_KWARGS = (
     "features_extractor_class", "features_extractor_kwargs", "use_sde", "squash_output", "use_expln",
-    "normalize_images", "share_features_extractor", "n_critics", "optimizer_class",
 )  # fmt: skip
 _INIT_TEXT = re.compile(r"<function (\w+)\.__init__ at ")
 _ACTIVATION_TEXT = re.compile(r"<class 'torch\.nn\.modules\.activation\.(\w+)'>")
@@ -125,7 +124,7 @@ def read_sb3_zip(path: Path) -> Sb3Zip:
         raise _refuse(path, "policy_kwargs is not a mapping")
     for option in _UNSUPPORTED_KWARGS:
         value = kwargs.get(option)
-        if value not in (None, False, {}) and option not in ("normalize_images", "share_features_extractor"):
+        if value not in (None, False, {}):
             raise _refuse(path, f"policy_kwargs.{option} = {value!r} is not supported by the float64 path")
     if data.get("use_sde"):
         raise _refuse(path, "gSDE (use_sde) is not supported by the float64 path")
@@ -173,6 +172,8 @@ def _check_tensors(state: Mapping[str, np.ndarray], algo: str, path: Path) -> No
     for key in state:
         if "features_extractor" in key or "lstm" in key or key.startswith(("cnn", "extractors")):
             raise _refuse(path, f"its network has a learned features extractor or recurrent layers ({key})")
+        if key.startswith("mlp_extractor.shared_net"):  # SB3 < 1.8's shared layers
+            raise _refuse(path, f"its actor shares layers with the critic ({key}), as SB3 before 1.8 built it")
     needed = {
         "ppo": "action_net.weight",
         "sac": "actor.mu.weight",
