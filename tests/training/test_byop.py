@@ -133,6 +133,39 @@ def test_onnx_mlp_acts_as_the_torch_network_and_the_same_twice(env, tmp_path):
     assert policy.predict(batch)[0].shape == (2, 2)
 
 
+_BITS = """
+import hashlib, sys
+from pathlib import Path
+import numpy as np
+from agri_training.learned.onnx_policy import load_graph
+x = np.random.default_rng(0).random((64, int(sys.argv[2]))).astype(np.float32).astype(np.float64)
+print(hashlib.sha256(load_graph(Path(sys.argv[1])).run(x).tobytes()).hexdigest())
+"""
+
+
+def test_onnx_actions_are_the_same_bits_whatever_numpy_dispatches(env, tmp_path):
+    """numpy's SIMD loops chosen freely (AVX-512 where the CPU has it), pinned as `agri` pins them, or SSE only."""
+    import hashlib
+    import os
+    import subprocess
+    import sys
+
+    from agri_training.learned.onnx_policy import load_graph
+
+    width = gym.spaces.flatdim(env.observation_space)
+    net = _mlp(width, 2, torch.nn.ELU(), torch.nn.Linear(32, 32), torch.nn.Sigmoid())
+    path = _export(net, width, tmp_path / "m.onnx")
+    root = str(Path(__file__).resolve().parents[2])
+    x = np.random.default_rng(0).random((64, width)).astype(np.float32).astype(np.float64)
+    digests = {hashlib.sha256(load_graph(path).run(x).tobytes()).hexdigest()}  # pinned, as `agri` runs
+    for disabled in ("", "X86_V4 AVX512_ICL AVX512_SPR X86_V3 AVX2 FMA3 AVX F16C"):
+        environ = {**os.environ, "NPY_DISABLE_CPU_FEATURES": disabled, "PYTHONPATH": root}
+        out = subprocess.run([sys.executable, "-c", _BITS, str(path), str(width)], env=environ, capture_output=True,
+                             text=True, check=True)  # fmt: skip
+        digests.add(out.stdout.strip())
+    assert len(digests) == 1
+
+
 def test_onnx_sidecar_normalises_and_names_env_arguments(env, tmp_path):
     width = gym.spaces.flatdim(env.observation_space)
     path = _export(_mlp(width, 2, torch.nn.Tanh()), width, tmp_path / "p.onnx")
