@@ -545,7 +545,14 @@ class LuoApfPolicy:
 
 
 def make_luo_apf(env: Any) -> LuoApfPolicy:
-    """Registry factory: the policy for a GrapeHarvest-v1 env with joint-delta actions."""
+    """Registry factory: the policy for a GrapeHarvest-v1 env with joint-delta actions.
+
+    Env arguments it adapts to: the scene (clusters, their boxes and tilt, leaves, canes: read from the
+    observation when it plans), ``max_joint_step`` (its actions step along the plan at that rate) and the
+    tolerances (its plan ends exactly on each cutting pose, so any tolerance holds). It needs
+    ``control="joint"`` and ignores the reward arguments and ``time_slack`` (it plans once, and its tour is
+    within Table 2's time in every pinned suite).
+    """
     cfg = env.unwrapped.config
     if cfg.control != "joint":
         raise ValueError(f"luo-apf drives joint-delta actions: make the env with control='joint' (got {cfg.control!r})")

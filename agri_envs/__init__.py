@@ -26,11 +26,13 @@ import gymnasium as gym
 from gymnasium.envs.registration import EnvSpec, WrapperSpec, register, registry
 
 from agri_envs.arm.presets import REACH_PRESET  # pure data: no pybullet
+from agri_envs.errors import SetupError
 
 __version__ = "0.1.0"
 
 __all__ = [
     "PARALLEL_ENVS",
+    "SetupError",
     "__version__",
     "env_ids",
     "env_version",

@@ -218,7 +218,13 @@ def load_hyperparams(
 
 
 def resolve_config(request: TrainRequest) -> dict[str, Any]:
-    """The full, resolved training config saved as ``config.yaml`` (and read back to load the policy)."""
+    """The full, resolved training config saved as ``config.yaml`` (and read back to load the policy).
+
+    Raises:
+        ValueError: For an env id that is not the package's (the message lists the known ones), bad
+            hyperparameters, or a combination the env does not take.
+    """
+    agri_envs.env_version(request.env_id)  # a misspelled id fails here, before anything is written
     hp = load_hyperparams(request.env_id, request.algo, request.scenario, request.overrides, request.hyperparams_file)
     env_kwargs: dict[str, Any] = {}
     if request.scenario:
@@ -664,6 +670,43 @@ def _stop_on_sigterm() -> Callable[[], None]:
     return restore
 
 
+def _build_model(cls: Any, config: Mapping[str, Any], venv: Any, run_dir: Path) -> Any:
+    """The SB3 model of ``config`` on ``venv`` (nothing written yet: its TensorBoard folder is made by ``learn``).
+
+    Raises:
+        ValueError: For algorithm or policy arguments the run cannot take (a misspelled one, HER's
+            ``learning_starts``).
+    """
+    algo_kwargs = resolve_algo_kwargs(config["algo_kwargs"])
+    if config["her"] is not None:
+        from stable_baselines3 import HerReplayBuffer
+
+        probe = gym.make(config["env_id"], **config["env_kwargs"])
+        limit = probe.spec.max_episode_steps if probe.spec is not None else None
+        probe.close()
+        starts = int(config["algo_kwargs"].get("learning_starts", 100))
+        if limit is not None and starts <= limit:
+            raise ValueError(
+                f"with --her, algo_kwargs.learning_starts ({starts}) must exceed the episode limit ({limit}): "
+                "HER samples only finished episodes"
+            )
+
+        algo_kwargs.update(replay_buffer_class=HerReplayBuffer, replay_buffer_kwargs=dict(config["her"]))
+    try:
+        return cls(
+            config["policy"],
+            venv,
+            policy_kwargs=resolve_policy_kwargs(config["policy_kwargs"]),
+            tensorboard_log=str(run_dir / "tb"),
+            seed=config["seed"],
+            device="cpu",
+            verbose=0,
+            **algo_kwargs,
+        )
+    except TypeError as exc:  # an argument the algorithm or its policy does not take: the user's to fix
+        raise ValueError(f"{config['algo']}: algo_kwargs or policy_kwargs: {exc}") from exc
+
+
 def train(
     request: TrainRequest, command: str | None = None, on_eval: Callable[[dict[str, Any]], None] | None = None
 ) -> Path:
@@ -688,39 +731,21 @@ def train(
         raise ValueError(f"{run_dir} already holds a run; pass another --out")
     if config["train_env_kwargs"] or config["eval_env_kwargs"]:
         check_same_spaces(config)
-    run_dir.mkdir(parents=True, exist_ok=True)
     command = command or " ".join(shlex.quote(a) for a in ["agri", *sys.argv[1:]])
-    (run_dir / CONFIG_FILE).write_text(yaml.safe_dump(config, sort_keys=False))
     torch.set_num_threads(config["torch_threads"])
     cls = algorithm_class(config["algo"])
     if config.get("update_threads", config["torch_threads"]) != config["torch_threads"]:
         cls = with_update_threads(cls, config["update_threads"])
+    # Everything that bad input can break (env arguments, wrappers, algorithm arguments) is built before the
+    # run directory is written, so a refused request leaves no half-written folder behind.
     venv = make_vec_env(config)
-    algo_kwargs = resolve_algo_kwargs(config["algo_kwargs"])
-    if config["her"] is not None:
-        from stable_baselines3 import HerReplayBuffer
-
-        probe = gym.make(config["env_id"], **config["env_kwargs"])
-        limit = probe.spec.max_episode_steps if probe.spec is not None else None
-        probe.close()
-        starts = int(config["algo_kwargs"].get("learning_starts", 100))
-        if limit is not None and starts <= limit:
-            raise ValueError(
-                f"with --her, algo_kwargs.learning_starts ({starts}) must exceed the episode limit ({limit}): "
-                "HER samples only finished episodes"
-            )
-
-        algo_kwargs.update(replay_buffer_class=HerReplayBuffer, replay_buffer_kwargs=dict(config["her"]))
-    model = cls(
-        config["policy"],
-        venv,
-        policy_kwargs=resolve_policy_kwargs(config["policy_kwargs"]),
-        tensorboard_log=str(run_dir / "tb"),
-        seed=config["seed"],
-        device="cpu",
-        verbose=0,
-        **algo_kwargs,
-    )
+    try:
+        model = _build_model(cls, config, venv, run_dir)
+    except BaseException:
+        venv.close()
+        raise
+    run_dir.mkdir(parents=True, exist_ok=True)
+    (run_dir / CONFIG_FILE).write_text(yaml.safe_dump(config, sort_keys=False))
     # SB3 collects whole rollouts: PPO n_steps per env, off-policy algorithms train_freq steps per env. It
     # rounds the total up to them, so the bar, the log and meta.json say the number it will train, and why.
     unit, why = rollout_size(model)

@@ -13,14 +13,136 @@ import numpy as np
 
 from agri_envs.chain.config import RobotChainConfig
 from agri_envs.chain.maps import ChainMap
+from agri_envs.errors import SetupError
 from agri_envs.sim2d.astar import descend, distance_field
 from agri_envs.sim2d.polyline import Polyline
 
-GOAL_TRIES = 4  # sampled goals tried before the map counts as too small for the chain
+GOAL_TRIES = 4  # goals drawn at random before the goals known to fit are drawn from (fallback_mission)
+FALLBACK_TRIES = 8  # goals known to fit tried (each fits up to rounding: the first one nearly always does)
+SWEEPS = 4  # farthest-point sweeps per connected part of the floor (floor_reach)
 
 
-class ChainDoesNotFit(ValueError):
-    """The map has no room for the whole chain behind the leader (raised by :func:`plan_mission`)."""
+class ChainDoesNotFit(SetupError):
+    """The floor has no room for the whole chain behind the leader; the message names the limit."""
+
+
+@dataclasses.dataclass(frozen=True)
+class FloorReach:
+    """How long a chain a floor holds: the free-floor distances from the goals a mission may draw.
+
+    Attributes:
+        candidates: Flat indices of the cells a goal is drawn from (free floor 0.35 m from obstacles, or all
+            free floor when none is that roomy).
+        bound: For each candidate, the free-floor distance (m) from it to one of a few far cells: a goal
+            whose bound is at least ``min_goal_distance + (n_robots - 1) * spacing`` has room for the chain.
+        longest: The largest bound (m): the longest free path from a goal that the floor holds.
+    """
+
+    candidates: np.ndarray
+    bound: np.ndarray
+    longest: float
+
+    def max_robots(self, cfg: RobotChainConfig, lo: float | None = None) -> int:
+        """The largest ``n_robots`` whose chain fits (0: not even the leader ``lo`` from the goal).
+
+        Args:
+            cfg: The env's config (``spacing``, ``min_goal_distance``).
+            lo: The leader's least distance to the goal (m); None: ``min_goal_distance``.
+        """
+        lo = cfg.min_goal_distance if lo is None else lo
+        if self.longest < lo:
+            return 0
+        return int(math.floor((self.longest - lo) / cfg.spacing + 1e-9)) + 1
+
+
+def goal_candidates(cmap: ChainMap, cfg: RobotChainConfig) -> np.ndarray:
+    """Flat indices of the cells :func:`plan_mission` draws a goal from."""
+    free = cmap.free_cells
+    roomy = free[cmap.wall_distance.ravel()[free] >= cfg.robot_radius + 0.35]
+    return roomy if len(roomy) else free
+
+
+def floor_reach(cmap: ChainMap, cfg: RobotChainConfig) -> FloorReach:
+    """The free-floor distances from every goal candidate to the floor's far cells (farthest-point sweeps).
+
+    In each connected part of the floor, a distance field from one candidate gives the cell farthest from
+    it, a field from that cell the next farthest, and so on (``SWEEPS`` fields); a candidate's bound is its
+    largest distance in these fields. The far cells are the ends of the floor's longest paths, so the
+    largest bound is the floor's longest free path from a goal (equal to the exhaustive search over every
+    candidate on the example map and the offices measured), found in a few distance fields. Deterministic:
+    no random draw.
+    """
+    free = cmap.free_cells
+    candidates = goal_candidates(cmap, cfg)
+    width, res = cmap.grid.width, cmap.grid.resolution
+    bound = np.full(len(candidates), -np.inf)
+    unseen = np.ones(len(candidates), dtype=np.bool_)
+    while unseen.any():  # one connected part of the floor per pass
+        source = divmod(int(candidates[np.argmax(unseen)]), width)
+        for _ in range(SWEEPS):
+            field = distance_field(cmap.blocked, source).ravel() * res
+            on_candidates = field[candidates]
+            reached = np.isfinite(on_candidates)
+            unseen &= ~reached
+            bound = np.where(reached, np.maximum(bound, on_candidates), bound)
+            on_free = np.where(np.isfinite(field[free]), field[free], -1.0)
+            source = divmod(int(free[np.argmax(on_free)]), width)
+    return FloorReach(candidates=candidates, bound=bound, longest=float(bound.max()) if len(bound) else 0.0)
+
+
+def does_not_fit(cfg: RobotChainConfig, reaches: list[FloorReach], goal_distance: tuple[float, float] | None,
+                 generated: bool) -> ChainDoesNotFit:
+    """The one-line refusal of a chain too long for its floor(s): it names the largest ``n_robots`` they hold.
+
+    Args:
+        cfg: The env's config.
+        reaches: The floors tried (one for a fixed map; the generated ones drawn for the episode).
+        goal_distance: The episode's ``(lo, hi)`` option, if any.
+        generated: The floors are generated from the arguments (then a larger floor is the other way out).
+    """
+    lo = cfg.min_goal_distance if goal_distance is None else goal_distance[0]
+    need = lo + (cfg.n_robots - 1) * cfg.spacing
+    longest = max(r.longest for r in reaches)
+    holds = max(r.max_robots(cfg, lo) for r in reaches)
+    floor = "the floors drawn for this episode hold" if generated else "this floor holds"
+    larger = {"office": "office_width / office_height", "greenhouse": "n_rows / row_length"}.get(cfg.scene)
+    way_out = f", or a larger floor ({larger})" if larger else ""
+    lead = "min_goal_distance" if goal_distance is None else "options['goal_distance'][0]"
+    return ChainDoesNotFit(
+        f"robot_chain_v1: {floor} at most n_robots={holds} at spacing={cfg.spacing} m (the longest free path "
+        f"from a goal is {longest:.2f} m); n_robots={cfg.n_robots} needs {lead} + (n_robots - 1) * spacing = "
+        f"{need:.2f} m. Use n_robots <= {holds}, a smaller spacing or {lead}{way_out}."
+    )
+
+
+def fallback_mission(
+    cmap: ChainMap,
+    cfg: RobotChainConfig,
+    rng: np.random.Generator,
+    goal_distance: tuple[float, float] | None,
+    reach: FloorReach,
+) -> Mission | None:
+    """A mission whose goal is drawn (with ``rng``) among the goals known to leave room for the chain.
+
+    What :func:`plan_mission` falls back to when its random goals all lie too central; None when the floor
+    holds no such goal (the caller refuses the chain with :func:`does_not_fit`).
+    """
+    free = cmap.free_cells
+    width, res = cmap.grid.width, cmap.grid.resolution
+    need = (cfg.n_robots - 1) * cfg.spacing
+    lo, hi = goal_distance if goal_distance is not None else (cfg.min_goal_distance, np.inf)
+    fits = reach.candidates[reach.bound >= lo + need]
+    for _ in range(FALLBACK_TRIES if len(fits) else 0):
+        goal = divmod(int(fits[rng.integers(len(fits))]), width)
+        goal_cells = distance_field(cmap.blocked, goal)
+        to_goal = goal_cells * res
+        on_free = to_goal.ravel()[free]
+        tails = free[(on_free < np.inf) & (on_free >= lo + need) & (on_free <= hi + need)]
+        if len(tails):
+            tail = divmod(int(tails[rng.integers(len(tails))]), width)
+            line = Polyline(cmap.centres(np.array(descend(cmap.blocked, goal_cells, tail))))
+            return _mission(cmap, cfg, goal_cells, cmap.cell(line.at(need)), line, to_goal)
+    return None
 
 
 @dataclasses.dataclass(frozen=True)
@@ -95,8 +217,7 @@ def plan_mission(
     free = cmap.free_cells
     if len(free) == 0:
         raise ValueError("robot_chain_v1: the inflated map has no free cell for the robots")
-    roomy = free[cmap.wall_distance.ravel()[free] >= cfg.robot_radius + 0.35]
-    candidates = roomy if len(roomy) else free
+    candidates = goal_candidates(cmap, cfg)
     width = cmap.grid.width
     res = cmap.grid.resolution
     n = cfg.n_robots

@@ -196,8 +196,9 @@ def run_job(job: EpisodeJob) -> dict[str, Any]:
 
     Returns:
         ``{"ok": True, "outs": [run_episode's output per run]}``, or ``{"ok": False, "stage": "build" |
-        "episode", "error": ..., "exc_type": ..., "traceback": ...}`` when building or running raised (so that
-        every backend reports failures the same way, and a failed build's ``ValueError`` stays a user error).
+        "episode", "user_error": ..., "error": ..., "exc_type": ..., "traceback": ...}`` when building or
+        running raised (so that every backend reports failures the same way, and a failed build's
+        ``ValueError``, or a :class:`agri_envs.SetupError` a reset raised, stays a user error).
     """
     stage = "build"
     try:
@@ -237,6 +238,9 @@ def run_job(job: EpisodeJob) -> dict[str, Any]:
         return {
             "ok": False,
             "stage": stage,
+            # The user's to fix, reported as one line: a bad argument while building, or arguments that a reset
+            # found cannot be set up (a chain longer than its floor holds).
+            "user_error": isinstance(exc, agri_envs.SetupError) or (stage == "build" and type(exc) is ValueError),
             "exc_type": type(exc).__name__,
             "error": f"{type(exc).__name__}: {exc}",
             "traceback": traceback.format_exc(),
@@ -260,9 +264,10 @@ def _unwrap(job: EpisodeJob, result: dict[str, Any]) -> list[EpisodeOutput]:
     if result["ok"]:
         outs: list[EpisodeOutput] = result["outs"]
         return outs
-    if result["stage"] == "build" and result["exc_type"] == "ValueError":
-        # A bad env argument or policy name: the same clear user error as in a serial run.
-        raise ValueError(result["error"].removeprefix("ValueError: "))
+    if result.get("user_error"):
+        # A bad env argument or policy name, or a setup the env refused: the same clear user error as in a
+        # serial run.
+        raise ValueError(result["error"].split(": ", 1)[-1])
     if "seed" in result:  # the episode of a batch that raised when run alone
         job = dataclasses.replace(job, seed=result["seed"], batch=1)
     raise EpisodeError(job, result["error"], result["traceback"])

@@ -7,6 +7,9 @@ import numpy as np
 import pytest
 
 from agri_envs.chain import robot_chain_v1
+from agri_envs.chain.mission import ChainDoesNotFit, floor_reach, goal_candidates
+from agri_envs.scenes import EXAMPLE_MAP
+from agri_envs.sim2d.astar import distance_field
 
 #: An office with room for a chain of 64 robots (34.65 m of free floor behind the leader).
 BIG_OFFICE = {"office_width": 40.0, "office_height": 20.0, "office_rooms": 6, "min_goal_distance": 2.0}
@@ -197,10 +200,18 @@ def test_the_chain_starts_intact_behind_the_leader(n, kwargs):
 
 
 def test_a_chain_that_does_not_fit_is_a_clear_error():
-    # 64 robots need 34.65 m of free floor behind the leader: the default office has no such path.
+    # 64 robots need 40.65 m of free floor from the goal: the default office has no such path. Its floors
+    # are generated per episode, so the reset that draws them refuses, naming the largest chain they hold.
     env = robot_chain_v1.parallel_env(n_robots=64)
-    with pytest.raises(ValueError, match=r"n_robots=64 need .*office_width"):
+    refusal = r"hold at most n_robots=\d+ .*n_robots=64 needs .* = 40.65 m.*office_width"
+    with pytest.raises(ChainDoesNotFit, match=refusal):
         env.reset(seed=0)
+    # A fixed floor (a loaded map, or a fixed layout_seed) is refused up front, by the constructor.
+    with pytest.raises(ChainDoesNotFit, match=r"^robot_chain_v1: this floor holds at most n_robots=11 at spacing"):
+        robot_chain_v1.parallel_env(n_robots=12, scene="map", map_yaml=str(EXAMPLE_MAP))
+    robot_chain_v1.parallel_env(n_robots=11, scene="map", map_yaml=str(EXAMPLE_MAP)).reset(seed=0)  # the limit fits
+    with pytest.raises(ValueError, match=r"this floor holds at most n_robots=\d+ .*office_width"):
+        robot_chain_v1.parallel_env(n_robots=64, layout_seed=3)
     # A floor sized to fit it works, and the chain is placed whole.
     big = robot_chain_v1.parallel_env(n_robots=64, **BIG_OFFICE)
     _, infos = big.reset(seed=0)
@@ -373,3 +384,68 @@ def test_distance_to_go_of_a_robot_on_a_blocked_cell():
     assert arrived == int(np.sum(np.hypot(*(poses[:, :2] - goal).T) <= 0.1))
     cells = (((poses[:, 1] - origin[1]) // res).astype(int), ((poses[:, 0] - origin[0]) // res).astype(int))
     assert blocked[cells].any() and not blocked[cells].all()  # both kinds of cell were tested
+
+
+def _refused(env, seeds) -> list[int]:
+    refused = []
+    for seed in seeds:
+        try:
+            env.reset(seed=seed)
+        except ChainDoesNotFit:
+            refused.append(seed)
+    return refused
+
+
+@pytest.mark.parametrize(
+    ("n", "kwargs", "seeds"),
+    [
+        # Refused before: 13 of seeds 0-499 (6 of these), 27 of 500 (7 of these), 43 of 500 (12 of these).
+        (8, {"scene": "map", "map_yaml": str(EXAMPLE_MAP)}, range(100, 240)),
+        (16, {"layout_seed": 3}, range(150, 250)),  # a fixed office
+        (20, {}, range(100)),  # fresh offices
+    ],
+    ids=["example-map-8", "fixed-office-16", "fresh-offices-20"],
+)
+def test_a_floor_that_holds_the_chain_holds_it_for_every_seed(n, kwargs, seeds):
+    # reset drew a few goals and refused when all lay too central; it now falls back to goals known to fit.
+    env = robot_chain_v1.parallel_env(n_robots=n, **kwargs)
+    assert _refused(env, seeds) == []
+
+
+def test_the_fallback_leaves_every_seed_that_fitted_before_unchanged():
+    # Seed 1 of 8 robots on the example map found room with its random goals (goal and poses recorded before
+    # the fallback existed); seed 131 did not, and now starts on a goal known to fit.
+    env = robot_chain_v1.parallel_env(n_robots=8, scene="map", map_yaml=str(EXAMPLE_MAP))
+    env.reset(seed=1)
+    np.testing.assert_allclose(env.unwrapped.goal, [0.575, 2.675], atol=1e-9)
+    np.testing.assert_allclose(env.unwrapped._poses[[0, 7]], [[6.092767, 4.125, 3.141593], [9.225, 5.575, -2.075986]],
+                               atol=1e-6)
+    _, infos = env.reset(seed=131)
+    assert infos["robot_0"]["chain_intact"] and _to_goal(env)[0] >= env.config.min_goal_distance - 0.1
+
+
+def test_floor_reach_is_the_longest_free_path_from_a_goal():
+    # The sweeps' longest path equals the exhaustive search over goal candidates (every 25th here).
+    env = robot_chain_v1.parallel_env(n_robots=4, scene="map", map_yaml=str(EXAMPLE_MAP))
+    env.reset(seed=0)
+    cmap, cfg = env.unwrapped.chain_map, env.config
+    reach = floor_reach(cmap, cfg)
+    exhaustive = 0.0
+    for c in goal_candidates(cmap, cfg)[::25]:
+        field = distance_field(cmap.blocked, divmod(int(c), cmap.grid.width)) * cmap.grid.resolution
+        exhaustive = max(exhaustive, float(field[np.isfinite(field)].max()))
+    assert exhaustive <= reach.longest + 1e-9 and reach.longest == pytest.approx(12.0426, abs=1e-3)
+    assert reach.max_robots(cfg) == 11  # 6 m + 10 * 0.55 m <= 12.04 m < 6 m + 11 * 0.55 m
+
+
+def test_agri_evaluate_refuses_a_chain_too_long_for_its_floor_in_one_line(tmp_path, capsys):
+    from agri_training.cli import main
+
+    out = str(tmp_path / "x.json")
+    for extra, workers in ((["scene=map", f"map_yaml={EXAMPLE_MAP}"], "1"), ([], "2")):
+        # A fixed floor refuses while the env is built; generated floors at the reset, in a worker process.
+        rc = main(["evaluate", "--env", "robot_chain_v1", "--policy", "apoorva-chain", "--episodes", "2",
+                   "--workers", workers, "--env-kwargs", "n_robots=64", *extra, "--out", out, "--quiet"])
+        err = capsys.readouterr().err
+        assert rc == 2 and err.startswith("agri: error: robot_chain_v1: ") and "at most n_robots=" in err, err
+        assert "Traceback" not in err and len(err.strip().splitlines()) == 1

@@ -94,3 +94,19 @@ def test_list_names_every_env_family(capsys):
     envs = capsys.readouterr().out.split("scenarios:")[0]
     for env_id in ("GreenhouseNav-v2", "GreenhouseCoverage-v2", "robot_chain_v1", "GrapeHarvest-v1"):
         assert env_id in envs
+
+
+def test_train_refuses_bad_input_before_writing_the_run_folder(tmp_path, capsys):
+    # A misspelled env id used to leave an --out folder holding only config.yaml, after a traceback.
+    out = tmp_path / "run"
+    rc = main(["train", "--env", "agri_envs/GreenhouseNav-v3", "--algo", "ppo", "--out", str(out), "--quiet"])
+    err = capsys.readouterr().err
+    assert rc == 2 and "unknown env id 'agri_envs/GreenhouseNav-v3'" in err and "GreenhouseNav-v2" in err
+    assert "Traceback" not in err and len(err.strip().splitlines()) == 1
+    assert not out.exists()
+    # A bad env argument and a bad algorithm argument are refused the same way.
+    for hp in (["env_kwargs={n_row: 2}"], ["algo_kwargs={n_stepz: 8}"]):
+        rc = main(["train", "--env", "agri_envs/GreenhouseNav-v2", "--algo", "ppo", "--out", str(out), "--quiet",
+                   "--hp", *hp])
+        assert rc == 2, capsys.readouterr().err
+        assert not out.exists()
