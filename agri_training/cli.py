@@ -9,10 +9,8 @@ import sys
 from pathlib import Path
 from typing import Any
 
-import yaml
-
 import agri_envs
-from agri_baselines import list_policies, policy_spec
+from agri_baselines import list_policies
 from agri_envs.scenarios import list_scenarios
 from agri_training import leaderboard as lb
 from agri_training.core.yaml_values import load_yaml
@@ -20,6 +18,7 @@ from agri_training.datasets import DatasetRequest, default_dataset_id, default_e
 from agri_training.evaluation.batched import BATCH_SIZE
 from agri_training.evaluation.evaluate import EvalRequest, evaluate, format_summary
 from agri_training.evaluation.parallel import EpisodeError
+from agri_training.evaluation.reference import resolve_policy
 from agri_training.evaluation.validation import VALIDATION_SEED, candidates, validate
 from agri_training.evaluation.video import ClipRequest, record
 from agri_training.learned.zoo import zoo_training
@@ -54,6 +53,7 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
         env_kwargs=parse_env_kwargs(args.env_kwargs or []),
         record_traces=args.traces,
         campaign_runs=args.campaign_runs,
+        env_kwargs_from="--env-kwargs",
     )
     result = evaluate(request, progress=not args.quiet, workers=args.workers, ray=args.ray, batch=args.batch)
     out = Path(args.out)
@@ -142,7 +142,11 @@ def _cmd_watch(args: argparse.Namespace) -> int:
 
 def _add_clip_arguments(parser: argparse.ArgumentParser, out_required: bool) -> None:
     parser.add_argument("--env", required=True, help="env id, e.g. agri_envs/GreenhouseNav-v2 or robot_chain_v1")
-    parser.add_argument("--policy", required=True, help="registered policy name (agri list) or an `agri train` run")
+    parser.add_argument(
+        "--policy",
+        required=True,
+        help="registered policy name (agri list), an `agri train` run, a .onnx or SB3 .zip file, or module:attribute",
+    )
     parser.add_argument("--seed", type=int, default=0, help="seed of the first episode (default 0)")
     parser.add_argument("--scenario", default=None, help="named preset of env arguments (agri list)")
     parser.add_argument("--env-kwargs", nargs="*", action="extend", metavar="KEY=VALUE", help="extra env arguments")
@@ -264,6 +268,7 @@ def _cmd_leaderboard(args: argparse.Namespace) -> int:
         return 0
     if args.action == "submit":
         suites = lb.load_suites(suites_dir)
+        pairs: list[tuple[lb.Suite, Any]]  # (suite, a resolved policy or an entry's policy record)
         if args.all:  # optionally only the suites named (every registered policy on each)
             named = set(args.suite or [])
             unknown = named - {s.name for s in suites}
@@ -277,17 +282,17 @@ def _cmd_leaderboard(args: argparse.Namespace) -> int:
                 raise ValueError("submit needs --suite and --policy (or --all for every baseline on every suite)")
             names = args.suite
             chosen = [lb.find_suite(n, suites_dir) for n in names] if names != ["all"] else suites
-            if Path(args.policy).is_dir():  # an `agri train` run: its config names the env
-                ref = lb.policy_reference(args.policy, args.name)
-                env_id = yaml.safe_load((Path(args.policy) / "config.yaml").read_text())["env_id"]
-                chosen = [s for s in chosen if s.env_id == env_id] if names == ["all"] else chosen
-            else:
-                ref = lb.policy_reference(args.policy)
-                env_id = policy_spec(args.policy).env_id
-                chosen = [s for s in chosen if s.env_id == env_id] if names == ["all"] else chosen
-            if names == ["all"]:  # a suite that names its policies runs only those
-                chosen = [s for s in chosen if s.policies is None or ref["name"] in s.policies]
-            pairs = [(s, ref) for s in chosen]
+            policy = resolve_policy(args.policy, args.name, lb.ROOT)  # resolved once, here
+            if names == ["all"]:
+                if policy.env_id is None:
+                    raise ValueError(
+                        f"{args.policy} does not say which env it drives: name the suites (--suite NAME ...), "
+                        "or give env_id in its sidecar"
+                    )
+                # the suites of its env; a suite that names its policies runs only those
+                chosen = [s for s in chosen if s.env_id == policy.env_id]
+                chosen = [s for s in chosen if s.policies is None or policy.name in s.policies]
+            pairs = [(s, policy) for s in chosen]
         command = "agri leaderboard " + " ".join(sys.argv[2:] if len(sys.argv) > 2 else [])
         entries, seconds = lb.timed(
             lb.evaluate_entries, pairs, args.workers, not args.quiet, command, args.ray, batch=args.batch
@@ -396,8 +401,9 @@ def build_parser() -> argparse.ArgumentParser:
     ev.add_argument(
         "--policy",
         required=True,
-        help="registered policy name (baseline or shipped learned policy: agri list), or an `agri train` run "
-        "directory (or its best/ folder); SB3 .zip files are refused (they unpickle code)",
+        help="registered policy name (baseline or shipped learned policy: agri list), an `agri train` run "
+        "directory (or its best/ folder), an ONNX file, an SB3 model.zip (read without unpickling) or "
+        "module:attribute (a factory taking the env)",
     )
     ev.add_argument("--episodes", type=int, default=20, help="episodes to run (default 20)")
     ev.add_argument(
@@ -556,8 +562,11 @@ def build_parser() -> argparse.ArgumentParser:
     lbsub.add_parser("render", help="regenerate LEADERBOARD.md from the entries")
     su = lbsub.add_parser("submit", help="evaluate a policy on suites and write its entries (and LEADERBOARD.md)")
     su.add_argument("--suite", nargs="+", help="suite names, or 'all' (every suite of the policy's env)")
-    su.add_argument("--policy", help="registered policy name, or an `agri train` run folder")
-    su.add_argument("--name", default=None, help="display name of a learned policy")
+    su.add_argument(
+        "--policy",
+        help="registered policy name, an `agri train` run folder, a .onnx or SB3 .zip file, or module:attribute",
+    )
+    su.add_argument("--name", default=None, help="display name of a learned, ONNX, SB3 or Python policy")
     su.add_argument(
         "--all", action="store_true", help="every registered policy on every suite of its env (or on the --suite named)"
     )
@@ -589,6 +598,8 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: list[str] | None = None) -> int:
     """Entry point of the ``agri`` command."""
     args = build_parser().parse_args(argv)
+    if "" not in sys.path and os.getcwd() not in sys.path:  # module:attribute policies of the working folder,
+        sys.path.insert(0, os.getcwd())  # as `python -m` finds them
     try:
         return int(args.func(args))
     except ValueError as exc:  # users' mistakes: a clear message, no traceback

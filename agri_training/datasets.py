@@ -29,13 +29,13 @@ from pathlib import Path
 from typing import Any
 
 import agri_envs
-from agri_baselines import policy_spec
 from agri_envs.scenarios import scenario as get_scenario
 from agri_training.core.datasets import DatasetEnv, DatasetWriter, EpisodeSteps, check_dataset_id, dataset_path
 from agri_training.core.documents import EpisodeOutput, git_commit
 from agri_training.core.progress import Progress
 from agri_training.evaluation.parallel import EpisodeJob, run_episodes
 from agri_training.evaluation.policies import EvalRequest, resolve_env_kwargs
+from agri_training.evaluation.reference import resolve_policy
 from agri_training.leaderboard import HELD_OUT_SEED
 
 
@@ -80,15 +80,15 @@ class DatasetRequest:
 
 
 def default_env(policy: str) -> str:
-    """The env a registered policy drives (``--env`` may then be left out).
+    """The env a policy drives (``--env`` may then be left out): a registered one's, a run's, a sidecar's.
 
     Raises:
-        ValueError: For a policy that is not a registered name (an ``agri train`` run needs ``--env``).
+        ValueError: For a policy that does not say which env it drives (then give ``--env``).
     """
-    try:
-        return policy_spec(policy).env_id
-    except ValueError:
-        raise ValueError(f"{policy!r} is not a registered policy name: give --env") from None
+    env_id = resolve_policy(policy).env_id
+    if env_id is None:
+        raise ValueError(f"{policy!r} does not say which env it drives: give --env")
+    return env_id
 
 
 def default_dataset_id(env_id: str, policy: str) -> str:
@@ -190,8 +190,9 @@ def _record(
     progress: bool,
 ) -> dict[str, Any]:
     """Run the jobs; write each episode as soon as those before it are written (seed order, bounded memory)."""
+    policy = resolve_policy(request.policy)  # once for every job
     jobs = [
-        EpisodeJob(described.env_id, described.env_kwargs, request.policy, request.seed + i, record=True)
+        EpisodeJob(described.env_id, described.env_kwargs, policy, request.seed + i, record=True)
         for i in range(request.episodes)
     ]
     bar = Progress(len(jobs), 1, progress)

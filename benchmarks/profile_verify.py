@@ -5,7 +5,7 @@ Per entry, the entry is verified in this process (``--workers 1``, as one worker
 calls inside it count for themselves), so the parts of an entry add up to its wall time:
 
 * ``env build``: ``agri_envs.make`` (once per entry and level: the worker's env cache);
-* ``policy build``: ``load_policy`` (once per episode: a fresh policy per job);
+* ``policy build``: ``build_policy`` (once per episode: a fresh policy per job);
 * ``reset`` and ``step``: the env's, through ``gym.make``'s wrappers (the episode loop's calls), or its batched
   form's (``gym.make_vec``) where episodes run batched;
 * ``policy``: the policy's ``predict`` without the two parts below;
@@ -81,8 +81,8 @@ def timed(name: str, fn: Callable[..., Any]) -> Callable[..., Any]:
 
 
 def _timed_policy(load: Callable[..., Any]) -> Callable[..., Any]:
-    def build(name: str, env: Any) -> Any:
-        policy = load(name, env)
+    def build(ref: Any, env: Any) -> Any:
+        policy = load(ref, env)
         policy.predict = timed("policy", policy.predict)
         return policy
 
@@ -92,7 +92,7 @@ def _timed_policy(load: Callable[..., Any]) -> Callable[..., Any]:
 def instrument() -> None:
     """Put the timers around the calls of a verify (module globals, so every caller sees them)."""
     agri_envs.make = timed("env build", agri_envs.make)  # type: ignore[assignment]
-    parallel_module.load_policy = timed("policy build", _timed_policy(parallel_module.load_policy))
+    parallel_module.build_policy = timed("policy build", _timed_policy(parallel_module.build_policy))
     for driver in (episode_module._SingleAgent, episode_module._Team):
         driver.reset = timed("reset", driver.reset)  # type: ignore[method-assign]
         driver.step = timed("step", driver.step)  # type: ignore[method-assign]

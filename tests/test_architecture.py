@@ -31,7 +31,7 @@ TRAINING_LAYERS = (
 DEFERRABLE = {
     "torch", "stable_baselines3", "sb3_contrib", "supersuit", "matplotlib", "ray", "optuna", "pybullet",
     "pybullet_data", "moviepy", "imageio", "imageio_ffmpeg", "pygame", "tqdm", "tensorboard", "psutil", "numba",
-    "scipy", "PIL", "mkdocs", "minari", "h5py",
+    "scipy", "PIL", "mkdocs", "minari", "h5py", "onnx",
 }  # fmt: skip
 
 
@@ -188,6 +188,8 @@ def heavy(module: str) -> bool:
 #: Late imports of light project modules that must stay late, and why.
 LATE_ON_PURPOSE = {
     ("agri_training.__main__", "agri_training.cli"): "the numeric kernel pins must be set before numpy is imported",
+    ("agri_training", "agri_training.api"): "the numeric kernel pins of `python -m agri_training` must be set before "
+    "the package's API (which imports numpy) is loaded",
     ("agri_baselines.hector_slam", "agri_envs.sim2d.gridmap"): "the SLAM algorithm imports no Gymnasium (which "
     "importing agri_envs brings) unless a caller asks for an OccupancyGrid",
 }

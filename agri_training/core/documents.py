@@ -8,6 +8,7 @@ their values are plain Python (:func:`jsonable`).
 
 from __future__ import annotations
 
+import hashlib
 import math
 import subprocess
 from pathlib import Path
@@ -100,3 +101,12 @@ def git_commit() -> str:
         return out.stdout.strip() or "unknown"
     except (OSError, subprocess.SubprocessError):
         return "unknown"
+
+
+def sha256_file(path: Path | str) -> str:
+    """Hex sha256 of a file's bytes."""
+    h = hashlib.sha256()
+    with open(path, "rb") as f:
+        for chunk in iter(lambda: f.read(1 << 20), b""):
+            h.update(chunk)
+    return h.hexdigest()

@@ -32,10 +32,9 @@ import gymnasium as gym
 import numpy as np
 
 import agri_envs
-from agri_baselines import policy_spec
 from agri_training.core.documents import EpisodeOutput
 from agri_training.evaluation.episode import EpisodeBook
-from agri_training.learned.policy import is_run_path
+from agri_training.evaluation.reference import PolicyRef
 
 #: Most episodes one batch steps together (16 GreenhouseNav-v2 worlds cost 86 us each a step, 32 cost 83 us).
 BATCH_SIZE = 16
@@ -51,21 +50,13 @@ def has_batched_form(env_id: str) -> bool:
     return gym.registry[env_id].vector_entry_point is not None
 
 
-def batchable(env_id: str, policy: str) -> bool:
+def batchable(env_id: str, policy: PolicyRef) -> bool:
     """Whether ``policy``'s episodes on ``env_id`` may be stepped together in the env's batched form.
 
-    True when the env has a batched form and the policy acts on its observations alone: a learned policy (a
-    zoo name or an ``agri train`` run folder) or a baseline registered with ``observation_only=True``.
+    True when the env has a batched form and the policy acts on its observations alone: a network (a zoo name,
+    an ``agri train`` run folder, an ONNX or SB3 file) or a baseline registered with ``observation_only=True``.
     """
-    if not has_batched_form(env_id):
-        return False
-    if is_run_path(policy):
-        return True
-    try:
-        spec = policy_spec(policy)
-    except ValueError:
-        return False
-    return spec.learned or spec.observation_only
+    return has_batched_form(env_id) and policy.observation_only
 
 
 class _InfoRow(Mapping[str, Any]):

@@ -1,4 +1,4 @@
-"""Evaluate any policy (a registered baseline, a zoo policy or a run directory) on an env over a range of seeds.
+"""Evaluate any policy (a name, a run folder, an ONNX or SB3 file, ``module:attribute``) on an env over seeds.
 
 Episode ``i`` is reset with seed ``seed + i``. The env's final ``info`` supplies the keys listed in its
 ``metadata["episode_metric_keys"]``; a policy may add its own through ``episode_metrics(index)``. The
@@ -171,15 +171,15 @@ def episode_jobs(request: EvalRequest, kwargs: Mapping[str, Any], batch: int = 1
     if isinstance(batch, bool) or not isinstance(batch, int) or batch < 1:
         raise ValueError(f"batch must be an int >= 1, got {batch!r}")
     runs = request.campaign_runs
-    if runs == 1 and batch > 1 and batchable(request.env_id, request.policy):
+    if runs == 1 and batch > 1 and batchable(request.env_id, request.ref):
         traced = min(request.record_traces, request.episodes)
         return [
-            EpisodeJob(request.env_id, kwargs, request.policy, request.seed + first, first < traced, batch=size)
+            EpisodeJob(request.env_id, kwargs, request.ref, request.seed + first, first < traced, batch=size)
             for first, size in _batches(0, traced, batch) + _batches(traced, request.episodes, batch)
         ]
     if runs == 1:
         return [
-            EpisodeJob(request.env_id, kwargs, request.policy, request.seed + i, i < request.record_traces)
+            EpisodeJob(request.env_id, kwargs, request.ref, request.seed + i, i < request.record_traces)
             for i in range(request.episodes)
         ]
     jobs = []
@@ -188,7 +188,7 @@ def episode_jobs(request: EvalRequest, kwargs: Mapping[str, Any], batch: int = 1
         fixed = dict(kwargs)
         if int(fixed.get("layout_seed", -1)) < 0:
             fixed["layout_seed"] = first
-        jobs.append(EpisodeJob(request.env_id, fixed, request.policy, first, c < request.record_traces, runs))
+        jobs.append(EpisodeJob(request.env_id, fixed, request.ref, first, c < request.record_traces, runs))
     return jobs
 
 
@@ -253,6 +253,9 @@ def evaluate_many(
         ValueError: For bad arguments (unknown scenario, policy, env argument, ``workers < 1``).
         agri_training.parallel.EpisodeError: When an episode raises; it names the seed and the exception.
     """
+    live = [r.ref.name for r in requests if r.ref.instance is not None]
+    if live and (workers != 1 or ray is not None):
+        raise ValueError(f"policy {live[0]!r} is a live Python object: it runs in this process only (workers=1)")
     levels = _plan(requests, batch)
     jobs = [job for level in levels for job in level.jobs]
     priority = _job_costs(levels, costs) if costs is not None else None
@@ -350,7 +353,7 @@ def _level_doc(level: _Level, outs: list[EpisodeOutput]) -> EvaluationDocument:
         "env_id": request.env_id,
         "scenario": request.scenario,
         "label": level.label or request.scenario,
-        "policy": request.policy,
+        "policy": request.ref.spec,
         "privileged": level.privileged,
         "seed": request.seed,
         "env_kwargs": jsonable(level.kwargs),
@@ -386,7 +389,7 @@ class _OrderedDisplay:
         done, ok = done + 1, ok + bool(record.get("is_success"))
         self._counts[id(level)] = (done, ok)
         where = level.label or level.request.scenario or "default"
-        desc = f"{level.request.policy} on {level.request.env_id.split('/')[-1]} [{where}]"
+        desc = f"{level.request.ref.name} on {level.request.env_id.split('/')[-1]} [{where}]"
         self.bar.advance(self._block[id(level)], desc, f"success {ok}/{done} of {len(level.jobs)}")
 
     def close(self) -> None:

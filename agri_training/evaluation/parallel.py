@@ -37,14 +37,12 @@ from typing import Any
 import gymnasium as gym
 
 import agri_envs
-from agri_baselines import policy_spec
 from agri_training.core.documents import EpisodeOutput
 from agri_training.core.pool import limit_torch_threads, run_items
 from agri_training.evaluation.batched import run_batch
 from agri_training.evaluation.episode import run_episode
-from agri_training.evaluation.policies import load_policy
 from agri_training.evaluation.recording import StepRecorder
-from agri_training.learned.policy import is_run_path
+from agri_training.evaluation.reference import PolicyRef, build_policy, resolve_policy
 
 #: Per-process cache of built envs (and their trace keys), keyed by :meth:`EpisodeJob.config_key`. A worker
 #: usually sees one configuration at a time (jobs are handed out in order), so a few entries suffice.
@@ -61,7 +59,8 @@ class EpisodeJob:
     Attributes:
         env_id: Registered env id.
         env_kwargs: Resolved ``gym.make`` arguments (JSON-able).
-        policy: Baseline name or checkpoint path (what :func:`agri_training.evaluate.load_policy` accepts).
+        policy: The resolved policy (anything else that :func:`~.reference.resolve_policy` takes is resolved
+            when the job is made).
         seed: Seed of ``env.reset`` (of a campaign's first run).
         trace: Whether the episode (every run of the campaign) records the env's per-step ``trace_keys``.
         runs: Episodes of the campaign, on seeds ``seed .. seed + runs - 1``, driven by one policy; 1: a
@@ -76,7 +75,7 @@ class EpisodeJob:
 
     env_id: str
     env_kwargs: Mapping[str, Any]
-    policy: str
+    policy: PolicyRef | str
     seed: int
     trace: bool = False
     runs: int = 1
@@ -84,6 +83,8 @@ class EpisodeJob:
     record: bool = False
 
     def __post_init__(self) -> None:
+        if not isinstance(self.policy, PolicyRef):
+            object.__setattr__(self, "policy", resolve_policy(self.policy))
         if not isinstance(self.seed, int) or isinstance(self.seed, bool) or self.seed < 0:
             raise ValueError(f"seed must be an int >= 0, got {self.seed!r}")
         for name in ("runs", "batch"):
@@ -98,13 +99,19 @@ class EpisodeJob:
             raise ValueError(f"a recording job runs one episode, got runs={self.runs}, batch={self.batch}")
 
     @property
+    def ref(self) -> PolicyRef:
+        """The resolved policy."""
+        assert isinstance(self.policy, PolicyRef)
+        return self.policy
+
+    @property
     def episodes(self) -> int:
         """The episodes the job runs (seeds ``seed .. seed + episodes - 1``)."""
         return max(self.runs, self.batch)
 
     def config_key(self) -> str:
         """Identity of the (env, policy) pair the job runs on; equal keys share a built env and policy."""
-        return json.dumps([self.env_id, dict(self.env_kwargs), self.policy], sort_keys=True, default=repr)
+        return json.dumps([self.env_id, dict(self.env_kwargs), self.ref.key()], sort_keys=True, default=repr)
 
     def describe(self) -> str:
         """``seed S of POLICY on ENV_ID (args)`` (``campaign of R runs from seed S ...``), for messages."""
@@ -114,7 +121,7 @@ class EpisodeJob:
             what = f"campaign of {self.runs} runs from seed {self.seed}"
         elif self.batch > 1:
             what = f"seeds {self.seed}..{self.seed + self.batch - 1} (batched)"
-        return f"{what} of {self.policy} on {self.env_id}" + (f" ({args})" if args else "")
+        return f"{what} of {self.ref.spec} on {self.env_id}" + (f" ({args})" if args else "")
 
 
 class EpisodeError(RuntimeError):
@@ -197,7 +204,7 @@ def run_job(job: EpisodeJob) -> dict[str, Any]:
     try:
         if job.batch > 1:
             envs = _vector_env_for(job)
-            policies = [load_policy(job.policy, sub_env) for sub_env in envs.envs]
+            policies = [build_policy(job.ref, sub_env) for sub_env in envs.envs]
             limit_torch_threads()
             stage = "episode"
             try:
@@ -213,7 +220,7 @@ def run_job(job: EpisodeJob) -> dict[str, Any]:
                 raise
         else:
             env, trace_keys = _env_for(job)
-            policy = load_policy(job.policy, env)
+            policy = build_policy(job.ref, env)
             limit_torch_threads()  # loading an SB3 checkpoint imports torch
             stage = "episode"
             if job.record:
@@ -248,7 +255,7 @@ def _run_batch_job(job: EpisodeJob, envs: Any, policies: list[Any]) -> list[Epis
 
     def rerun(i: int) -> EpisodeOutput:
         env, keys = _env_for(job)
-        return run_episode(env, load_policy(job.policy, env), seeds[i], keys if job.trace else None)
+        return run_episode(env, build_policy(job.ref, env), seeds[i], keys if job.trace else None)
 
     return run_batch(envs, policies, seeds, trace_keys, rerun)
 
@@ -280,12 +287,7 @@ LEARNED_PRELOAD = ("torch",)
 
 
 def _runs_learned(job: EpisodeJob) -> bool:
-    if is_run_path(job.policy):
-        return True
-    try:
-        return bool(policy_spec(job.policy).learned)
-    except ValueError:
-        return False
+    return job.ref.needs_torch
 
 
 def _lost(index: int, message: str) -> dict[str, Any]:

@@ -1,23 +1,22 @@
-"""What to evaluate: the request, the policy by name or path, and the env arguments the episodes run with.
+"""What to evaluate: the request, its policy resolved once, and the env arguments the episodes run with.
 
-A policy is a registered name (a scripted baseline of :mod:`agri_baselines`, or a trained policy of the
-zoo, :mod:`agri_training.learned.zoo`) or an ``agri train`` run directory, loaded weights-only.
+A policy is named as :mod:`.reference` says (a registered name, an ``agri train`` run folder, an ONNX or SB3
+``.zip`` file, ``module:attribute``, or a live object in Python). :class:`EvalRequest` resolves it when it is
+made, into one :class:`~.reference.PolicyRef` that every layer below uses; nothing looks it up again.
 """
 
 from __future__ import annotations
 
 import dataclasses
 from collections.abc import Mapping
-from pathlib import Path
 from typing import Any
 
 import gymnasium as gym
 
-from agri_baselines import list_policies, make_policy, policy_spec
+from agri_baselines import list_policies
 from agri_envs import env_version
 from agri_envs.scenarios import scenario as get_scenario
-from agri_training.learned import zoo  # noqa: F401  (registers the trained policies by name)
-from agri_training.learned.policy import LearnedPolicy, is_run_path, read_config, refuse_pickled
+from agri_training.evaluation.reference import PolicyRef, build_policy, merge_env_kwargs, resolve_policy
 
 
 @dataclasses.dataclass(frozen=True)
@@ -26,7 +25,8 @@ class EvalRequest:
 
     Attributes:
         env_id: Registered env id.
-        policy: Registered policy name (a baseline or a zoo policy) or an ``agri train`` run directory.
+        policy: The policy: a :class:`~.reference.PolicyRef`, or anything :func:`~.reference.resolve_policy`
+            takes (a name, a path, ``module:attribute``, an object), resolved when the request is made.
         episodes: Number of episodes (seeds ``seed`` .. ``seed + episodes - 1``).
         seed: First seed.
         scenario: Name of an env-argument preset (``agri_envs.scenarios``), or None.
@@ -37,10 +37,11 @@ class EvalRequest:
             each by one policy that keeps its state between runs, in one world held fixed by the env's
             ``layout_seed`` (the campaign's first seed, unless the arguments fix it). 1: every episode is a
             fresh policy's first.
+        env_kwargs_from: Where ``env_kwargs`` come from, for messages (``--env-kwargs``, ``suite NAME``).
     """
 
     env_id: str
-    policy: str
+    policy: PolicyRef | str | Any
     episodes: int = 20
     seed: int = 0
     scenario: str | None = None
@@ -48,6 +49,7 @@ class EvalRequest:
     record_traces: int = 1
     label: str | None = None
     campaign_runs: int = 1
+    env_kwargs_from: str = "the request's env_kwargs"
 
     def __post_init__(self) -> None:
         if self.episodes < 1:
@@ -56,6 +58,14 @@ class EvalRequest:
             raise ValueError(
                 f"campaign_runs must be >= 1 and divide episodes ({self.episodes}), got {self.campaign_runs}"
             )
+        if not isinstance(self.policy, PolicyRef):  # resolved here, once, for every layer below
+            object.__setattr__(self, "policy", resolve_policy(self.policy))
+
+    @property
+    def ref(self) -> PolicyRef:
+        """The resolved policy."""
+        assert isinstance(self.policy, PolicyRef)
+        return self.policy
 
 
 def resolve_env_kwargs(request: EvalRequest, base: Mapping[str, Any] | None = None) -> tuple[dict[str, Any], bool]:
@@ -66,55 +76,35 @@ def resolve_env_kwargs(request: EvalRequest, base: Mapping[str, Any] | None = No
         base: Preset arguments (one level of the scenario); defaults to the scenario's own.
 
     Raises:
-        ValueError: For an unknown env id (listing the known ones), when a user argument contradicts what the
-            policy needs, or the policy drives another env.
+        ValueError: For an unknown env id (listing the known ones), when the policy drives another env, or
+            needs an argument that contradicts the scenario's or the request's (both values named; see
+            :func:`~.reference.merge_env_kwargs`).
     """
     env_version(request.env_id)  # a misspelled env id is named as such before anything else
-    kwargs: dict[str, Any] = {}
+    asked: list[tuple[str, Mapping[str, Any]]] = []
     if base is not None:
-        kwargs.update(base)
+        asked.append((f"scenario {request.scenario}" if request.scenario else "the level", base))
     elif request.scenario:
-        kwargs.update(get_scenario(request.env_id, request.scenario).env_kwargs)
-    kwargs.update(request.env_kwargs)
-    privileged = False
-    refuse_pickled(request.policy)
-    if is_run_path(request.policy):  # a training run: its env id and env arguments, like a baseline's needs
-        config = read_config(Path(request.policy))
-        if config["env_id"] != request.env_id:
-            raise ValueError(f"run {request.policy} was trained on {config['env_id']}, not {request.env_id}")
-        for key, value in config["env_kwargs"].items():
-            if key in request.env_kwargs and request.env_kwargs[key] != value:
-                raise ValueError(
-                    f"run {request.policy} was trained with {key}={value!r}, got {request.env_kwargs[key]!r}"
-                )
-            kwargs[key] = value
-        privileged = bool(config.get("privileged", False))
-    else:
-        spec = policy_spec(request.policy)
-        if spec.env_id != request.env_id:
-            raise ValueError(f"policy {spec.name!r} drives {spec.env_id}, not {request.env_id}")
-        for key, value in spec.env_kwargs.items():
-            if key in request.env_kwargs and request.env_kwargs[key] != value:
-                raise ValueError(f"policy {spec.name!r} needs {key}={value!r}, got {request.env_kwargs[key]!r}")
-            kwargs[key] = value
-        privileged = spec.privileged
-    return kwargs, privileged
+        asked.append((f"scenario {request.scenario}", get_scenario(request.env_id, request.scenario).env_kwargs))
+    asked.append((request.env_kwargs_from, request.env_kwargs))
+    return merge_env_kwargs(request.env_id, request.ref, asked), request.ref.privileged
 
 
-def load_policy(name_or_path: str, env: gym.Env[Any, Any]) -> Any:
-    """A registered policy by name (baseline or trained), or an ``agri train`` run directory, weights-only.
+def load_policy(name_or_path: str | PolicyRef | Any, env: gym.Env[Any, Any]) -> Any:
+    """A policy in any format, built on ``env``: SB3's ``predict`` on the env's raw observations.
+
+    Args:
+        name_or_path: A registered name, an ``agri train`` run folder, a ``.onnx`` or SB3 ``.zip`` file,
+            ``module:attribute``, a :class:`~.reference.PolicyRef`, or a live policy object.
+        env: The env it will drive (made with the arguments it needs).
 
     Raises:
-        ValueError: For an unknown name; :class:`agri_training.learned.UnsafeCheckpointError` for checkpoints
-            that need unpickling (SB3 ``.zip`` files).
+        ValueError: For an unknown name, a refused file (unsupported operator, pickled content, wrong widths),
+            a module that does not import; :class:`agri_training.learned.UnsafeCheckpointError` for pickles.
     """
-    refuse_pickled(name_or_path)
-    if is_run_path(name_or_path):
-        return LearnedPolicy(name_or_path, env)
-    return make_policy(name_or_path, env)
+    return build_policy(resolve_policy(name_or_path), env)
 
 
 def all_baselines() -> list[str]:
     """Names of every registered baseline."""
     return [p.name for p in list_policies()]
-

@@ -14,7 +14,7 @@ The same in Python::
     # the env arguments the policy needs (harik-apf-gt: full scan, true pose), as agri evaluate resolves them
     kwargs, _ = resolve_env_kwargs(EvalRequest("agri_envs/GreenhouseNav-v2", "harik-apf-gt"))
     env = agri_envs.make("agri_envs/GreenhouseNav-v2", **kwargs, render_mode="rgb_array")
-    policy = load_policy("harik-apf-gt", env)  # a baseline, a zoo policy or an `agri train` run folder
+    policy = load_policy("harik-apf-gt", env)  # a name, a run folder, a .onnx or SB3 .zip file
     obs, info = env.reset(seed=0)
     frames, state, start, done = [env.render()], None, True, False
     while not done:
@@ -36,7 +36,8 @@ import numpy as np
 import agri_envs
 from agri_training.core.progress import Heartbeat, format_duration
 from agri_training.evaluation.episode import run_episode
-from agri_training.evaluation.policies import EvalRequest, load_policy, resolve_env_kwargs
+from agri_training.evaluation.policies import EvalRequest, resolve_env_kwargs
+from agri_training.evaluation.reference import build_policy
 
 #: Clip formats and what writes them.
 FORMATS = (".gif", ".mp4")
@@ -48,7 +49,7 @@ class ClipRequest:
 
     Attributes:
         env_id: Env id (Gymnasium or the PettingZoo chain).
-        policy: Registered policy name (baseline or zoo) or an ``agri train`` run directory.
+        policy: Any policy :func:`~agri_training.evaluation.reference.resolve_policy` takes (name, path, file).
         seed: Seed of the first episode (episode i runs seed + i).
         out: ``.gif`` or ``.mp4`` file to write; None opens a window (``render_mode="human"``).
         scenario: Named preset of env arguments, or None.
@@ -103,10 +104,11 @@ def record(request: ClipRequest, progress_s: float | None = None) -> dict[str, A
         ValueError: For a bad request (unknown policy or env argument, wrong file type); an ImportError
             names the extra for an MP4 without imageio's ffmpeg.
     """
-    kwargs, _ = resolve_env_kwargs(
-        EvalRequest(request.env_id, request.policy, seed=request.seed, scenario=request.scenario,
-                    env_kwargs=dict(request.env_kwargs))
+    evaluation = EvalRequest(
+        request.env_id, request.policy, seed=request.seed, scenario=request.scenario,
+        env_kwargs=dict(request.env_kwargs), env_kwargs_from="--env-kwargs",
     )  # fmt: skip
+    kwargs, _ = resolve_env_kwargs(evaluation)
     headless = request.out is not None
     if request.out is not None and Path(request.out).suffix.lower() == ".mp4":  # fail before the episode, not after it
         _mp4_writer_module()
@@ -128,7 +130,7 @@ def record(request: ClipRequest, progress_s: float | None = None) -> dict[str, A
     heartbeat = None
     if progress_s is not None:
         where = f" into {request.out}" if request.out is not None else ""
-        print(f"recording {request.policy} on {request.env_id}, seed {request.seed}{where}", flush=True)
+        print(f"recording {evaluation.ref.name} on {request.env_id}, seed {request.seed}{where}", flush=True)
         heartbeat = Heartbeat(status, progress_s)
 
     def on_step(step: int) -> bool:
@@ -144,7 +146,7 @@ def record(request: ClipRequest, progress_s: float | None = None) -> dict[str, A
         try:
             for i in range(request.episodes):
                 now["episode"] = i + 1
-                policy = load_policy(request.policy, env)  # a fresh policy per episode, as the evaluator does
+                policy = build_policy(evaluation.ref, env)  # a fresh policy per episode, as the evaluator does
                 records.append(run_episode(env, policy, request.seed + i, None, on_step)["record"])
             fps = request.fps or max(1.0, float(_render_fps(env)) / request.every)
         finally:

@@ -22,94 +22,78 @@ from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
-import yaml
-
 import agri_envs
-from agri_baselines import list_policies, policy_spec
+from agri_baselines import list_policies
 from agri_training.core.documents import EvaluationDocument, git_commit, is_timing_key, jsonable
 from agri_training.evaluation.batched import BATCH_SIZE
 from agri_training.evaluation.evaluate import EvalRequest, evaluate_many, summarize
+from agri_training.evaluation.reference import PolicyRef, resolve_policy
 from agri_training.leaderboard.suites import ENTRIES_DIR, ENTRY_FORMAT, ROOT, SUITES_DIR, Suite, find_suite, sha256_file
-from agri_training.learned.zoo import zoo_path
-
-#: The weights file of an ``agri train`` run directory (hashed into learned entries).
-RUN_WEIGHTS = "policy.pt"
 
 
-def _weights_file(path: Path) -> Path:
-    """The file whose sha256 identifies a learned policy: a run folder's weights, or the file itself."""
-    return path / RUN_WEIGHTS if path.is_dir() else path
-
-
-def _shown(path: Path) -> str:
-    try:
-        return str(path.resolve().relative_to(ROOT))
-    except ValueError:
-        return str(path)
-
-
-def policy_reference(policy: str, name: str | None = None) -> dict[str, Any]:
-    """What an entry records about its policy.
+def policy_reference(policy: str | PolicyRef, name: str | None = None) -> dict[str, Any]:
+    """What an entry records about its policy (:meth:`~agri_training.evaluation.reference.PolicyRef.to_entry`).
 
     Args:
-        policy: A registered policy name (baseline, or trained with ``learned=True`` in its spec), or the
-            folder of an ``agri train`` run (its weights are ``policy.pt``).
-        name: Display name of a run (default: the run folder's name).
+        policy: Anything :func:`~agri_training.evaluation.reference.resolve_policy` takes: a registered name, an
+            ``agri train`` run folder, an ONNX or SB3 ``.zip`` file, ``module:attribute``, or a reference.
+        name: Display name (default: the registered name, the run folder's or the file's name).
 
     Raises:
-        ValueError: For an unknown name or a run folder without weights.
+        ValueError: For an unknown name, or a file that is missing or refused.
     """
-    path = Path(policy)
-    if path.is_dir() or policy.endswith((".zip", ".pt")):
-        weights = _weights_file(path)
-        if not weights.is_file():
-            raise ValueError(f"policy weights {str(weights)!r} not found")
-        privileged = False
-        config = (path if path.is_dir() else path.parent) / "config.yaml"
-        if config.is_file():
-            doc = yaml.safe_load(config.read_text())
-            privileged = bool(isinstance(doc, Mapping) and doc.get("privileged", False))
-        return {
-            "kind": "learned",
-            "name": name or (path.name if path.is_dir() else f"{path.parent.name}/{path.stem}"),
-            "path": _shown(path),
-            "sha256": sha256_file(weights),
-            "privileged": privileged,
-        }
-    spec = policy_spec(policy)
-    ref: dict[str, Any] = {"kind": "baseline", "name": spec.name, "privileged": spec.privileged}
-    if getattr(spec, "learned", False):  # a trained policy registered by name: hash its committed weights
-        ref["kind"] = "learned"
-        weights = _weights_file(zoo_path(spec.name))
-        if weights.is_file():
-            ref["sha256"] = sha256_file(weights)
-    return ref
+    return resolve_policy(policy, name, ROOT).to_entry()
 
 
-def policy_argument(ref: Mapping[str, Any]) -> str:
-    """The ``policy`` argument of the evaluator for a reference (checks a learned policy's weights).
+def policy_from_entry(ref: Mapping[str, Any]) -> PolicyRef:
+    """The policy of a committed entry, resolved, after checking that its weights are the committed ones.
+
+    The reference keeps the entry's own name and path, so that a fresh entry records the same ``policy``.
 
     Raises:
-        ValueError: When a learned policy's weights are missing or their sha256 changed.
+        ValueError: When the weights (or a sidecar) are missing or their sha256 changed, or the kind is unknown.
     """
-    if "path" not in ref:
-        if ref.get("sha256"):
-            fresh = policy_reference(str(ref["name"])).get("sha256")
-            if fresh != ref["sha256"]:
-                raise ValueError(
-                    f"weights of {ref['name']!r} changed: sha256 {str(fresh)[:12]} != {ref['sha256'][:12]}"
-                )
-        return str(ref["name"])
+    kind = ref.get("kind")
+    if kind == "baseline" or (kind == "learned" and "path" not in ref):
+        fresh = resolve_policy(str(ref["name"]))
+        if ref.get("sha256") and fresh.sha256 != ref["sha256"]:
+            raise ValueError(
+                f"weights of {ref['name']!r} changed: sha256 {str(fresh.sha256)[:12]} != {ref['sha256'][:12]}"
+            )
+        return fresh
+    if kind == "callable":
+        fresh = resolve_policy(str(ref["spec"]), str(ref["name"]))
+        return dataclasses.replace(fresh, privileged=bool(ref.get("privileged", fresh.privileged)))
+    if kind == "object":
+        raise ValueError(f"policy {ref.get('name')!r} was a live Python object: nothing names it to re-run it")
+    if kind not in ("learned", "onnx", "sb3-zip"):
+        raise ValueError(f"policy {ref.get('name')!r}: unknown kind {kind!r}")
     path = Path(ref["path"])
     if not path.is_absolute():
         path = ROOT / path
-    weights = _weights_file(path)
+    weights = path / RUN_WEIGHTS if kind == "learned" else path
     if not weights.is_file():
         raise ValueError(f"weights of {ref['name']!r} not found at {weights}")
     digest = sha256_file(weights)
     if digest != ref["sha256"]:
         raise ValueError(f"weights of {ref['name']!r} changed: sha256 {digest[:12]} != committed {ref['sha256'][:12]}")
-    return str(path)
+    fresh = resolve_policy(str(path), str(ref["name"]), ROOT)
+    if fresh.sidecar_sha256 != ref.get("sidecar_sha256"):
+        raise ValueError(f"the sidecar of {ref['name']!r} changed (or appeared, or went): its sha256 differs")
+    return dataclasses.replace(fresh, shown_path=str(ref["path"]))
+
+
+#: The weights file of an ``agri train`` run directory (hashed into learned entries).
+RUN_WEIGHTS = "policy.pt"
+
+
+def policy_argument(ref: Mapping[str, Any]) -> str:
+    """The ``policy`` argument of the evaluator for an entry's reference (checks the weights' sha256).
+
+    Raises:
+        ValueError: When a learned policy's weights are missing or their sha256 changed.
+    """
+    return policy_from_entry(ref).spec
 
 
 def slug(name: str) -> str:
@@ -130,7 +114,7 @@ class Block:
     """One unit of work: a policy on one level of a suite."""
 
     suite: Suite
-    policy: str
+    policy: PolicyRef
     label: str
     env_kwargs: Mapping[str, Any]
     traces: int = 0
@@ -161,6 +145,7 @@ def run_blocks(
             record_traces=b.traces,
             label=b.label,
             campaign_runs=b.suite.campaign_runs,
+            env_kwargs_from=f"suite {b.suite.name}",
         )
         for b in blocks
     ]
@@ -170,7 +155,7 @@ def run_blocks(
     return docs
 
 
-def blocks_of(suite: Suite, policy: str, traces: int = 0) -> list[Block]:
+def blocks_of(suite: Suite, policy: PolicyRef, traces: int = 0) -> list[Block]:
     """The blocks of a policy on a suite (one per level)."""
     return [Block(suite, policy, label, kwargs, traces) for label, kwargs in suite.levels()]
 
@@ -215,7 +200,7 @@ def make_entry(
 
 
 def evaluate_entries(
-    pairs: Sequence[tuple[Suite, Mapping[str, Any]]],
+    pairs: Sequence[tuple[Suite, Mapping[str, Any] | PolicyRef]],
     workers: int | None = 1,
     progress: bool = True,
     command: str = "",
@@ -227,7 +212,8 @@ def evaluate_entries(
     """Evaluate each (suite, policy reference) pair and return the entries, all blocks in one pool.
 
     Args:
-        pairs: The (suite, policy reference) pairs.
+        pairs: The (suite, policy) pairs: a resolved policy, or an entry's ``policy`` record (its weights are
+            checked, and the entry records it as it is).
         workers: Worker processes (see :func:`run_blocks`).
         progress: Show the progress bar.
         command: The command recorded in the entries.
@@ -240,8 +226,11 @@ def evaluate_entries(
     blocks: list[Block] = []
     spans = []
     block_costs: list[Sequence[float] | None] = []
+    recorded: list[Mapping[str, Any]] = []
     for p, (suite, ref) in enumerate(pairs):
-        bl = blocks_of(suite, policy_argument(ref), suite.episodes if traces is not None else 0)
+        policy = ref if isinstance(ref, PolicyRef) else policy_from_entry(ref)
+        recorded.append(policy.to_entry() if isinstance(ref, PolicyRef) else ref)
+        bl = blocks_of(suite, policy, suite.episodes if traces is not None else 0)
         spans.append((len(blocks), len(blocks) + len(bl)))
         blocks += bl
         pair_costs = costs[p] if costs is not None else None
@@ -253,7 +242,10 @@ def evaluate_entries(
             for trace in doc["traces"]:
                 trace["record"] = records.get(trace["seed"])
         traces += [[doc["traces"] for doc in results[a:b]] for a, b in spans]
-    return [make_entry(suite, ref, results[a:b], command) for (suite, ref), (a, b) in zip(pairs, spans, strict=True)]
+    return [
+        make_entry(suite, record, results[a:b], command)
+        for (suite, _), record, (a, b) in zip(pairs, recorded, spans, strict=True)
+    ]
 
 
 def write_entry(entry: Mapping[str, Any], entries_dir: Path | str = ENTRIES_DIR) -> Path:
@@ -378,11 +370,11 @@ def verify_entries(
                     f"({suite.sha256[:12]}); regenerate it"
                 )
                 continue
-            policy_argument(entry["policy"])
+            policy = policy_from_entry(entry["policy"])
         except ValueError as exc:
             problems.append(f"{name}: {exc}")
             continue
-        pairs.append((suite, entry["policy"]))
+        pairs.append((suite, policy))
         kept.append(entry)
     costs = [[[float(e.get("wall_time_s") or 0.0) for e in lv["episodes"]] for lv in entry["levels"]] for entry in kept]
     fresh = evaluate_entries(pairs, workers, progress, ray=ray, batch=batch, costs=costs)
@@ -445,7 +437,7 @@ def verify_sample(
             if suite.sha256 != entry["suite"]["sha256"] or suite.version != entry["suite"]["version"]:
                 problems.append(f"{name}: stale, made for suite version {entry['suite']['version']}; regenerate it")
                 continue
-            policy = policy_argument(entry["policy"])
+            policy = policy_from_entry(entry["policy"])
         except ValueError as exc:
             problems.append(f"{name}: {exc}")
             continue
@@ -467,6 +459,7 @@ def verify_sample(
                         env_kwargs=dict(kwargs),
                         label=label,
                         campaign_runs=n,
+                        env_kwargs_from=f"suite {suite.name}",
                     )
                 )
                 committed = level["episodes"][first : first + n]

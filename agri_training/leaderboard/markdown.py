@@ -207,6 +207,20 @@ def compare_entries(x: Mapping[str, Any], y: Mapping[str, Any], metric: str, hig
         return None
 
 
+def policy_kind(policy: Mapping[str, Any]) -> str:
+    """The ``kind`` cell of an entry's policy.
+
+    Learned and file policies show their weights' sha256 (its first 10 digits); a Python callable says when its
+    actions may differ on another CPU.
+    """
+    kind = str(policy["kind"])
+    if kind in ("learned", "onnx", "sb3-zip") and policy.get("sha256"):
+        return f"{kind} (`{policy['sha256'][:10]}`)"
+    if kind == "callable" and not policy.get("reverifiable", False):
+        return "callable, not re-verifiable on another CPU"
+    return kind
+
+
 def render_markdown(entries: Sequence[Mapping[str, Any]], suites: Sequence[Suite]) -> str:
     """LEADERBOARD.md: per env and suite, every entry ranked, with 95 % intervals; privileged ones marked.
 
@@ -275,9 +289,7 @@ def render_markdown(entries: Sequence[Mapping[str, Any]], suites: Sequence[Suite
             for rank, e in enumerate(group, 1):
                 s = e["summary"]
                 name = e["policy"]["name"] + (" **P**" if e.get("privileged") else "")
-                kind = e["policy"]["kind"]
-                if kind == "learned":
-                    kind = f"learned (`{e['policy']['sha256'][:10]}`)"
+                kind = policy_kind(e["policy"])
                 cells = [
                     str(rank),
                     f"`{e['policy']['name']}`" + name[len(e["policy"]["name"]) :],

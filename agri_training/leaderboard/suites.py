@@ -40,6 +40,7 @@ from typing import Any
 import yaml
 
 import agri_envs
+from agri_training.core.documents import sha256_file  # noqa: F401  (re-exported: the leaderboard API)
 
 #: First evaluation seed of every suite; training must never use seeds at or above it.
 HELD_OUT_SEED = 100_000
@@ -340,16 +341,3 @@ def find_suite(name: str, directory: Path | str = SUITES_DIR) -> Suite:
         known = ", ".join(sorted(p.stem for p in Path(directory).glob("*.yaml")))
         raise ValueError(f"unknown suite {name!r}; known: {known or 'none'}")
     return load_suite(path)
-
-
-
-
-def sha256_file(path: Path | str) -> str:
-    """Hex sha256 of a file's bytes."""
-    h = hashlib.sha256()
-    with open(path, "rb") as f:
-        for chunk in iter(lambda: f.read(1 << 20), b""):
-            h.update(chunk)
-    return h.hexdigest()
-
-

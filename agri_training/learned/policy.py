@@ -13,7 +13,8 @@ rebuild a policy without unpickling anything:
 PolicyNetwork` (a forward pass that computes the same bits on every CPU, so that leaderboard entries
 reproduce anywhere), and replays the training wrappers and the normalisation on each observation, so that
 it implements SB3's ``predict`` on the env's raw observations, like every baseline. Checkpoints that need
-unpickling (SB3 ``.zip`` files, tensors stored with code) are refused with a clear message.
+unpickling (pickle files, tensors stored with code) are refused with a clear message; SB3 ``.zip`` files are read
+without unpickling by :mod:`agri_training.learned.sb3_zip`.
 """
 
 from __future__ import annotations
@@ -468,13 +469,12 @@ def refuse_pickled(name_or_path: str) -> None:
     """Raise for checkpoint formats that can only be loaded by unpickling.
 
     Raises:
-        UnsafeCheckpointError: For SB3 ``.zip`` files and pickle files.
+        UnsafeCheckpointError: For pickle files (``.pkl``, ``.pickle``).
     """
-    if name_or_path.endswith((".zip", ".pkl", ".pickle")):
+    if name_or_path.endswith((".pkl", ".pickle")):
         raise UnsafeCheckpointError(
-            f"{name_or_path}: SB3 .zip and pickle checkpoints are not loaded, because unpickling can run code. "
-            "Train with `agri train`, whose run directory holds weights only (policy.pt, config.yaml, "
-            "normalize.json), and pass that directory to --policy."
+            f"{name_or_path}: pickle checkpoints are not loaded, because unpickling can run code. Pass an "
+            "`agri train` run directory (weights only), an SB3 model.zip (read without unpickling) or an ONNX file."
         )
 
 

@@ -40,7 +40,7 @@ from agri_training.core.progress import Progress
 from agri_training.core.stats import bootstrap_ci, newcombe_interval, paired_comparison, wilson_interval
 from agri_training.evaluation.episode import run_episode
 from agri_training.evaluation.evaluate import INTERVALS_NOTE
-from agri_training.evaluation.policies import load_policy
+from agri_training.evaluation.reference import PolicyRef, build_policy
 from agri_training.evaluation.video import shrink_frame, write_clip
 from agri_training.learned.zoo import ZOO_DIR
 from agri_training.report.generalization import generalization_section
@@ -245,8 +245,7 @@ def _level_document(
         return doc
     bar.start_block(f"traces: {doc['policy']} on {doc['label']}")
     kept = {t["seed"]: t for t in row.traces[k]} if row.traces is not None else {}
-    name = lb.policy_argument(entry["policy"])
-    replay = _Replay(doc["env_id"], doc["env_kwargs"], name)
+    replay = _Replay(doc["env_id"], doc["env_kwargs"], lb.policy_from_entry(entry["policy"]))
     try:
         for seed in seeds:
             record = _record_of(level, seed)
@@ -282,7 +281,7 @@ class _Replay:
     after the campaign's earlier runs, with the same policy, in the campaign's world (``layout_seed``).
     """
 
-    def __init__(self, env_id: str, env_kwargs: Mapping[str, Any], policy: str) -> None:
+    def __init__(self, env_id: str, env_kwargs: Mapping[str, Any], policy: PolicyRef) -> None:
         self.env_id, self.env_kwargs, self.policy = env_id, dict(env_kwargs), policy
         self._envs: dict[tuple[Any, bool], Any] = {}
 
@@ -299,7 +298,7 @@ class _Replay:
         """The episode of ``record`` with its trace, and (``film``) about :data:`CLIP_FRAMES` frames of it."""
         env = self._env(record.get("layout_seed"), film)
         keys = tuple(getattr(env, "unwrapped", env).metadata.get("trace_keys", ()))
-        policy = load_policy(self.policy, env)
+        policy = build_policy(self.policy, env)
         seed, run = int(record["seed"]), int(record.get("campaign_run") or 0)
         for earlier in range(seed - run, seed):
             run_episode(env, policy, earlier, None)

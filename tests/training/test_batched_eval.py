@@ -14,6 +14,7 @@ from agri_training.evaluation.batched import batchable, has_batched_form
 from agri_training.evaluation.evaluate import episode_jobs, evaluate_many
 from agri_training.evaluation.parallel import EpisodeError, EpisodeJob, run_episodes
 from agri_training.evaluation.policies import EvalRequest, resolve_env_kwargs
+from agri_training.evaluation.reference import resolve_policy
 from agri_training.leaderboard.entries import compare_documents
 from agri_training.learned.policy import LearnedPolicy
 from agri_training.learned.zoo import ZOO_DIR
@@ -77,14 +78,15 @@ def test_traces_and_reruns_match_the_reference_loop(monkeypatch):
 def test_which_policies_run_batched(monkeypatch):
     assert has_batched_form(NAV) and has_batched_form("agri_envs/GreenhouseCoverage-v2")
     assert not has_batched_form("robot_chain_v1") and not has_batched_form("agri_envs/GrapeHarvest-v1")
-    assert not batchable("agri_envs/GreenhouseCoverage-v2", "gonzalez-pseudo-reactive")  # it reads the env
-    assert batchable(NAV, "harik-apf") and batchable(NAV, "ppo-greenhouse-nav")
-    assert batchable(NAV, str(ZOO_DIR / "ppo-greenhouse-nav"))  # a run folder: a learned policy
-    assert not batchable("agri_envs/GrapeHarvest-v1", "luo-apf") and not batchable(NAV, "no-such-policy")
+    ref = resolve_policy
+    assert not batchable("agri_envs/GreenhouseCoverage-v2", ref("gonzalez-pseudo-reactive"))  # it reads the env
+    assert batchable(NAV, ref("harik-apf")) and batchable(NAV, ref("ppo-greenhouse-nav"))
+    assert batchable(NAV, ref(str(ZOO_DIR / "ppo-greenhouse-nav")))  # a run folder: a learned policy
+    assert not batchable("agri_envs/GrapeHarvest-v1", ref("luo-apf"))
     # a registered policy stays for the whole process (the report evaluates every one): registered for this test only
     monkeypatch.setattr(agri_baselines, "_REGISTRY", dict(agri_baselines._REGISTRY))
     register_policy(PolicySpec("test-reads-the-env", NAV, "agri_baselines.harik_apf:make_harik_apf_gt"))
-    assert not batchable(NAV, "test-reads-the-env")  # observation_only is opt-in
+    assert not batchable(NAV, ref("test-reads-the-env"))  # observation_only is opt-in
 
 
 def test_levels_split_into_balanced_batches_with_traced_episodes_apart():
@@ -112,7 +114,7 @@ def test_a_failing_episode_of_a_batch_is_named_by_its_seed(monkeypatch):
     from agri_baselines.harik_apf import HarikApfPolicy
     from agri_envs.rover.greenhouse_nav import GreenhouseNavEnv
 
-    reset, predict, make = GreenhouseNavEnv.reset, HarikApfPolicy.predict, parallel.load_policy
+    reset, predict, make = GreenhouseNavEnv.reset, HarikApfPolicy.predict, parallel.build_policy
 
     def remember_seed(self, *, seed=None, options=None):
         self.test_seed = seed
@@ -130,7 +132,7 @@ def test_a_failing_episode_of_a_batch_is_named_by_its_seed(monkeypatch):
 
     monkeypatch.setattr(GreenhouseNavEnv, "reset", remember_seed)
     monkeypatch.setattr(HarikApfPolicy, "predict", flaky)
-    monkeypatch.setattr(parallel, "load_policy", load)
+    monkeypatch.setattr(parallel, "build_policy", load)
     kwargs, _ = resolve_env_kwargs(EvalRequest(NAV, "harik-apf-gt", env_kwargs={"n_rows": 1, "row_length": 3.0}))
     with pytest.raises(EpisodeError, match=r"seed 12 of harik-apf-gt .*FloatingPointError: pose became NaN"):
         run_episodes([EpisodeJob(NAV, kwargs, "harik-apf-gt", 10, batch=4)], workers=1)

@@ -89,7 +89,7 @@ def test_evaluate_help_explains_every_option(capsys):
     with pytest.raises(SystemExit):
         main(["evaluate", "--help"])
     text = " ".join(capsys.readouterr().out.split())
-    assert "run directory" in text and "refused" in text
+    assert "run directory" in text and "ONNX" in text and "without unpickling" in text
     assert "episodes to run (default 20)" in text and "episode i runs seed S+i" in text
     assert "--quiet no progress bar" in text
 

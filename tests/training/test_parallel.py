@@ -13,6 +13,7 @@ from agri_training.evaluation.episode import run_episode
 from agri_training.evaluation.evaluate import evaluate, evaluate_many
 from agri_training.evaluation.parallel import EpisodeError, EpisodeJob, run_episodes, run_job
 from agri_training.evaluation.policies import EvalRequest, load_policy, resolve_env_kwargs
+from agri_training.evaluation.reference import PolicyRef
 from agri_training.leaderboard.entries import compare_documents
 
 NAV = "agri_envs/GreenhouseNav-v2"
@@ -107,10 +108,11 @@ def test_episode_error_names_seed_and_exception(monkeypatch):
 
 
 def test_worker_failure_names_seed(tmp_path):
-    """In a worker process: a checkpoint that is not there fails every job; the first one is named."""
-    bad = tmp_path / "broken.zip"
-    jobs = [EpisodeJob(NAV, SMALL_NAV, str(bad), s) for s in (11, 12)]
-    with pytest.raises(EpisodeError, match=r"episode with seed 1[12] of .*broken\.zip on agri_envs/GreenhouseNav-v2"):
+    """In a worker process: a policy file that went after it was resolved fails every job; the first one is named."""
+    bad = tmp_path / "broken.onnx"
+    ref = PolicyRef("onnx", "broken", str(bad), "onnx", path=str(bad), observation_only=True)
+    jobs = [EpisodeJob(NAV, SMALL_NAV, ref, s) for s in (11, 12)]
+    with pytest.raises(EpisodeError, match=r"episode with seed 1[12] of .*broken\.onnx on agri_envs/GreenhouseNav-v2"):
         run_episodes(jobs, workers=2)
 
 

@@ -109,7 +109,7 @@ def test_quick_look_runs_each_episode_once_and_says_it_is_a_smoke_test(tmp_path,
     real = page._Replay.run
 
     def counted(self, record, film):
-        replays.append((self.policy, record["seed"], film))
+        replays.append((self.policy.name, record["seed"], film))
         return real(self, record, film)
 
     monkeypatch.setattr(page._Replay, "run", counted)

@@ -91,7 +91,7 @@ def test_evaluate_a_run_like_a_baseline(tiny_run):
     result = evaluate(EvalRequest(ENV_ID, str(tiny_run), episodes=2, seed=100_000), progress=False)
     assert result["summary"]["episodes"] == 2 and result["privileged"]
     assert result["env_kwargs"]["localization"] == "ground_truth"
-    with pytest.raises(ValueError, match="trained with localization"):
+    with pytest.raises(ValueError, match="needs localization='ground_truth', but the request's env_kwargs sets"):
         evaluate(EvalRequest(ENV_ID, str(tiny_run), episodes=1, env_kwargs={"localization": "none"}), progress=False)
 
 
@@ -118,7 +118,7 @@ def test_pickled_code_in_a_checkpoint_never_runs(tiny_run, tmp_path):
         load_weights(evil / "policy.pt")
     assert not marker.exists()
     with pytest.raises(UnsafeCheckpointError, match="unpickling"):
-        load_policy(str(tmp_path / "model.zip"), env)
+        load_policy(str(tmp_path / "model.pkl"), env)
 
 
 def test_hyperparameters_resolve_and_stay_strict(tmp_path):
