@@ -185,14 +185,17 @@ end), every argument with its default and range, its scenarios and policies.
 
 
 def best_scores(suite_name: str, entries: Sequence[Mapping[str, Any]]) -> dict[str, Mapping[str, Any] | None]:
-    """The first scripted and the first learned entry of a suite in the leaderboard's ranking (or None)."""
+    """The first scripted and the first learned entry of a suite in the leaderboard's ranking (or None).
+
+    Scripted: a registered baseline; learned: every other kind (a zoo policy, a run, an ONNX file, an SB3 zip, ...).
+    """
     rank_by = find_suite(suite_name).rank_by
     ranked = sorted(
         (e for e in entries if e["suite"]["name"] == suite_name),
         key=lambda e: (rank_key(e, rank_by), e["policy"]["name"]),
     )
     return {
-        kind: next((e for e in ranked if (e["policy"]["kind"] == "learned") == (kind == "learned")), None)
+        kind: next((e for e in ranked if (e["policy"]["kind"] == "baseline") == (kind == "scripted")), None)
         for kind in ("scripted", "learned")
     }
 

@@ -70,7 +70,7 @@ def test_the_home_page_is_a_gallery_with_the_guides_beside_it(site_source):
         for kind, policy, rate in scores:
             entry = json.loads((ROOT / "leaderboard" / "entries" / suite / f"{policy}.json").read_text())
             assert f"{entry['summary']['success_rate']:.2f}" == rate and f"`{suite}`" in card
-            assert (entry["policy"]["kind"] == "learned") == (kind == "learned")
+            assert (entry["policy"]["kind"] == "baseline") == (kind == "scripted")
     for page, title, _ in GUIDES:
         assert f"- [{title}]({page})" in index and (site_source / page).is_file()
 
