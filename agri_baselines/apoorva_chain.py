@@ -29,6 +29,24 @@ obstacle, validation seeds 8000-8019 (``agri evaluate --env robot_chain_v1 --sce
 (greenhouse, 8 robots: 20/20), the printed strip 9/20, 4/20 and 1/20 (its failures are chain breaks and
 chains jammed until the time limit), no strip 20/20 each. The held-out numbers are the leaderboard's
 (suites ``chain-office``, ``-8``, ``-12``, ``-16``).
+
+Env arguments :class:`ApoorvaChainPolicy` adapts to, and those it ignores (4 robots, default office, seeds
+from 100000):
+
+* ``spacing``, ``max_gap``, ``max_speed``, ``max_accel``, ``control_period``: ``d_s`` is the spacing and
+  the stop threshold ``Delta`` the gap limit less the braking distance at ``max_speed``
+  (:func:`default_params`); commands are scaled by the env's limits. ``max_speed`` 0.1 to 2.0: 3/3 each.
+* ``max_turn_rate``: a robot that turns slower than the 2 rad/s the gains were tuned on
+  (:data:`TUNED_TURN_RATE`) slows down in proportion when its turn rate saturates, so it drives the curves
+  the tuned robot would (``max_turn_rate=0.2``: 2/4 before, chains broken or stuck in wide arcs; 4/4 now;
+  0.5: 3/4, one chain stuck until the time limit; 1.0 and 6.0: all).
+* The sonar layout and range, the map bounds, the robots' neighbours: read from the observation layout.
+* Ignored, as the env's own limits: ``ghost_speed`` (the leader follows the env's ghost, whatever its
+  pace) and ``max_cycles`` (the time limit is fixed steps, not sized to the speeds): with
+  ``ghost_speed=0.01`` no chain arrives within the 1500 steps (0/3), with ``max_speed=0.05`` one of three
+  does not (the mission needs more than 150 s at 0.05 m/s). ``max_angular_accel``: ignored.
+
+With the default arguments the policy acts exactly as before (the chain entries verify unchanged).
 """
 
 from __future__ import annotations
@@ -318,13 +336,26 @@ def default_params(config: Any) -> ApoorvaParams:
     return ApoorvaParams(d_s=config.spacing, delta=delta)
 
 
+#: The turn rate limit the gains were tuned on (robot_chain_v1's default ``max_turn_rate``, rad/s).
+TUNED_TURN_RATE = 2.0
+
+
 def force_to_command(
-    force: np.ndarray, heading: float, kp_v: float, kp_w: float, max_v: float, max_w: float
+    force: np.ndarray,
+    heading: float,
+    kp_v: float,
+    kp_w: float,
+    max_v: float,
+    max_w: float,
+    tuned_w: float | None = None,
 ) -> tuple[float, float]:
     """Alg. 2's proportional controller: ``q' = q + F``, ``v = k_p^1 d(q, q')``, ``omega = k_p^2 theta_e``.
 
     The speed is scaled by ``cos theta_e`` (and is zero when the target lies behind), so a robot turns
-    toward ``q'`` before it drives there instead of sweeping sideways into obstacles.
+    toward ``q'`` before it drives there instead of sweeping sideways into obstacles. On a robot that turns
+    slower (``max_w``) than the one the gains were tuned on (``tuned_w``), a turn rate clipped to ``max_w``
+    slows the robot in proportion, so that it drives the curve the tuned robot would have driven rather
+    than a wider one (with ``max_w >= tuned_w``, as by default, or no ``tuned_w``, nothing changes).
     """
     size = math.hypot(force[0], force[1])
     if size < 1e-9:
@@ -333,6 +364,8 @@ def force_to_command(
     theta_e = math.atan2(math.sin(theta_e), math.cos(theta_e))
     v = kp_v * size * max(0.0, math.cos(theta_e))
     w = kp_w * theta_e
+    if tuned_w is not None and max_w < tuned_w and abs(w) > max_w:
+        v *= max_w / min(abs(w), tuned_w)
     return min(v, max_v), max(-max_w, min(max_w, w))
 
 
@@ -465,7 +498,9 @@ class ApoorvaChainPolicy:
             if self._escape_left[k] > 0:
                 self._escape_left[k] -= 1
                 force = force + p.escape * np.array([c, s])
-            v, w = force_to_command(force, float(heading[k]), p.kp_v, p.kp_w, spec["max_speed"], spec["max_turn_rate"])
+            v, w = force_to_command(
+                force, float(heading[k]), p.kp_v, p.kp_w, spec["max_speed"], spec["max_turn_rate"], TUNED_TURN_RATE
+            )
             # Stop while the follower is farther than Delta (Algs. 4-5).
             if waiting:
                 v, w = 0.0, 0.0

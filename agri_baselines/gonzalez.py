@@ -537,6 +537,36 @@ class PseudoReactiveParams:
     filter_eps: float = 0.3
 
 
+def adapted_params(
+    params: PseudoReactiveParams, max_speed: float, max_turn_rate: float, budget: float
+) -> PseudoReactiveParams:
+    """``params`` for a robot with other limits and a tighter time budget than the one it was tuned for.
+
+    The gains were tuned on the default Fitorobot (0.5 m/s, 0.6 rad/s), whose episodes take under half of
+    the env's time limit. The limit is sized to the robot's speed limits (``mission_time``), so a faster
+    robot gets less time: with ``budget`` (the default robot's limit over this one's) above 2 the speeds and
+    the turn rate grow by ``budget / 2``, so that an episode keeps within the limit. The turn rate never
+    exceeds the robot's, and the first turn's forward speed follows the turn rate so that its arc keeps its
+    radius (``turn_speed / turn_rate``, 0.5 m): on a robot that turns slower than ``turn_rate`` the arc
+    would otherwise widen into the rows. With the default limits the parameters come back unchanged.
+
+    Args:
+        params: The tuned parameters.
+        max_speed: The robot's forward speed limit (m/s).
+        max_turn_rate: The robot's turn rate limit (rad/s).
+        budget: The default robot's time limit over this robot's (1 with the default limits).
+    """
+    scale = max(1.0, 0.5 * budget)
+    turn_rate = min(params.turn_rate * scale, max_turn_rate)
+    return dataclasses.replace(
+        params,
+        cruise_speed=min(params.cruise_speed * scale, max_speed),
+        across_speed=min(params.across_speed * scale, max_speed),
+        turn_rate=turn_rate,
+        turn_speed=params.turn_speed * (turn_rate / params.turn_rate),
+    )
+
+
 FRONT, LF, LM, LR, RF, RM, RR = range(7)
 SONAR_BASELINE = 1.2  # m between the front and rear lateral sonars of the Fitorobot
 

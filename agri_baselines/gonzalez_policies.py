@@ -14,6 +14,31 @@
 
 The policies drive one env at a time (the privileged map comes from that env); ``predict`` accepts a
 batch of one, or a single observation.
+
+Env arguments the policies adapt to, and those they ignore (measured on 4 episodes, seeds 100000-100003,
+each argument at its bounds, ``max_speed`` 0.1 and 1.5, ``max_turn_rate`` 0.1 and 2.0, both at 1.5 and 2.0:
+all three 4/4 on every one):
+
+* ``max_speed``, ``max_turn_rate``: actions are scaled by the env's limits. Pure Pursuit (deliberative,
+  hybrid's later runs) drives within the Fitorobot's limits the paper used (0.5 m/s, 0.6 rad/s:
+  :data:`TRACKING_SPEED`, :data:`TRACKING_TURN_RATE`) or the env's where lower: allowed the env's 1.0 m/s
+  it took the headland turns too fast for the acceleration limit and touched the crop (0/4). The
+  pseudo-reactive controller (and the hybrid's first run) keeps its turn arcs' radius on a robot that turns
+  slower than its 0.4 rad/s (at ``max_turn_rate=0.1`` the arc widened into the rows: 0/4), and speeds up
+  when the env's speed limits shrink the time limit to less than half the default robot's (at 1.5 m/s and
+  2 rad/s it timed out at 190.9 s: 0/4) (:func:`~agri_baselines.gonzalez.adapted_params`).
+* ``time_limit`` and the mission-sized limit (``n_rows``, ``row_length``, ...): the pseudo-reactive speed-up
+  above compares the env's limit with the default robot's.
+* ``max_accel``: Pure Pursuit brakes within it. The pseudo-reactive controller plans its stops at its own
+  0.2 m/s^2 (``brake_decel``) and ignores it (``max_accel=0.1``: still 4/4, in 223-234 s against 215-222 s).
+  The hybrid's later runs at 1.5 m/s and 2 rad/s: 2 campaigns of 2 runs, all covered.
+* ``control_period``, the sonar layout and range, ``pose_scale``: read from the env.
+* Ignored: ``max_angular_accel`` (the turns assume the default 0.8 rad/s^2 or near it), the sensor noise
+  arguments (the filters are the paper's, not tuned to them), ``localization`` (each policy requires its
+  own: ground truth for the deliberative, odometry for the others).
+
+With the default arguments every policy acts exactly as before these adaptations (the leaderboard's
+coverage entries verify unchanged).
 """
 
 from __future__ import annotations
@@ -36,6 +61,7 @@ from agri_baselines.gonzalez import (
     PseudoReactiveController,
     PseudoReactiveParams,
     PurePursuit,
+    adapted_params,
     sonar_echo,
 )
 from agri_baselines.gonzalez_planner import (
@@ -53,6 +79,14 @@ from agri_baselines.gonzalez_planner import (
 MIN_LOOKAHEAD = 0.4
 
 
+#: The Fitorobot's limits as the paper drove it (GreenhouseCoverage's default ``max_speed`` (m/s) and
+#: ``max_turn_rate`` (rad/s)): Pure Pursuit follows a plan within them, or within the env's where lower.
+#: Allowed more, it took the headland turns too fast for the robot's acceleration limits and touched the
+#: crop (``max_speed=1.0``: 4 of 4 episodes; ``max_turn_rate=2.0``: 1 of 4).
+TRACKING_SPEED = 0.5
+TRACKING_TURN_RATE = 0.6
+
+
 class _CoveragePolicyBase:
     """Observation decoding and action scaling shared by the three policies."""
 
@@ -64,6 +98,16 @@ class _CoveragePolicyBase:
         self.max_range = e.sonars.spec.max_range
         self.mounts = e.sonars.mounts.copy()
         self.dt = e.config.control_period
+        #: ``(speed, turn rate, acceleration)`` limits Pure Pursuit follows a plan within.
+        self.tracking = (
+            min(self.spec.max_speed, TRACKING_SPEED),
+            min(self.spec.max_turn_rate, TRACKING_TURN_RATE),
+            self.spec.max_accel,
+        )
+        # The default robot's time limit over this env's (1 with the default speed limits and time_limit).
+        cfg = e.config
+        tuned = dataclasses.replace(cfg, max_speed=TRACKING_SPEED, max_turn_rate=TRACKING_TURN_RATE, time_limit=0.0)
+        self.time_budget = tuned.mission_time() / cfg.mission_time()
 
     def decode(self, obs: dict[str, np.ndarray]) -> tuple[np.ndarray, np.ndarray, float]:
         """``(pose (x, y, yaw), sonar ranges (m), compass heading (rad))`` from one observation."""
@@ -124,9 +168,12 @@ class _Follower:
         k = int(np.searchsorted(self._s, s, side="right")) - 1
         return int(self.part[min(len(self.part) - 1, max(0, k))])
 
-    def command(self, pose: np.ndarray, spec: Any) -> tuple[float, float]:
-        """Pure Pursuit's ``(v, w)`` for ``pose``; records its cross-track error on the part of the plan it is on."""
-        v, w = self.tracker.command(pose, spec.max_speed, spec.max_turn_rate, spec.max_accel)
+    def command(self, pose: np.ndarray, limits: tuple[float, float, float]) -> tuple[float, float]:
+        """Pure Pursuit's ``(v, w)`` for ``pose`` within ``(speed, turn rate, acceleration)`` limits.
+
+        Records its cross-track error on the part of the plan it is on.
+        """
+        v, w = self.tracker.command(pose, *limits)
         part = self.part_at(self.tracker.progress)
         if not self.tracker.done and part in self.errors:
             self.errors[part].append(self.tracker.distance)
@@ -213,7 +260,7 @@ class GonzalezDeliberativePolicy(_CoveragePolicyBase):
             plan = plan_coverage(occ, res, pose[:2] - np.asarray(origin), self.planner)
             self.plan_time = time.perf_counter() - t0
             self.follower = _Follower(plan, np.asarray(origin), self.lookahead, self.min_lookahead)
-        return self.to_action(*self.follower.command(pose, self.spec))
+        return self.to_action(*self.follower.command(pose, self.tracking))
 
     def episode_metrics(self, index: int = 0) -> dict[str, Any]:
         """The episode's plan: ``plan_time_ms``, ``planned_length`` (m), ``planned_path`` (m, every 0.2 m).
@@ -243,7 +290,10 @@ class GonzalezPseudoReactivePolicy(_CoveragePolicyBase):
         super().__init__(env)
         if env.unwrapped.config.localization != "odometry":
             raise ValueError("gonzalez-pseudo-reactive needs gym.make(..., localization='odometry')")
-        self.params = params or PseudoReactiveParams()
+        spec = self.spec
+        self.params = params or adapted_params(
+            PseudoReactiveParams(), spec.max_speed, spec.max_turn_rate, self.time_budget
+        )
         self.controller = PseudoReactiveController(self.params, self.mounts, self.max_range)
 
     def act(self, obs: dict[str, np.ndarray], start: bool) -> np.ndarray:
@@ -376,7 +426,7 @@ class GonzalezHybridPolicy(GonzalezPseudoReactivePolicy):
         if self.anchor_ends:
             self._correct_along(corrected, pose[:2], np.array(filtered))
             corrected[:2] = self._corrected(pose[:2])
-        return self.to_action(*self.follower.command(corrected, self.spec))
+        return self.to_action(*self.follower.command(corrected, self.tracking))
 
     def _start_run(self, pose: np.ndarray) -> None:
         same_greenhouse = self.env.unwrapped.config.layout_seed >= 0

@@ -70,6 +70,18 @@ class _SpecWithVectorForm(EnvSpec):
         fields["additional_wrappers"] = ()
         return EnvSpec(**fields)
 
+    def __eq__(self, other: object) -> bool:
+        """Equal to any ``EnvSpec`` with the same fields: the subclass only changes how ``make_vec`` copies it.
+
+        So a spec that went through ``EnvSpec.to_json`` / ``from_json`` (a plain ``EnvSpec``) equals it, either
+        way round, as Gymnasium's own specs do.
+        """
+        if not isinstance(other, EnvSpec):
+            return NotImplemented
+        return all(getattr(self, f.name) == getattr(other, f.name) for f in dataclasses.fields(EnvSpec) if f.compare)
+
+    __hash__ = None  # type: ignore[assignment]  # as EnvSpec's (a mutable dataclass)
+
 
 def register_envs() -> None:
     """Register all agri_envs ids with Gymnasium (idempotent)."""

@@ -41,7 +41,8 @@ from agri_envs.sim2d.view import SceneView
 from agri_envs.sim2d.world import World2D
 
 _PARK = 1.0e6  # where dynamic obstacles wait before they are dropped (far outside any map)
-LAYOUT_TRIES = 3  # generated maps drawn for an episode before a chain that fits none of them is an error
+LAYOUT_TRIES = 3  # generated maps drawn for an episode with random goals
+FALLBACK_LAYOUTS = 16  # further generated maps drawn (goals known to fit) before a chain that fits none is refused
 
 
 class RobotChainEnv(ParallelEnv):  # type: ignore[misc]
@@ -142,7 +143,8 @@ class RobotChainEnv(ParallelEnv):  # type: ignore[misc]
     leader stands there and the chain behind it along a free path that leads away from the goal.) A goal
     without such cells is drawn again (4 goals; a generated map is drawn anew up to 3 times); when all of
     them lie too central, the goal is drawn (from the same stream) among the goals known to leave room for
-    the chain, so that a floor that holds the chain holds it for every seed. A chain its floor cannot hold
+    the chain, so that a floor that holds the chain holds it for every seed (on generated floors, up to 16
+    more are drawn until one holds it). A chain its floor cannot hold
     is refused with a ``ValueError`` (``ChainDoesNotFit``) naming the largest ``n_robots`` the floor holds:
     at construction for a fixed floor (``scene="map"`` or ``layout_seed >= 0``, without ``start``/``goal``),
     else at ``reset`` when none of the floors drawn holds it. Obstacles drop when the
@@ -345,7 +347,8 @@ class RobotChainEnv(ParallelEnv):  # type: ignore[misc]
         Random goals on each generated map (drawn anew up to ``LAYOUT_TRIES`` times) come first, as they
         always did, so that an episode that found room this way stays the same. When every one of them lies
         too central, a goal is drawn (from the same stream) among those known to leave room for the chain,
-        on the maps tried in turn: a floor that holds the chain holds it for every seed.
+        on the maps tried in turn, then on up to ``FALLBACK_LAYOUTS`` new generated ones: a floor that holds
+        the chain holds it for every seed.
 
         Raises:
             ChainDoesNotFit: When none of the floors holds the chain; the message names the largest
@@ -364,12 +367,14 @@ class RobotChainEnv(ParallelEnv):  # type: ignore[misc]
                 if self._fixed_map is not None:
                     break
         reaches = []
-        for cmap in tried:
+        generated = self._fixed_map is None
+        for k in range(len(tried) + (FALLBACK_LAYOUTS if generated else 0)):
+            cmap = tried[k] if k < len(tried) else self._draw_map(rng)  # then new floors, as long as none holds it
             reaches.append(reach := self._reach(cmap))
             mission = fallback_mission(cmap, cfg, rng, goal_distance, reach)
             if mission is not None:
                 return cmap, mission
-        raise does_not_fit(cfg, reaches, goal_distance, generated=self._fixed_map is None)
+        raise does_not_fit(cfg, reaches, goal_distance, generated=generated)
 
     def reset(
         self, seed: int | None = None, options: dict[str, Any] | None = None

@@ -104,7 +104,7 @@ def does_not_fit(cfg: RobotChainConfig, reaches: list[FloorReach], goal_distance
     need = lo + (cfg.n_robots - 1) * cfg.spacing
     longest = max(r.longest for r in reaches)
     holds = max(r.max_robots(cfg, lo) for r in reaches)
-    floor = "the floors drawn for this episode hold" if generated else "this floor holds"
+    floor = f"the {len(reaches)} floors drawn for this episode hold" if generated else "this floor holds"
     larger = {"office": "office_width / office_height", "greenhouse": "n_rows / row_length"}.get(cfg.scene)
     way_out = f", or a larger floor ({larger})" if larger else ""
     lead = "min_goal_distance" if goal_distance is None else "options['goal_distance'][0]"

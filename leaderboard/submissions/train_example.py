@@ -43,4 +43,7 @@ torch.onnx.export(
 )
 for name in ("example-ppo-nav.onnx", "example-ppo-nav.zip"):
     with open(name + ".yaml", "w") as sidecar:
-        sidecar.write("env_id: agri_envs/GreenhouseNav-v2\nenv_kwargs: {localization: ground_truth}\n")
+        sidecar.write(
+            "env_id: agri_envs/GreenhouseNav-v2\nenv_kwargs: {localization: ground_truth}\n"
+            "privileged: true  # it reads the waypoints from the true pose\n"
+        )

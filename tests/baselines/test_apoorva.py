@@ -204,3 +204,23 @@ def test_follower_keeps_its_place_on_the_trail_across_a_wall():
     target = policy._trail_target("robot_0", "robot_1", now, np.array([0.6, 0.5]))
     assert target is not None
     np.testing.assert_allclose(target, [0.0, 0.5 + p.lookahead], atol=1e-6)
+
+
+def test_force_to_command_slows_a_robot_that_turns_slower_than_the_tuned_one():
+    force, heading = np.array([0.0, 1.0]), 0.0  # the target lies 90 deg to the left: the turn saturates
+    tuned = ac.force_to_command(force, heading, 1.2, 2.5, 0.4, 2.0)
+    # As tuned (and with any robot that turns at least as fast), the command is the paper's.
+    assert ac.force_to_command(force, heading, 1.2, 2.5, 0.4, 2.0, ac.TUNED_TURN_RATE) == tuned
+    assert ac.force_to_command(force, heading, 1.2, 2.5, 0.4, 6.0, ac.TUNED_TURN_RATE)[0] == tuned[0]
+    force = np.array([0.2, 0.06])  # ahead, a little left: w = 2.5 * 0.29 rad/s saturates at 0.2 rad/s
+    v, w = ac.force_to_command(force, heading, 1.2, 2.5, 0.4, 2.0, ac.TUNED_TURN_RATE)
+    v_slow, w_slow = ac.force_to_command(force, heading, 1.2, 2.5, 0.4, 0.2, ac.TUNED_TURN_RATE)
+    assert w < 2.0 and v < 0.4  # neither limit bites the tuned robot
+    assert w_slow == 0.2 and v_slow / w_slow == pytest.approx(v / w)  # the tuned robot's curvature
+    assert ac.force_to_command(force, heading, 1.2, 2.5, 0.4, 0.2) == (v, 0.2)  # without tuned_w: as before
+
+
+def test_apoorva_chain_leads_a_slowly_turning_chain_to_the_goal():
+    # max_turn_rate=0.2 (valid: 0.2-6.0): the chain broke in wide arcs on this seed (2 of 4 seeds from 100000).
+    (info,) = _run("apoorva-chain", [100001], n_robots=4, max_turn_rate=0.2)
+    assert info["is_success"] and info["collisions"] == 0

@@ -544,3 +544,44 @@ def test_report_section_writes_the_figures(tmp_path):
     pngs = sorted(p.name for p in tmp_path.glob("*.png"))
     assert len(pngs) == 5 and all(name in md for name in pngs)
     assert "| gonzalez-deliberative |" in md and "Peak filter (eq. 1)" in md
+
+
+def test_adapted_params_leave_the_default_robot_unchanged_and_keep_the_turn_arc():
+    from agri_baselines.gonzalez import PseudoReactiveParams, adapted_params
+
+    tuned = PseudoReactiveParams()
+    assert adapted_params(tuned, 0.5, 0.6, 1.0) == tuned  # the default robot: bit-identical
+    slow_turns = adapted_params(tuned, 0.5, 0.1, 1.0)
+    assert slow_turns.turn_rate == 0.1 and slow_turns.turn_speed / slow_turns.turn_rate == pytest.approx(0.5)
+    fast = adapted_params(tuned, 1.5, 2.0, 2.72)  # the limit shrunk to 190.8 s from 518.8 s
+    assert fast.cruise_speed == pytest.approx(0.4 * 1.36) and fast.turn_rate == pytest.approx(0.4 * 1.36)
+    assert fast.turn_speed / fast.turn_rate == pytest.approx(0.5)
+
+
+def test_policies_are_unchanged_with_the_default_arguments():
+    from agri_baselines.gonzalez import PseudoReactiveParams
+
+    env = gym.make("agri_envs/GreenhouseCoverage-v2", localization="ground_truth")
+    policy = make_policy("gonzalez-deliberative", env)
+    spec = env.unwrapped.robot_spec
+    assert policy.tracking == (spec.max_speed, spec.max_turn_rate, spec.max_accel) and policy.time_budget == 1.0
+    env = gym.make("agri_envs/GreenhouseCoverage-v2")
+    assert make_policy("gonzalez-pseudo-reactive", env).params == PseudoReactiveParams()
+
+
+@pytest.mark.parametrize(
+    ("name", "kwargs"),
+    [
+        # The pseudo-reactive first turn's arc widened into the rows on a slowly turning robot (0/2 before).
+        ("gonzalez-pseudo-reactive", {"max_turn_rate": 0.1}),
+        # Pure Pursuit at the env's 1.0 m/s took the headland turns too fast and touched the crop (0/2 before).
+        ("gonzalez-deliberative", {"max_speed": 1.0}),
+    ],
+)
+def test_baselines_cover_the_greenhouse_at_the_robots_limits(name, kwargs):
+    from agri_training.evaluation.episode import run_episode
+
+    loc = "ground_truth" if name == "gonzalez-deliberative" else "odometry"
+    env = gym.make("agri_envs/GreenhouseCoverage-v2", localization=loc, n_rows=2, row_length=6.0, **kwargs)
+    record = run_episode(env, make_policy(name, env), 0, None)["record"]
+    assert record["is_success"], record
