@@ -339,6 +339,22 @@ def compare_documents(committed: Any, fresh: Any, rtol: float = 0.0, path: str =
 _META_KEYS = ("git_commit", "command", "package_version", "_path")
 
 
+def _entry_suite_and_policy(entry: Mapping[str, Any], suites_dir: Path | str) -> tuple[Suite, PolicyRef]:
+    """The suite an entry was made for and its resolved policy.
+
+    Raises:
+        ValueError: When the suite changed since the entry was made (stale), or the policy's files are missing
+            or changed.
+    """
+    suite = find_suite(entry["suite"]["name"], suites_dir)
+    if suite.sha256 != entry["suite"]["sha256"] or suite.version != entry["suite"]["version"]:
+        raise ValueError(
+            f"stale, made for suite version {entry['suite']['version']} ({entry['suite']['sha256'][:12]}), the "
+            f"suite is now v{suite.version} ({suite.sha256[:12]}); regenerate it"
+        )
+    return suite, policy_from_entry(entry["policy"])
+
+
 def verify_entries(
     entries: Sequence[Mapping[str, Any]],
     suites_dir: Path | str = SUITES_DIR,
@@ -360,19 +376,10 @@ def verify_entries(
     pairs = []
     kept = []
     for entry in entries:
-        name = f"{entry['suite']['name']}/{entry['policy']['name']}"
         try:
-            suite = find_suite(entry["suite"]["name"], suites_dir)
-            if suite.sha256 != entry["suite"]["sha256"] or suite.version != entry["suite"]["version"]:
-                problems.append(
-                    f"{name}: stale, made for suite version {entry['suite']['version']} "
-                    f"({entry['suite']['sha256'][:12]}), the suite is now v{suite.version} "
-                    f"({suite.sha256[:12]}); regenerate it"
-                )
-                continue
-            policy = policy_from_entry(entry["policy"])
+            suite, policy = _entry_suite_and_policy(entry, suites_dir)
         except ValueError as exc:
-            problems.append(f"{name}: {exc}")
+            problems.append(f"{entry['suite']['name']}/{entry['policy']['name']}: {exc}")
             continue
         pairs.append((suite, policy))
         kept.append(entry)
@@ -433,11 +440,7 @@ def verify_sample(
     for entry in entries:
         name = f"{entry['suite']['name']}/{entry['policy']['name']}"
         try:
-            suite = find_suite(entry["suite"]["name"], suites_dir)
-            if suite.sha256 != entry["suite"]["sha256"] or suite.version != entry["suite"]["version"]:
-                problems.append(f"{name}: stale, made for suite version {entry['suite']['version']}; regenerate it")
-                continue
-            policy = policy_from_entry(entry["policy"])
+            suite, policy = _entry_suite_and_policy(entry, suites_dir)
         except ValueError as exc:
             problems.append(f"{name}: {exc}")
             continue
