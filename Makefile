@@ -25,13 +25,13 @@ $(STAMP): pyproject.toml
 report: $(STAMP)
 	$(BIN)/agri report --out reports/latest
 
-# Static checks, the tests, then the leaderboard's verify on a sample: one episode of every level of every entry
+# Static checks, the tests, then the leaderboard's verify on a sample: two episodes of every level of every entry
 # re-run on its pinned seed, every summary recomputed from the committed records, LEADERBOARD.md current.
 test: $(STAMP)
 	$(BIN)/ruff check .
 	$(BIN)/mypy
 	SDL_VIDEODRIVER=dummy SDL_AUDIODRIVER=dummy $(BIN)/python -m pytest -n 2 -q
-	$(BIN)/agri leaderboard verify --sample 1
+	$(BIN)/agri leaderboard verify --sample 2
 
 # Every episode of every entry re-run (what the leaderboard workflow runs, one job per env family).
 verify: $(STAMP)

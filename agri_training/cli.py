@@ -586,7 +586,7 @@ def build_parser() -> argparse.ArgumentParser:
         default=None,
         metavar="N",
         help="re-run only N evenly spaced episodes (whole campaigns) of every level of every entry, and recompute "
-        "every summary from the committed records (make test: 1; default: every episode)",
+        "every summary from the committed records (make test: 2; default: every episode)",
     )
     ve.add_argument("--quiet", action="store_true")
     board.set_defaults(func=_cmd_leaderboard)
