@@ -342,3 +342,14 @@ def test_drives_any_valid_robot_within_the_time_limit(kwargs):
     # the time limit scales with the robot's limits; Harik's fixed u_max = 0.5 timed out every episode at 1 m/s
     infos = run({"n_rows": 2, "row_length": 5.0, "n_people": 0, **kwargs}, range(2))
     assert all(i["is_success"] and not i["collision"] for i in infos), infos
+
+
+def test_front_zone_fits_narrow_corridors_and_is_the_papers_from_0_9_m():
+    paper = HarikApfParams()
+    for width in (0.9, 1.0, 1.2, 3.0):
+        assert paper.for_corridor(width - rover.WIDTH) == paper  # bit for bit
+    margins = [paper.for_corridor(w - rover.WIDTH).front_margin for w in (0.8, 0.85, 0.9)]
+    assert margins[0] == pytest.approx(0.0, abs=1e-12) and 0.0 < margins[1] < margins[2] == 0.05
+    # with the paper's 5 cm margin, harik-apf-gt stopped 30-50 times and timed out in 5 of 20 held-out episodes
+    infos = run({"corridor_width": 0.8, "n_people": 0, "n_rows": 2, "row_length": 5.0}, range(2))
+    assert all(i["is_success"] and not i["collision"] for i in infos), infos
