@@ -12,6 +12,7 @@ Two views of the same entries:
 from __future__ import annotations
 
 import re
+import textwrap
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
@@ -130,7 +131,9 @@ def _column_labels(suite: lb.Suite) -> tuple[str, list[str]]:
     """A suite's group header and its level labels: one argument -> its values; several -> one per line."""
     assert suite.sweep is not None
     names, rows = suite.sweep
-    header = f"{suite.stress or suite.name}\n({', '.join(names)})"
+    # the arguments wrapped to the group's width (about 11 characters a column), so that groups never overlap
+    wrapped = textwrap.fill(f"({', '.join(names)})", width=max(14, 11 * len(rows)))
+    header = f"{suite.stress or suite.name}\n{wrapped}"
     if len(names) == 1:
         return header, [_short(row[0]) for row in rows]
     return header, ["\n".join(_short(v) for v in row) for row in rows]
@@ -169,7 +172,8 @@ def robustness_figure(
     cell_h = 0.42  # inches
     # per band: the level labels (one line per swept argument), then the two-line suite header above them
     label_h = [0.12 + 0.12 * max(len(s.sweep[0]) if s.sweep else 1 for s in band) for band in bands]
-    header_h = [h + 0.45 for h in label_h]
+    header_lines = [max(_column_labels(s)[0].count("\n") + 1 for s in band) for band in bands]
+    header_h = [h + 0.15 + 0.15 * lines for h, lines in zip(label_h, header_lines, strict=True)]
     title_h, cells_h, gap_h = 0.55, cell_h * n_rows, 0.3
     total = title_h + sum(header_h) + len(bands) * cells_h + (len(bands) - 1) * gap_h + 0.1
     fig = plt.figure(figsize=(FIGURE_WIDTH, total))
@@ -190,7 +194,8 @@ def robustness_figure(
             ax.text(x + len(labels) / 2, -(label_h[b] + 0.06) / cell_h, header, ha="center", va="bottom", fontsize=8,
                     fontweight="bold")  # fmt: skip
             for j, label in enumerate(labels):
-                ax.text(x + j + 0.5, -0.12, label, ha="center", va="bottom", fontsize=7)
+                longest = max(len(line) for line in label.split("\n"))  # a word like "greenhouse" fills its cell
+                ax.text(x + j + 0.5, -0.12, label, ha="center", va="bottom", fontsize=7 if longest <= 8 else 5.5)
             for i, (name, _, _) in enumerate(policies):
                 entry = entries.get((suite.name, name))
                 drop = lb.first_drop(suite, entry) if entry else None
