@@ -32,7 +32,7 @@ from collections.abc import Callable, Mapping, Sequence
 from typing import Any
 
 from agri_training.core.stats import format_interval, wilson_interval
-from agri_training.leaderboard.suites import Suite
+from agri_training.leaderboard.suites import Suite, is_learned
 
 #: The success rate below which a policy counts as broken at a stress level.
 SUCCESS_FLOOR = 0.90
@@ -181,7 +181,7 @@ def policy_order(entries: Sequence[Mapping[str, Any]]) -> list[tuple[str, bool, 
     seen: dict[str, tuple[str, bool, bool]] = {}
     for e in entries:
         name = e["policy"]["name"]
-        seen.setdefault(name, (name, e["policy"]["kind"] == "learned", bool(e.get("privileged"))))
+        seen.setdefault(name, (name, is_learned(e["policy"]), bool(e.get("privileged"))))
     return sorted(seen.values(), key=lambda p: (p[1], p[0]))
 
 

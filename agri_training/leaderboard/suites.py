@@ -341,3 +341,12 @@ def find_suite(name: str, directory: Path | str = SUITES_DIR) -> Suite:
         known = ", ".join(sorted(p.stem for p in Path(directory).glob("*.yaml")))
         raise ValueError(f"unknown suite {name!r}; known: {known or 'none'}")
     return load_suite(path)
+
+
+def is_learned(policy: Mapping[str, Any]) -> bool:
+    """Whether an entry's ``policy`` reference is a learned one: every kind but a registered scripted baseline.
+
+    A zoo policy or ``agri train`` run (``learned``), an ONNX file, an SB3 zip, a Python callable or object: the
+    report and LEADERBOARD.md compare them with the baselines and list them below the line.
+    """
+    return policy.get("kind") != "baseline"

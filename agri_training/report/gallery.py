@@ -28,7 +28,7 @@ import numpy as np
 import agri_envs
 from agri_baselines import PolicySpec, list_policies
 from agri_envs.scenarios import list_scenarios
-from agri_training.leaderboard import find_suite, load_entries, rank_key
+from agri_training.leaderboard import find_suite, is_learned, load_entries, rank_key
 from agri_training.learned.zoo import zoo_training  # (importing zoo registers the shipped learned policies)
 
 #: Env families of the site: (page name, env id, preset ids that share the page).
@@ -195,7 +195,7 @@ def best_scores(suite_name: str, entries: Sequence[Mapping[str, Any]]) -> dict[s
         key=lambda e: (rank_key(e, rank_by), e["policy"]["name"]),
     )
     return {
-        kind: next((e for e in ranked if (e["policy"]["kind"] == "baseline") == (kind == "scripted")), None)
+        kind: next((e for e in ranked if is_learned(e["policy"]) == (kind == "learned")), None)
         for kind in ("scripted", "learned")
     }
 

@@ -399,8 +399,8 @@ def _pairs(group: Sequence[Row]) -> list[tuple[Row, Row]]:
     Every learned policy against every baseline; without learned ones, every pair of baselines (the
     unprivileged before the privileged).
     """
-    learned = [r for r in group if r.entry["policy"]["kind"] == "learned"]
-    base = [r for r in group if r.entry["policy"]["kind"] != "learned"]
+    learned = [r for r in group if lb.is_learned(r.entry["policy"])]
+    base = [r for r in group if not lb.is_learned(r.entry["policy"])]
     if learned:
         return [(a, b) for a in learned for b in base]
     base = sorted(base, key=lambda r: (bool(r.entry.get("privileged")), r.entry["policy"]["name"]))
@@ -1022,7 +1022,7 @@ def who_wins_where(env_ids: Sequence[str], suites: Sequence[lb.Suite], rows: Seq
             "",
             "</details>",
         ]
-    if not any(r.entry["policy"]["kind"] == "learned" for r in rows):
+    if not any(lb.is_learned(r.entry["policy"]) for r in rows):
         lines += [
             "",
             "No learned policy has an entry yet: the comparisons are between the baselines. Submit one with "

@@ -138,3 +138,14 @@ def test_report_opens_with_the_glance_and_draws_a_robustness_matrix(tmp_path, mo
     assert (out / "robustness-robot-chain.png").exists()
     html = (out / "report.html").read_text()
     assert "img,video{max-width:100%" in html and "<details><summary>" in html
+
+
+def test_every_policy_kind_but_a_baseline_is_listed_as_learned():
+    from agri_training.leaderboard.robustness import policy_order
+
+    assert not lb.is_learned({"kind": "baseline", "name": "harik-apf"})
+    kinds = ("learned", "onnx", "sb3-zip", "callable", "object")
+    assert all(lb.is_learned({"kind": k}) for k in kinds)
+    entries = [{"policy": {"kind": k, "name": k}, "privileged": False} for k in ("baseline", *kinds)]
+    order = policy_order(entries)
+    assert order[0] == ("baseline", False, False) and all(learned for _, learned, _ in order[1:])
