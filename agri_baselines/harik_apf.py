@@ -81,10 +81,9 @@ class HarikApfParams:
 
         Not in the paper, and never binding at its speeds: there the stop distance is the fixed 0.35 m, and the
         safety stop acts below it. A faster robot slows as the gap closes instead of running into the stop
-        from full speed, which at 2 m/s would leave it stopping and starting (the stop distance grows with
-        the stop distance would have to grow with the speed, and then block it in front of every post).
+        from full speed (a stop distance grown with the speed instead blocked it in front of every post).
         """
-        budget = _braking(*_PAPER_BRAKING) + (front - self.front_stop_distance)
+        budget = _PAPER_BRAKING_DISTANCE + (front - self.front_stop_distance)
         if u <= 0.0 or budget <= 0.0 or _braking(u, self.braking_accel, self.reaction_time) <= budget:
             return u
         a, t = self.braking_accel, self.reaction_time
@@ -139,8 +138,9 @@ def _braking(u: float, accel: float, reaction_time: float) -> float:
     return u * u / (2.0 * accel) + u * reaction_time
 
 
-#: Speed (m/s), deceleration (m/s^2) and reaction time (s) the paper's front stop distance was set for.
-_PAPER_BRAKING = (0.5, 1.0, 1.0 / 15.0)
+#: Distance (m) the paper's robot needs to stop from its 0.5 m/s at 1 m/s^2 after one 1/15 s period: the paper's
+#: front stop distance covers it, so only a robot that needs more slows down (:meth:`HarikApfParams.governed_speed`).
+_PAPER_BRAKING_DISTANCE = _braking(0.5, 1.0, 1.0 / 15.0)
 
 #: The limits of GreenhouseNav's default robot, for which the paper's gains (:class:`HarikApfParams`) are set.
 DEFAULT_LIMITS: dict[str, float] = {

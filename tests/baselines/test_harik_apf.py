@@ -350,6 +350,12 @@ def test_front_zone_fits_narrow_corridors_and_is_the_papers_from_0_9_m():
         assert paper.for_corridor(width - rover.WIDTH) == paper  # bit for bit
     margins = [paper.for_corridor(w - rover.WIDTH).front_margin for w in (0.8, 0.85, 0.9)]
     assert margins[0] == pytest.approx(0.0, abs=1e-12) and 0.0 < margins[1] < margins[2] == 0.05
-    # with the paper's 5 cm margin, harik-apf-gt stopped 30-50 times and timed out in 5 of 20 held-out episodes
-    infos = run({"corridor_width": 0.8, "n_people": 0, "n_rows": 2, "row_length": 5.0}, range(2))
-    assert all(i["is_success"] and not i["collision"] for i in infos), infos
+    # Two held-out episodes of greenhouse-stress-narrow-rows at 0.8 m: with the paper's 5 cm margin the plants
+    # keep entering the front zone (about 50 safety stops, then the time limit); with the fitted margin both arrive.
+    env = gym.make(ENV_ID, full_scan=True, localization="ground_truth", corridor_width=0.8, n_people=0)
+    for margin, arrives in ((None, True), (0.05, False)):
+        policy = make_policy("harik-apf-gt", env)
+        if margin is not None:
+            policy.params = dataclasses.replace(policy.params, front_margin=margin)
+        records = [run_episode(env, policy, seed, None)["record"] for seed in (100007, 100011)]
+        assert all(r["is_success"] == arrives and not r["collision"] for r in records), (margin, records)
