@@ -356,12 +356,13 @@ class RobotChainEnv(ParallelEnv):  # type: ignore[misc]
         """
         cfg = self.config
         tried: list[ChainMap] = []
-        for _ in range(LAYOUT_TRIES):
+        for attempt in range(LAYOUT_TRIES):
             cmap = self._draw_map(rng)
             try:
                 return cmap, plan_mission(cmap, cfg, rng, goal_distance)
             except ChainDoesNotFit:
-                if cfg.start or cfg.goal:  # a given start or goal: no other goal to fall back to
+                last = self._fixed_map is not None or attempt == LAYOUT_TRIES - 1
+                if (cfg.start or cfg.goal) and last:  # a given start or goal: no other goal to fall back to
                     raise
                 tried.append(cmap)
                 if self._fixed_map is not None:

@@ -452,3 +452,32 @@ def test_agri_evaluate_refuses_a_chain_too_long_for_its_floor_in_one_line(tmp_pa
         err = capsys.readouterr().err
         assert rc == 2 and err.startswith("agri: error: robot_chain_v1: ") and "at most n_robots=" in err, err
         assert "Traceback" not in err and len(err.strip().splitlines()) == 1
+
+
+def test_a_given_start_on_generated_floors_draws_another_floor_before_refusing(monkeypatch):
+    # A given start leaves no other goal to fall back to, but a generated floor that cannot take the chain is
+    # drawn anew (up to LAYOUT_TRIES floors), as before the fallback goals existed.
+    from agri_envs.chain import env as chain_env
+
+    real = chain_env.plan_mission
+    calls = []
+
+    def first_floor_too_small(*args, **kwargs):
+        calls.append(1)
+        if len(calls) == 1:
+            raise ChainDoesNotFit("too small")
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(chain_env, "plan_mission", first_floor_too_small)
+    robot_chain_v1.parallel_env(start=(2.0, 4.5)).reset(seed=3)
+    assert len(calls) == 2  # the second floor took the chain
+
+    def never(*args, **kwargs):
+        calls.append(1)
+        raise ChainDoesNotFit("never")
+
+    calls.clear()
+    monkeypatch.setattr(chain_env, "plan_mission", never)
+    with pytest.raises(ChainDoesNotFit, match="never"):
+        robot_chain_v1.parallel_env(start=(2.0, 4.5)).reset(seed=3)
+    assert len(calls) == chain_env.LAYOUT_TRIES
