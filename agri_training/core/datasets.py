@@ -1,6 +1,6 @@
 """Demonstration datasets in Minari's format (the Farama standard for offline RL): what one holds, written and read.
 
-:func:`agri_training.evaluation.datasets.make_dataset` runs the episodes; this module knows the format only.
+:func:`agri_training.datasets.make_dataset` runs the episodes; this module knows the format only.
 A dataset of ours is a Minari dataset (``minari.load_dataset(dataset_id)``, stored in HDF5 under
 ``MINARI_DATASETS_PATH``, default ``~/.minari/datasets``) whose
 
@@ -263,7 +263,7 @@ class DatasetWriter:
                 "dataset_id": self.dataset_id,
                 "algorithm_name": policy,
                 "author": {"agri_envs"},
-                "code_permalink": "agri_training.evaluation.datasets (agri dataset)",
+                "code_permalink": "agri_training.datasets (agri dataset)",
                 "description": description,
                 "minari_version": minari.__version__,
                 "requirements": [f"agri-envs=={agri_envs.__version__}"],

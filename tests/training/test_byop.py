@@ -83,7 +83,9 @@ def test_a_policy_need_that_contradicts_the_scenario_is_refused_with_both_values
 def test_a_policy_is_resolved_once_into_a_typed_reference():
     ref = resolve_policy("ppo-greenhouse-nav")
     assert ref.kind == "zoo" and ref.sha256 and ref.env_id == NAV and ref.observation_only
-    assert ref.to_entry() == lb.policy_reference("ppo-greenhouse-nav")
+    # the reference an entry records keeps the committed entries' format
+    committed = json.loads((lb.ENTRIES_DIR / "greenhouse-corridor" / "ppo-greenhouse-nav.json").read_text())
+    assert ref.to_entry() == committed["policy"]
     request = EvalRequest(NAV, "harik-apf-gt")
     assert request.ref.kind == "baseline" and EvalRequest(NAV, request.ref).ref is request.ref
     with pytest.raises(ValueError, match="unknown policy 'nope'.*module:attribute"):
