@@ -31,7 +31,7 @@ import numpy as np
 
 import agri_envs
 from agri_training.learned.inference import dense_layer, exp, fold_sum, tanh
-from agri_training.learned.sidecar import FlatNormalization, read_sidecar
+from agri_training.learned.sidecar import FlatNormalization, read_sidecar, sidecar_path
 
 #: The operators an ONNX policy may use (those of MLPs as ``torch.onnx.export`` writes them).
 SUPPORTED_OPS = (
@@ -390,6 +390,62 @@ def flatten_observations(space: gym.Space[Any], observation: Any) -> tuple[np.nd
     return np.asarray(rows, dtype=np.float32), True
 
 
+#: Graphs with their sidecar's normalisation, checked against the spaces they drive (see :func:`_checked`).
+_CHECKED: collections.OrderedDict[tuple[Any, ...], tuple[OnnxGraph, FlatNormalization | None]] = (
+    collections.OrderedDict()
+)
+
+
+def _checked(
+    path: Path, observation_space: gym.Space[Any], action_space: gym.Space[Any], env_name: str
+) -> tuple[OnnxGraph, FlatNormalization | None]:
+    """The graph of ``path`` and its sidecar's normalisation, checked against the spaces once per process.
+
+    The evaluator builds a fresh policy for every episode (and every sub-env of a batch); reading the sidecar
+    and running the graph once on zeros took about 5 ms each time. Both are immutable and shared while the
+    file and its sidecar are unchanged (as :func:`agri_training.learned.policy._network_of` shares a run's).
+
+    Raises:
+        ValueError: When the graph does not take the env's flattened observation (both widths named), its
+            output is not the action's size, or the file or its sidecar is refused.
+    """
+    side = sidecar_path(path)
+    stamps = tuple((f.stat().st_mtime_ns, f.stat().st_size) for f in (path, side) if f is not None)
+    key = (str(path.resolve()), side is not None, stamps, repr(observation_space), repr(action_space))
+    if key in _CHECKED:
+        _CHECKED.move_to_end(key)
+        return _CHECKED[key]
+    graph = load_graph(path)
+    normalization = read_sidecar(path).normalization
+    width = int(gym.spaces.flatdim(observation_space))
+    if graph.input_width is not None and graph.input_width != width:
+        raise ValueError(
+            f"{path}: the graph's input has {graph.input_width} values, {env_name}'s flattened "
+            f"observation has {width}: the policy was made for another env or other env arguments"
+        )
+    if normalization is not None and normalization.mean.size != width:
+        raise ValueError(
+            f"{path}: the sidecar normalises {normalization.mean.size} values, {env_name}'s flattened observation "
+            f"has {width}"
+        )
+    try:
+        out = graph.run(np.zeros((1, width)))
+    except ValueError as exc:
+        raise ValueError(
+            f"{path}: the graph does not take {env_name}'s flattened observation ({width} values): {exc}"
+        ) from None
+    if isinstance(action_space, gym.spaces.Discrete):
+        want = int(action_space.n)
+    else:
+        want = int(np.prod(action_space.shape or ()))
+    if out.size != want:
+        raise ValueError(f"{path}: the graph outputs {out.size} values, {env_name}'s action needs {want}")
+    while len(_CHECKED) >= 8:
+        _CHECKED.popitem(last=False)
+    _CHECKED[key] = (graph, normalization)
+    return graph, normalization
+
+
 class OnnxPolicy:
     """An ONNX policy file acting on an env's raw observations: SB3's ``predict``, deterministic.
 
@@ -409,38 +465,12 @@ class OnnxPolicy:
         self.path = Path(path)
         if agri_envs.is_parallel_env(env):
             raise ValueError(f"{self.path}: ONNX policies drive single-agent envs, not the PettingZoo env {env}")
-        self.graph = load_graph(self.path)
-        sidecar = read_sidecar(self.path)
-        self.normalization: FlatNormalization | None = sidecar.normalization
+        if not isinstance(env.action_space, (gym.spaces.Box, gym.spaces.Discrete)):
+            raise ValueError(f"{self.path}: ONNX policies drive Box or Discrete action spaces, got {env.action_space}")
         self.observation_space = env.observation_space
         self.action_space = env.action_space
-        width = int(gym.spaces.flatdim(self.observation_space))
         env_name = getattr(getattr(env, "spec", None), "id", None) or type(getattr(env, "unwrapped", env)).__name__
-        if self.graph.input_width is not None and self.graph.input_width != width:
-            raise ValueError(
-                f"{self.path}: the graph's input has {self.graph.input_width} values, {env_name}'s flattened "
-                f"observation has {width}: the policy was made for another env or other env arguments"
-            )
-        if self.normalization is not None and self.normalization.mean.size != width:
-            raise ValueError(
-                f"{self.path}: the sidecar normalises {self.normalization.mean.size} values, {env_name}'s "
-                f"flattened observation has {width}"
-            )
-        try:
-            out = self.graph.run(np.zeros((1, width)))
-        except ValueError as exc:
-            raise ValueError(
-                f"{self.path}: the graph does not take {env_name}'s flattened observation ({width} values): {exc}"
-            ) from None
-        want = (
-            int(self.action_space.n)
-            if isinstance(self.action_space, gym.spaces.Discrete)
-            else int(np.prod(self.action_space.shape))
-        )
-        if out.size != want:
-            raise ValueError(f"{self.path}: the graph outputs {out.size} values, {env_name}'s action needs {want}")
-        if not isinstance(self.action_space, (gym.spaces.Box, gym.spaces.Discrete)):
-            raise ValueError(f"{self.path}: ONNX policies drive Box or Discrete action spaces, got {self.action_space}")
+        self.graph, self.normalization = _checked(self.path, self.observation_space, self.action_space, env_name)
 
     def act(self, observation: Any) -> tuple[np.ndarray, bool]:
         """The actions for one observation or a batch, and whether it was a batch."""
