@@ -20,7 +20,6 @@ executed.
 
 from __future__ import annotations
 
-import collections
 import dataclasses
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
@@ -30,6 +29,7 @@ import gymnasium as gym
 import numpy as np
 
 import agri_envs
+from agri_training.core.filecache import FileCache
 from agri_training.learned.inference import dense_layer, exp, fold_sum, tanh
 from agri_training.learned.sidecar import FlatNormalization, read_sidecar, sidecar_path
 
@@ -344,8 +344,8 @@ _OPS: dict[str, Op] = {
 }
 assert set(_OPS) == set(SUPPORTED_OPS)
 
-#: Graphs read in this process, by file and stamps (a fresh policy per episode shares the parsed graph).
-_GRAPHS: collections.OrderedDict[tuple[Any, ...], OnnxGraph] = collections.OrderedDict()
+#: Graphs read in this process (a fresh policy per episode shares the parsed graph).
+_GRAPHS: FileCache[OnnxGraph] = FileCache()
 
 
 def load_graph(path: Path) -> OnnxGraph:
@@ -354,16 +354,7 @@ def load_graph(path: Path) -> OnnxGraph:
     Raises:
         ValueError: See :meth:`OnnxGraph.parse`.
     """
-    stat = path.stat()
-    key = (str(path.resolve()), stat.st_mtime_ns, stat.st_size)
-    if key in _GRAPHS:
-        _GRAPHS.move_to_end(key)
-        return _GRAPHS[key]
-    graph = OnnxGraph.parse(path.read_bytes(), str(path))
-    while len(_GRAPHS) >= 8:
-        _GRAPHS.popitem(last=False)
-    _GRAPHS[key] = graph
-    return graph
+    return _GRAPHS.get([path], None, lambda: OnnxGraph.parse(path.read_bytes(), str(path)))
 
 
 def check_onnx_file(path: Path) -> None:
@@ -391,9 +382,7 @@ def flatten_observations(space: gym.Space[Any], observation: Any) -> tuple[np.nd
 
 
 #: Graphs with their sidecar's normalisation, checked against the spaces they drive (see :func:`_checked`).
-_CHECKED: collections.OrderedDict[tuple[Any, ...], tuple[OnnxGraph, FlatNormalization | None]] = (
-    collections.OrderedDict()
-)
+_CHECKED: FileCache[tuple[OnnxGraph, FlatNormalization | None]] = FileCache()
 
 
 def _checked(
@@ -403,47 +392,46 @@ def _checked(
 
     The evaluator builds a fresh policy for every episode (and every sub-env of a batch); reading the sidecar
     and running the graph once on zeros took about 5 ms each time. Both are immutable and shared while the
-    file and its sidecar are unchanged (as :func:`agri_training.learned.policy._network_of` shares a run's).
+    file and its sidecar are unchanged, as a run's network is (:class:`~agri_training.core.filecache.FileCache`).
 
     Raises:
         ValueError: When the graph does not take the env's flattened observation (both widths named), its
             output is not the action's size, or the file or its sidecar is refused.
     """
-    side = sidecar_path(path)
-    stamps = tuple((f.stat().st_mtime_ns, f.stat().st_size) for f in (path, side) if f is not None)
-    key = (str(path.resolve()), side is not None, stamps, repr(observation_space), repr(action_space))
-    if key in _CHECKED:
-        _CHECKED.move_to_end(key)
-        return _CHECKED[key]
-    graph = load_graph(path)
-    normalization = read_sidecar(path).normalization
-    width = int(gym.spaces.flatdim(observation_space))
-    if graph.input_width is not None and graph.input_width != width:
-        raise ValueError(
-            f"{path}: the graph's input has {graph.input_width} values, {env_name}'s flattened "
-            f"observation has {width}: the policy was made for another env or other env arguments"
-        )
-    if normalization is not None and normalization.mean.size != width:
-        raise ValueError(
-            f"{path}: the sidecar normalises {normalization.mean.size} values, {env_name}'s flattened observation "
-            f"has {width}"
-        )
-    try:
-        out = graph.run(np.zeros((1, width)))
-    except ValueError as exc:
-        raise ValueError(
-            f"{path}: the graph does not take {env_name}'s flattened observation ({width} values): {exc}"
-        ) from None
+
+    def make() -> tuple[OnnxGraph, FlatNormalization | None]:
+        graph = load_graph(path)
+        normalization = read_sidecar(path).normalization
+        width = int(gym.spaces.flatdim(observation_space))
+        if graph.input_width is not None and graph.input_width != width:
+            raise ValueError(
+                f"{path}: the graph's input has {graph.input_width} values, {env_name}'s flattened "
+                f"observation has {width}: the policy was made for another env or other env arguments"
+            )
+        if normalization is not None and normalization.mean.size != width:
+            raise ValueError(
+                f"{path}: the sidecar normalises {normalization.mean.size} values, {env_name}'s flattened "
+                f"observation has {width}"
+            )
+        try:
+            out = graph.run(np.zeros((1, width)))
+        except ValueError as exc:
+            raise ValueError(
+                f"{path}: the graph does not take {env_name}'s flattened observation ({width} values): {exc}"
+            ) from None
+        want = _action_size(action_space)
+        if out.size != want:
+            raise ValueError(f"{path}: the graph outputs {out.size} values, {env_name}'s action needs {want}")
+        return graph, normalization
+
+    return _CHECKED.get([path, sidecar_path(path)], (repr(observation_space), repr(action_space)), make)
+
+
+def _action_size(action_space: gym.Space[Any]) -> int:
+    """How many values an action holds (a Discrete action: one per choice, as a policy's output)."""
     if isinstance(action_space, gym.spaces.Discrete):
-        want = int(action_space.n)
-    else:
-        want = int(np.prod(action_space.shape or ()))
-    if out.size != want:
-        raise ValueError(f"{path}: the graph outputs {out.size} values, {env_name}'s action needs {want}")
-    while len(_CHECKED) >= 8:
-        _CHECKED.popitem(last=False)
-    _CHECKED[key] = (graph, normalization)
-    return graph, normalization
+        return int(action_space.n)
+    return int(np.prod(action_space.shape or ()))
 
 
 class OnnxPolicy:

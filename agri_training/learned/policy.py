@@ -33,6 +33,7 @@ import numpy as np
 import yaml
 
 import agri_envs
+from agri_training.core.filecache import FileCache
 from agri_training.learned.arm_observation import NearestBoxes
 from agri_training.learned.inference import PolicyNetwork
 from agri_training.learned.parameter_sharing import predict_shared
@@ -479,9 +480,8 @@ def refuse_pickled(name_or_path: str) -> None:
 
 
 #: Networks and observation statistics read in this process, by folder, file stamps, config and spaces.
-_NETWORKS: collections.OrderedDict[tuple[Any, ...], tuple[PolicyNetwork, ObsNormalization | None]] = (
-    collections.OrderedDict()
-)
+#: Runs' acting networks and observation statistics (:func:`_network_of`).
+_NETWORKS: FileCache[tuple[PolicyNetwork, ObsNormalization | None]] = FileCache()
 
 
 def _network_of(
@@ -494,19 +494,16 @@ def _network_of(
     observation history, its held action) is its own.
     """
     weights, norm = folder / WEIGHTS_FILE, folder / NORMALIZE_FILE
-    stamps = tuple((f.stat().st_mtime_ns, f.stat().st_size) if f.is_file() else None for f in (weights, norm))
-    key = (str(folder.resolve()), stamps, repr(sorted(config.items())), repr(observation_space), repr(action_space))
-    if key in _NETWORKS:
-        _NETWORKS.move_to_end(key)
-        return _NETWORKS[key]
-    network = PolicyNetwork.from_state_dict(
-        load_weights(weights), config["algo"], config.get("policy_kwargs", {}), observation_space, action_space
-    )
-    normalization = ObsNormalization.from_json(json.loads(norm.read_text())) if norm.is_file() else None
-    while len(_NETWORKS) >= 8:
-        _NETWORKS.popitem(last=False)
-    _NETWORKS[key] = (network, normalization)
-    return network, normalization
+
+    def make() -> tuple[PolicyNetwork, ObsNormalization | None]:
+        network = PolicyNetwork.from_state_dict(
+            load_weights(weights), config["algo"], config.get("policy_kwargs", {}), observation_space, action_space
+        )
+        normalization = ObsNormalization.from_json(json.loads(norm.read_text())) if norm.is_file() else None
+        return network, normalization
+
+    extra = (repr(sorted(config.items())), repr(observation_space), repr(action_space))
+    return _NETWORKS.get([weights, norm], extra, make)
 
 
 class LearnedPolicy:

@@ -21,7 +21,6 @@ recurrent policies, gSDE) is refused with a message that says to export the acto
 
 from __future__ import annotations
 
-import collections
 import dataclasses
 import io
 import json
@@ -35,7 +34,8 @@ import gymnasium as gym
 import numpy as np
 
 import agri_envs
-from agri_training.learned.inference import PolicyNetwork
+from agri_training.core.filecache import FileCache
+from agri_training.learned.inference import ACTIVATION_FUNCTIONS, ACTOR_LAYERS, DEFAULT_ACTIVATION, PolicyNetwork
 from agri_training.learned.sidecar import read_sidecar
 from agri_training.learned.torch_zip import read_state_dict
 
@@ -51,7 +51,7 @@ POLICY_CLASSES: dict[tuple[str, str], str] = {
     ("sb3_contrib.tqc.policies", "MultiInputPolicy"): "tqc",
 }
 #: Activation classes that may be named in ``policy_kwargs.activation_fn``.
-_ACTIVATIONS = ("ReLU", "Tanh", "ELU", "LeakyReLU", "SiLU")
+_ACTIVATIONS = tuple(ACTIVATION_FUNCTIONS)
 #: What to do instead, said by every refusal.
 EXPORT_HINT = (
     "export the actor to ONNX instead (torch.onnx.export of a network from the flattened observation to the "
@@ -160,7 +160,7 @@ def _policy_class(data: Mapping[str, Any], path: Path) -> tuple[str, str]:
 
 def _activation(value: Any, algo: str, path: Path) -> str:
     if value is None:
-        return {"ppo": "Tanh"}.get(algo, "ReLU")
+        return DEFAULT_ACTIVATION[algo]
     match = _ACTIVATION_TEXT.match(str(value))
     if match is None or match.group(1) not in _ACTIVATIONS:
         raise _refuse(path, f"policy_kwargs.activation_fn {value!r} is not one of {', '.join(_ACTIVATIONS)}")
@@ -174,14 +174,10 @@ def _check_tensors(state: Mapping[str, np.ndarray], algo: str, path: Path) -> No
             raise _refuse(path, f"its network has a learned features extractor or recurrent layers ({key})")
         if key.startswith("mlp_extractor.shared_net"):  # SB3 < 1.8's shared layers
             raise _refuse(path, f"its actor shares layers with the critic ({key}), as SB3 before 1.8 built it")
-    needed = {
-        "ppo": "action_net.weight",
-        "sac": "actor.mu.weight",
-        "tqc": "actor.mu.weight",
-        "td3": "actor.mu.0.weight",
-    }
-    if needed[algo] not in state:
-        raise _refuse(path, f"policy.pth lacks {needed[algo]!r}, which a {algo} policy has")
+    hidden, output = ACTOR_LAYERS[algo]
+    needed = f"{output}.weight" if output else f"{hidden}.0.weight"  # TD3's actor: one Sequential
+    if needed not in state:
+        raise _refuse(path, f"policy.pth lacks {needed!r}, which a {algo} policy has")
 
 
 def _plain_shape(space: Any) -> tuple[int, ...] | None:
@@ -205,19 +201,14 @@ def check_sb3_zip(path: Path) -> None:
 
 
 #: Zips read in this process, by file and stamps.
-_ZIPS: collections.OrderedDict[tuple[Any, ...], Sb3Zip] = collections.OrderedDict()
+_ZIPS: FileCache[Sb3Zip] = FileCache()
+#: The acting networks of zips, built for the spaces they drive (a fresh policy per episode shares one).
+_NETWORKS: FileCache[PolicyNetwork] = FileCache()
 
 
 def load_sb3_zip(path: Path) -> Sb3Zip:
     """:func:`read_sb3_zip`, once per process while the file is unchanged."""
-    stat = Path(path).stat()
-    key = (str(Path(path).resolve()), stat.st_mtime_ns, stat.st_size)
-    if key not in _ZIPS:
-        while len(_ZIPS) >= 8:
-            _ZIPS.popitem(last=False)
-        _ZIPS[key] = read_sb3_zip(Path(path))
-    _ZIPS.move_to_end(key)
-    return _ZIPS[key]
+    return _ZIPS.get([Path(path)], None, lambda: read_sb3_zip(Path(path)))
 
 
 class Sb3ZipPolicy:
@@ -257,8 +248,12 @@ class Sb3ZipPolicy:
                 raise ValueError(
                     f"{self.path} acts with shape {model.action_shape}, {env_name} takes {action_space.shape}"
                 )
-        self.network = PolicyNetwork.from_state_dict(
-            model.state, model.algo, {"activation_fn": model.activation}, observation_space, action_space
+        self.network = _NETWORKS.get(
+            [self.path],
+            (repr(observation_space), repr(action_space)),
+            lambda: PolicyNetwork.from_state_dict(
+                model.state, model.algo, {"activation_fn": model.activation}, observation_space, action_space
+            ),
         )
         width = int(sum(int(np.prod(s.shape or (1,))) for s in _boxes(observation_space)))
         first = self.network.hidden[0][0] if self.network.hidden else self.network.output[0]
