@@ -31,7 +31,8 @@ import numpy as np
 import agri_envs
 from agri_training.core.filecache import FileCache
 from agri_training.learned.inference import dense_layer, exp, fold_sum, tanh
-from agri_training.learned.sidecar import FlatNormalization, read_sidecar, sidecar_path
+from agri_training.learned.policy import ObsNormalization
+from agri_training.learned.sidecar import read_sidecar, sidecar_path
 
 #: The operators an ONNX policy may use (those of MLPs as ``torch.onnx.export`` writes them).
 SUPPORTED_OPS = (
@@ -382,12 +383,12 @@ def flatten_observations(space: gym.Space[Any], observation: Any) -> tuple[np.nd
 
 
 #: Graphs with their sidecar's normalisation, checked against the spaces they drive (see :func:`_checked`).
-_CHECKED: FileCache[tuple[OnnxGraph, FlatNormalization | None]] = FileCache()
+_CHECKED: FileCache[tuple[OnnxGraph, ObsNormalization | None]] = FileCache()
 
 
 def _checked(
     path: Path, observation_space: gym.Space[Any], action_space: gym.Space[Any], env_name: str
-) -> tuple[OnnxGraph, FlatNormalization | None]:
+) -> tuple[OnnxGraph, ObsNormalization | None]:
     """The graph of ``path`` and its sidecar's normalisation, checked against the spaces once per process.
 
     The evaluator builds a fresh policy for every episode (and every sub-env of a batch); reading the sidecar
@@ -399,7 +400,7 @@ def _checked(
             output is not the action's size, or the file or its sidecar is refused.
     """
 
-    def make() -> tuple[OnnxGraph, FlatNormalization | None]:
+    def make() -> tuple[OnnxGraph, ObsNormalization | None]:
         graph = load_graph(path)
         normalization = read_sidecar(path).normalization
         width = int(gym.spaces.flatdim(observation_space))
@@ -408,9 +409,10 @@ def _checked(
                 f"{path}: the graph's input has {graph.input_width} values, {env_name}'s flattened "
                 f"observation has {width}: the policy was made for another env or other env arguments"
             )
-        if normalization is not None and normalization.mean.size != width:
+        normalized = normalization.mean[""].size if normalization is not None else width
+        if normalized != width:
             raise ValueError(
-                f"{path}: the sidecar normalises {normalization.mean.size} values, {env_name}'s flattened "
+                f"{path}: the sidecar normalises {normalized} values, {env_name}'s flattened "
                 f"observation has {width}"
             )
         try:

@@ -26,30 +26,10 @@ from typing import Any
 import numpy as np
 import yaml
 
+from agri_training.learned.policy import ObsNormalization
+
 SIDECAR_KEYS = ("name", "env_id", "env_kwargs", "privileged", "observation_normalization")
 NORMALIZATION_KEYS = ("mean", "var", "clip", "epsilon")
-
-
-@dataclasses.dataclass(frozen=True)
-class FlatNormalization:
-    """Observation normalisation of the flattened observation, as ``VecNormalize`` computes it.
-
-    Attributes:
-        mean: Mean per flat entry (float64).
-        var: Variance per flat entry (float64).
-        clip: Normalised values are clipped to ``[-clip, clip]``.
-        epsilon: Added to the variance before the square root.
-    """
-
-    mean: np.ndarray
-    var: np.ndarray
-    clip: float = 10.0
-    epsilon: float = 1e-8
-
-    def normalize(self, flat: np.ndarray) -> np.ndarray:
-        """``clip((x - mean) / sqrt(var + epsilon))`` in float64, rounded to float32 (correctly rounded ops only)."""
-        z = (np.asarray(flat, dtype=np.float64) - self.mean) / np.sqrt(self.var + self.epsilon)
-        return np.clip(z, -self.clip, self.clip).astype(np.float32)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -70,7 +50,7 @@ class Sidecar:
     env_id: str | None = None
     env_kwargs: Mapping[str, Any] = dataclasses.field(default_factory=dict)
     privileged: bool = False
-    normalization: FlatNormalization | None = None
+    normalization: ObsNormalization | None = None
 
 
 def sidecar_path(policy_file: Path) -> Path | None:
@@ -126,7 +106,8 @@ def read_sidecar(policy_file: Path) -> Sidecar:
     )
 
 
-def _normalization(doc: Any, path: Path) -> FlatNormalization:
+def _normalization(doc: Any, path: Path) -> ObsNormalization:
+    """The sidecar's normalisation of the flattened observation (``VecNormalize``'s, on one flat key)."""
     if not isinstance(doc, Mapping) or "mean" not in doc or "var" not in doc:
         raise ValueError(f"sidecar {path}: observation_normalization needs mean and var (and optionally clip, epsilon)")
     unknown = sorted(set(doc) - set(NORMALIZATION_KEYS))
@@ -147,4 +128,4 @@ def _normalization(doc: Any, path: Path) -> FlatNormalization:
         raise ValueError(
             f"sidecar {path}: observation_normalization needs finite mean, var >= 0, clip > 0, epsilon >= 0"
         )
-    return FlatNormalization(mean, var, clip, epsilon)
+    return ObsNormalization(mean={"": mean}, var={"": var}, clip_obs=clip, epsilon=epsilon)
