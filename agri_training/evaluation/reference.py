@@ -33,7 +33,7 @@ from typing import Any
 
 import numpy as np
 
-from agri_baselines import make_policy, policy_spec
+from agri_baselines import policy_spec
 from agri_training.core.documents import sha256_file
 from agri_training.learned import zoo
 from agri_training.learned.onnx_policy import OnnxPolicy, check_onnx_file
@@ -249,7 +249,7 @@ def _file_reference(path: Path, name: str | None, base: Path) -> PolicyRef:
         privileged=sidecar.privileged,
         env_id=sidecar.env_id,
         env_kwargs=dict(sidecar.env_kwargs),
-        observation_only=True,  # neither imports torch: the ONNX graph and the SB3 tensors are read here
+        observation_only=True,  # it acts on its observation alone; needs_torch stays False: files are read here
         sidecar_sha256=sha256_file(sidecar.path) if sidecar.path is not None else None,
     )
 
@@ -340,10 +340,8 @@ def build_policy(ref: PolicyRef, env: Any) -> Any:
     Raises:
         ValueError: When the policy cannot act on ``env`` (its spaces, its format).
     """
-    if ref.kind in ("baseline", "zoo"):
-        if ref.entry_point is None:
-            return make_policy(ref.spec, env)
-        factory = import_attribute(ref.entry_point)
+    if ref.kind in ("baseline", "zoo"):  # as agri_baselines.make_policy builds it, without looking it up again
+        factory = import_attribute(str(ref.entry_point))
         return factory(env, ref.spec) if ref.kind == "zoo" else factory(env)
     if ref.kind == "learned-run":
         return LearnedPolicy(str(ref.path), env)
