@@ -53,7 +53,7 @@ from __future__ import annotations
 
 import dataclasses
 from collections.abc import Callable, Mapping, Sequence
-from typing import Any
+from typing import Any, SupportsFloat
 
 import gymnasium as gym
 import numpy as np
@@ -205,6 +205,79 @@ def _join(first: Demonstrations, second: Demonstrations) -> Demonstrations:
     )
 
 
+class _Decisions:
+    """The learner's decisions over demonstration episodes: what it sees, the label, the reward until the next.
+
+    One bookkeeping for both sources of step 1 (a baseline driven live, a dataset's recorded episodes), so that
+    the same episodes give the same demonstrations bit for bit whichever way they come.
+
+    Args:
+        learner_env: The training env (its observation keys; ``config``'s wrappers replay on them).
+        config: The resolved training config (``wrappers``, ``action_repeat``).
+    """
+
+    def __init__(self, learner_env: Any, config: Mapping[str, Any]) -> None:
+        space = learner_env.observation_space
+        self.keys = list(space.spaces) if isinstance(space, gym.spaces.Dict) else None
+        _, chain = observation_chain(learner_env, config.get("wrappers", []))
+        self.replay = ObservationReplay(chain)
+        self.repeat = int(config.get("action_repeat", 1))
+        self.observations: list[Any] = []
+        self.actions: list[np.ndarray] = []
+        self.rewards: list[float] = []
+        self.ends: list[bool] = []
+
+    def decide(self, step: int, shown: Any, action: Any) -> bool:
+        """Record a decision at ``step`` (one every ``action_repeat`` steps): True when it is one."""
+        if step % self.repeat:
+            return False
+        seen = {k: shown[k] for k in self.keys} if self.keys is not None else shown
+        self.observations.append(self.replay(seen, new_episode=step == 0))
+        self.actions.append(np.clip(np.asarray(action, dtype=np.float32), -1.0, 1.0))
+        self.rewards.append(0.0)
+        self.ends.append(False)
+        return True
+
+    def paid(self, reward: SupportsFloat) -> None:
+        """Add a step's reward to the current decision's."""
+        self.rewards[-1] += float(reward)
+
+    def end_episode(self) -> None:
+        """The current decision ends its episode."""
+        self.ends[-1] = True
+
+    def drop_from(self, kept: int) -> None:
+        """Forget the decisions from index ``kept`` on (an episode left out)."""
+        del self.observations[kept:], self.actions[kept:], self.rewards[kept:], self.ends[kept:]
+
+    def demonstrations(self, successes: int, episodes: int, skipped: int = 0) -> Demonstrations:
+        """The decisions recorded, stacked."""
+        return Demonstrations(
+            _stack(self.observations),
+            np.stack(self.actions),
+            np.array(self.rewards),
+            np.array(self.ends),
+            successes,
+            episodes,
+            skipped,
+        )
+
+
+def _lockstep(own: Any, action: Any, ends: tuple[Any, ...], source: str, env_id: str, seed: int, step: int) -> Any:
+    """Step the learner's own env beside the source's and return what it shows; it must agree on reward and ends.
+
+    Raises:
+        ValueError: When the source's arguments (``source`` names them) change the env's dynamics.
+    """
+    shown, own_reward, *own_ends, _ = own.step(action)
+    if (own_reward, *own_ends) != ends:
+        raise ValueError(
+            f"pretrain: {source} change {env_id}'s dynamics (seed {seed}, step {step}: reward {ends[0]} against "
+            f"the training env's {own_reward})"
+        )
+    return shown
+
+
 def demonstrate(
     spec: PretrainSpec, config: Mapping[str, Any], seeds: Sequence[int] | None = None, learner: Learner | None = None
 ) -> Demonstrations:
@@ -239,10 +312,7 @@ def demonstrate(
             )
         return _demonstrate_agents(spec, env_id, learner_kwargs, seeds, learner)
     learner_env = gym.make(env_id, **learner_kwargs)
-    space = learner_env.observation_space
-    keys = list(space.spaces) if isinstance(space, gym.spaces.Dict) else None
-    _, chain = observation_chain(learner_env, config.get("wrappers", []))
-    replay = ObservationReplay(chain)
+    decisions = _Decisions(learner_env, config)
     env = gym.make(env_id, **{**learner_kwargs, **baseline.env_kwargs})
     # Where the baseline's arguments change more than extra observation keys (a true pose for the baseline,
     # not a scan only it reads), the learner's own env runs beside it in lockstep and the learner sees what
@@ -250,54 +320,39 @@ def demonstrate(
     unwrapped: Any = learner_env.unwrapped
     own = learner_env if unwrapped.config.differences(baseline.env_kwargs) else None
     expert = make_policy(spec.policy, env)
-    repeat = int(config.get("action_repeat", 1))
-    observations: list[Any] = []
-    actions: list[np.ndarray] = []
-    rewards: list[float] = []
-    ends: list[bool] = []
+    source = f"{spec.policy}'s arguments {baseline.env_kwargs}"
     successes = skipped = 0
     for seed in seeds:
         obs, info = env.reset(seed=int(seed))
         shown = own.reset(seed=int(seed))[0] if own is not None else obs
-        step, done, kept = 0, False, len(actions)
+        step, done, kept = 0, False, len(decisions.actions)
         while not done:
             try:
                 action, _ = expert.predict(obs, episode_start=np.array([step == 0]), deterministic=True)
             except ValueError:  # the baseline cannot act here (no plan): the episode is left out
-                del observations[kept:], actions[kept:], rewards[kept:], ends[kept:]
+                decisions.drop_from(kept)
                 skipped += 1
                 break
-            if step % repeat == 0:  # a decision of the learner: what it sees, what the baseline does
-                seen = {k: shown[k] for k in keys} if keys is not None else shown
-                observations.append(replay(seen, new_episode=step == 0))
-                actions.append(np.clip(np.asarray(action, dtype=np.float32), -1.0, 1.0))
-                rewards.append(0.0)
-                ends.append(False)
-                if learner is not None:  # held for the action_repeat periods until its next decision
-                    driven = learner(_stack(observations[-1:]))[0]
+            # a decision of the learner: what it sees, what the baseline does
+            if decisions.decide(step, shown, action) and learner is not None:
+                # the learner drives, its action held for the action_repeat periods until its next decision
+                driven = learner(_stack(decisions.observations[-1:]))[0]
             acted = action if learner is None else driven
             obs, reward, terminated, truncated, info = env.step(acted)
             shown = obs
             if own is not None:
-                shown, own_reward, *own_ends, _ = own.step(acted)
-                if (own_reward, *own_ends) != (reward, terminated, truncated):
-                    raise ValueError(
-                        f"pretrain: {spec.policy}'s arguments {baseline.env_kwargs} change {env_id}'s dynamics "
-                        f"(seed {seed}, step {step}: reward {reward} against the training env's {own_reward})"
-                    )
-            rewards[-1] += float(reward)
+                shown = _lockstep(own, acted, (reward, terminated, truncated), source, env_id, int(seed), step)
+            decisions.paid(reward)
             step += 1
             done = terminated or truncated
         if done:
-            ends[-1] = True
+            decisions.end_episode()
             successes += int(bool(info.get("is_success", False)))
     env.close()
     learner_env.close()
-    if not actions:
+    if not decisions.actions:
         raise ValueError(f"pretrain: {spec.policy} could not act in any of the {len(seeds)} episodes")
-    return Demonstrations(
-        _stack(observations), np.stack(actions), np.array(rewards), np.array(ends), successes, len(seeds), skipped
-    )
+    return decisions.demonstrations(successes, len(seeds), skipped)
 
 
 def demonstrate_dataset(spec: PretrainSpec, config: Mapping[str, Any]) -> tuple[PretrainSpec, Demonstrations]:
@@ -339,16 +394,9 @@ def demonstrate_dataset(spec: PretrainSpec, config: Mapping[str, Any]) -> tuple[
         if changed:
             raise ValueError(f"pretrain: dataset {spec.dataset}'s {env_id} differs from the training env in {changed}")
         return spec, _dataset_agents(dataset, seeds)
-    space = learner_env.observation_space
-    keys = list(space.spaces) if isinstance(space, gym.spaces.Dict) else None
-    _, chain = observation_chain(learner_env, config.get("wrappers", []))
-    replay = ObservationReplay(chain)
+    decisions = _Decisions(learner_env, config)
     own = learner_env if changed else None
-    repeat = int(config.get("action_repeat", 1))
-    observations: list[Any] = []
-    actions: list[np.ndarray] = []
-    rewards: list[float] = []
-    ends: list[bool] = []
+    source = f"dataset {spec.dataset}'s arguments {dict(described.env_kwargs)}"
     successes = runs = 0
     for meta_ep, episode in datasets.episodes(dataset, seeds):
         seed = int(meta_ep["seed"])
@@ -361,32 +409,21 @@ def demonstrate_dataset(spec: PretrainSpec, config: Mapping[str, Any]) -> tuple[
 
         shown = own.reset(seed=seed)[0] if own is not None else recorded_obs(0)
         for step, action in enumerate(episode.actions):
-            if step % repeat == 0:  # a decision of the learner, as in demonstrate()
-                seen = {k: shown[k] for k in keys} if keys is not None else shown
-                observations.append(replay(seen, new_episode=step == 0))
-                actions.append(np.clip(np.asarray(action, dtype=np.float32), -1.0, 1.0))
-                rewards.append(0.0)
-                ends.append(False)
+            decisions.decide(step, shown, action)  # a decision of the learner, as in demonstrate()
             reward = float(episode.rewards[step])
             if own is not None:
-                shown, own_reward, *own_ends, _ = own.step(action)
-                if (own_reward, *own_ends) != (reward, episode.terminations[step], episode.truncations[step]):
-                    raise ValueError(
-                        f"pretrain: dataset {spec.dataset}'s arguments {dict(described.env_kwargs)} change {env_id}'s "
-                        f"dynamics (seed {seed}, step {step}: reward {reward} against the training env's {own_reward})"
-                    )
+                ends = (reward, episode.terminations[step], episode.truncations[step])
+                shown = _lockstep(own, action, ends, source, env_id, seed, step)
             else:
                 shown = recorded_obs(step + 1)
-            rewards[-1] += reward
+            decisions.paid(reward)
         if len(episode.actions) and (episode.terminations[-1] or episode.truncations[-1]):
-            ends[-1] = True
+            decisions.end_episode()
             successes += int(bool(episode.infos["is_success"][-1]))
     learner_env.close()
-    if not actions:
+    if not decisions.actions:
         raise ValueError(f"pretrain: dataset {spec.dataset} holds no steps")
-    return spec, Demonstrations(
-        _stack(observations), np.stack(actions), np.array(rewards), np.array(ends), successes, runs
-    )
+    return spec, decisions.demonstrations(successes, runs)
 
 
 def _dataset_agents(dataset: Any, seeds: Sequence[int]) -> Demonstrations:
