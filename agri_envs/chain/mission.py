@@ -104,6 +104,11 @@ def does_not_fit(cfg: RobotChainConfig, reaches: list[FloorReach], goal_distance
     need = lo + (cfg.n_robots - 1) * cfg.spacing
     longest = max(r.longest for r in reaches)
     holds = max(r.max_robots(cfg, lo) for r in reaches)
+    if goal_distance is not None and holds >= cfg.n_robots:  # the floor holds the chain; the window is too narrow
+        return ChainDoesNotFit(
+            f"robot_chain_v1: no goal leaves the leader {goal_distance[0]:.2f}-{goal_distance[1]:.2f} m from it "
+            f"(options['goal_distance']) with room behind for n_robots={cfg.n_robots}: widen the window"
+        )
     floor = f"the {len(reaches)} floors drawn for this episode hold" if generated else "this floor holds"
     larger = {"office": "office_width / office_height", "greenhouse": "n_rows / row_length"}.get(cfg.scene)
     way_out = f", or a larger floor ({larger})" if larger else ""
@@ -127,22 +132,43 @@ def fallback_mission(
     What :func:`plan_mission` falls back to when its random goals all lie too central; None when the floor
     holds no such goal (the caller refuses the chain with :func:`does_not_fit`).
     """
-    free = cmap.free_cells
-    width, res = cmap.grid.width, cmap.grid.resolution
+    width = cmap.grid.width
     need = (cfg.n_robots - 1) * cfg.spacing
     lo, hi = goal_distance if goal_distance is not None else (cfg.min_goal_distance, np.inf)
     fits = reach.candidates[reach.bound >= lo + need]
     for _ in range(FALLBACK_TRIES if len(fits) else 0):
         goal = divmod(int(fits[rng.integers(len(fits))]), width)
-        goal_cells = distance_field(cmap.blocked, goal)
-        to_goal = goal_cells * res
-        on_free = to_goal.ravel()[free]
-        tails = free[(on_free < np.inf) & (on_free >= lo + need) & (on_free <= hi + need)]
-        if len(tails):
-            tail = divmod(int(tails[rng.integers(len(tails))]), width)
-            line = Polyline(cmap.centres(np.array(descend(cmap.blocked, goal_cells, tail))))
-            return _mission(cmap, cfg, goal_cells, cmap.cell(line.at(need)), line, to_goal)
+        mission, _ = _mission_to(cmap, cfg, rng, goal, (lo, hi), need)
+        if mission is not None:
+            return mission
     return None
+
+
+def _mission_to(
+    cmap: ChainMap,
+    cfg: RobotChainConfig,
+    rng: np.random.Generator,
+    goal: tuple[int, int],
+    window: tuple[float, float],
+    need: float,
+) -> tuple[Mission | None, float]:
+    """The mission to ``goal`` whose chain's tail is drawn (with ``rng``) ``window`` plus ``need`` m from it.
+
+    Returns:
+        The mission, or None when no free cell lies that far; and the farthest free-floor distance to the goal.
+    """
+    free = cmap.free_cells
+    goal_cells = distance_field(cmap.blocked, goal)
+    to_goal = goal_cells * cmap.grid.resolution
+    on_free = to_goal.ravel()[free]
+    reachable = on_free < np.inf
+    lo, hi = window
+    tails = free[reachable & (on_free >= lo + need) & (on_free <= hi + need)]
+    if len(tails) == 0:
+        return None, float(on_free[reachable].max()) if reachable.any() else 0.0
+    tail = divmod(int(tails[rng.integers(len(tails))]), cmap.grid.width)
+    line = Polyline(cmap.centres(np.array(descend(cmap.blocked, goal_cells, tail))))
+    return _mission(cmap, cfg, goal_cells, cmap.cell(line.at(need)), line, to_goal), 0.0
 
 
 @dataclasses.dataclass(frozen=True)
@@ -241,9 +267,9 @@ def plan_mission(
             goal = divmod(int(far[rng.integers(len(far))]), width)
         else:
             goal = divmod(int(candidates[rng.integers(len(candidates))]), width)
-        goal_cells = distance_field(cmap.blocked, goal)
-        to_goal = goal_cells * res
         if start_given is not None:
+            goal_cells = distance_field(cmap.blocked, goal)
+            to_goal = goal_cells * res
             if not np.isfinite(to_goal[start_given]):
                 raise ValueError("robot_chain_v1: no path between start and goal on the inflated map")
             if to_goal[start_given] < cfg.min_goal_distance and goal_given is not None:
@@ -257,18 +283,13 @@ def plan_mission(
             if goal_given is not None:
                 break
             continue
-        lo, hi = goal_distance if goal_distance is not None else (cfg.min_goal_distance, np.inf)
-        on_free = to_goal.ravel()[free]
-        reachable = on_free < np.inf
-        tails = free[reachable & (on_free >= lo + need) & (on_free <= hi + need)]
-        if len(tails) == 0:
-            farthest = max(farthest, float(on_free[reachable].max()) if reachable.any() else 0.0)
-            if goal_given is not None:
-                break
-            continue
-        tail = divmod(int(tails[rng.integers(len(tails))]), width)
-        line = Polyline(cmap.centres(np.array(descend(cmap.blocked, goal_cells, tail))))
-        return _mission(cmap, cfg, goal_cells, cmap.cell(line.at(need)), line, to_goal)
+        window = goal_distance if goal_distance is not None else (cfg.min_goal_distance, np.inf)
+        mission, reached = _mission_to(cmap, cfg, rng, goal, window, need)
+        if mission is not None:
+            return mission
+        farthest = max(farthest, reached)
+        if goal_given is not None:
+            break
     if start_given is not None:
         raise ChainDoesNotFit(
             f"robot_chain_v1: n_robots={n} need {need:.2f} m of free floor behind start={cfg.start} "

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from agri_envs.chain import robot_chain_v1
-from agri_envs.chain.mission import ChainDoesNotFit, floor_reach, goal_candidates
+from agri_envs.chain.mission import ChainDoesNotFit, FloorReach, does_not_fit, floor_reach, goal_candidates
 from agri_envs.scenes import EXAMPLE_MAP
 from agri_envs.sim2d.astar import distance_field
 
@@ -481,3 +481,12 @@ def test_a_given_start_on_generated_floors_draws_another_floor_before_refusing(m
     with pytest.raises(ChainDoesNotFit, match="never"):
         robot_chain_v1.parallel_env(start=(2.0, 4.5)).reset(seed=3)
     assert len(calls) == chain_env.LAYOUT_TRIES
+
+
+def test_a_refusal_names_the_goal_distance_window_when_the_floor_holds_the_chain():
+    cfg = robot_chain_v1.parallel_env().config
+    roomy = FloorReach(candidates=np.array([0]), bound=np.array([30.0]), longest=30.0)
+    narrow = does_not_fit(cfg, [roomy], (6.0, 6.01), generated=False)
+    assert "widen the window" in str(narrow) and "holds at most" not in str(narrow)
+    tight = FloorReach(candidates=np.array([0]), bound=np.array([7.0]), longest=7.0)
+    assert "holds at most n_robots=2" in str(does_not_fit(cfg, [tight], None, generated=False))  # 6 m + 0.55 m
