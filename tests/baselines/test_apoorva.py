@@ -224,3 +224,10 @@ def test_apoorva_chain_leads_a_slowly_turning_chain_to_the_goal():
     # max_turn_rate=0.2 (valid: 0.2-6.0): the chain broke in wide arcs on this seed (2 of 4 seeds from 100000).
     (info,) = _run("apoorva-chain", [100001], n_robots=4, max_turn_rate=0.2)
     assert info["is_success"] and info["collisions"] == 0
+
+
+def test_the_tuned_turn_rate_is_the_default_robots():
+    from agri_baselines import apoorva_chain
+    from agri_envs.chain.config import RobotChainConfig
+
+    assert apoorva_chain.TUNED_TURN_RATE == RobotChainConfig().max_turn_rate

@@ -585,3 +585,15 @@ def test_baselines_cover_the_greenhouse_at_the_robots_limits(name, kwargs):
     env = gym.make("agri_envs/GreenhouseCoverage-v2", localization=loc, n_rows=2, row_length=6.0, **kwargs)
     record = run_episode(env, make_policy(name, env), 0, None)["record"]
     assert record["is_success"], record
+
+
+def test_the_tuned_limits_are_the_default_robots():
+    # the tracking gains were tuned on the env's default robot: at the defaults they must not cap anything
+    from agri_baselines import gonzalez_policies
+    from agri_envs.coverage.config import GreenhouseCoverageConfig
+
+    default = GreenhouseCoverageConfig()
+    assert (gonzalez_policies.TRACKING_SPEED, gonzalez_policies.TRACKING_TURN_RATE) == (
+        default.max_speed,
+        default.max_turn_rate,
+    )

@@ -146,7 +146,12 @@ print(hashlib.sha256(load_graph(Path(sys.argv[1])).run(x).tobytes()).hexdigest()
 
 
 def test_onnx_actions_are_the_same_bits_whatever_numpy_dispatches(env, tmp_path):
-    """numpy's SIMD loops chosen freely (AVX-512 where the CPU has it), pinned as `agri` pins them, or SSE only."""
+    """numpy's SIMD loops chosen freely (AVX-512 where the CPU has it), pinned as `agri` pins them, or SSE only.
+
+    What the dispatch can change here are the numpy steps of the graph (ELU, Sigmoid, the additions); the compiled
+    matrix products (numba) do not follow numpy's dispatch, and are the same bits by construction
+    (``agri_training.learned.inference``).
+    """
     import hashlib
     import os
     import subprocess

@@ -11,6 +11,7 @@ pytest.importorskip("minari")
 pytest.importorskip("h5py")
 
 import minari  # noqa: E402
+from tiny_runs import TINY_ENV, TINY_HP  # noqa: E402
 
 import agri_envs  # noqa: E402
 from agri_baselines import list_policies  # noqa: E402
@@ -182,17 +183,7 @@ def test_a_clone_from_a_dataset_equals_the_clone_from_the_same_baseline_driven_l
     from agri_training.train import TrainRequest, resolve_config, train
 
     env_id = "agri_envs/GreenhouseNav-v2"
-    hp = {
-        "n_envs": 1,
-        "env_kwargs": {"n_rows": 1, "row_length": 3.0, "n_people": 0, "max_episode_steps": 60},
-        "train_env_kwargs": {"scene_distribution": "off"},
-        "eval_env_kwargs": {"scene_distribution": "off"},
-        "algo_kwargs": {"n_steps": 32, "batch_size": 32, "n_epochs": 1},
-        "policy_kwargs": {"net_arch": {"pi": [16], "vf": [16]}},
-        "eval_freq": 64,
-        "eval_episodes": 1,
-        "checkpoint_freq": 64,
-    }
+    hp = {**TINY_HP, "n_envs": 1, "env_kwargs": {**TINY_ENV, "max_episode_steps": 60}}
     live = {**hp, "pretrain": {"policy": "harik-apf-gt", "episodes": 2, "epochs": 3, "seed": 50000}}
     config = resolve_config(TrainRequest(env_id, "ppo", tmp_path / "live", seed=4, overrides=live))
     # The dataset: the same baseline, seeds and training env (the baseline adds its own arguments).

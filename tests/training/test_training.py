@@ -10,6 +10,7 @@ import torch
 import yaml
 from stable_baselines3 import PPO
 from stable_baselines3.common.vec_env import DummyVecEnv
+from tiny_runs import TINY_ENV, TINY_HP
 
 import agri_envs  # noqa: F401
 from agri_training.evaluation.evaluate import evaluate
@@ -18,20 +19,6 @@ from agri_training.learned.policy import LearnedPolicy, UnsafeCheckpointError, l
 from agri_training.train import TrainRequest, load_hyperparams, resolve_config, train
 
 ENV_ID = "agri_envs/GreenhouseNav-v2"
-TINY_ENV = {"n_rows": 1, "row_length": 3.0, "n_people": 0, "max_episode_steps": 40}
-TINY_HP = {
-    "n_envs": 2,
-    "env_kwargs": TINY_ENV,
-    # the tiny fixed scene: no training distribution (the YAML draws scenes), which would override it
-    "train_env_kwargs": {"scene_distribution": "off"},
-    "eval_env_kwargs": {"scene_distribution": "off"},
-    "algo_kwargs": {"n_steps": 32, "batch_size": 32, "n_epochs": 1},
-    "policy_kwargs": {"net_arch": {"pi": [16], "vf": [16]}},
-    "eval_freq": 64,
-    "eval_episodes": 1,
-    "checkpoint_freq": 64,
-}
-
 
 @pytest.fixture(scope="module")
 def tiny_run(tmp_path_factory):
