@@ -385,6 +385,7 @@ class HarikApfPolicy:
         max_reverse_speed: float,
         max_turn_rate: float,
         params: HarikApfParams | None = None,
+        episode_setup: Callable[[], tuple[HarikApfParams, tuple[float, float, float]]] | None = None,
     ) -> None:
         self.params = params or HarikApfParams()
         self.robot = robot
@@ -392,6 +393,9 @@ class HarikApfPolicy:
         self.max_speed = max_speed
         self.max_reverse_speed = max_reverse_speed
         self.max_turn_rate = max_turn_rate
+        #: For one env whose robot or scene is drawn per episode: the gains and the robot's limits
+        #: ``(max_speed, max_reverse_speed, max_turn_rate)`` of the episode that starts (None: fixed).
+        self.episode_setup = episode_setup
         self.controllers: list[HarikApfController] = []
 
     def _controller(self, i: int) -> HarikApfController:
@@ -409,8 +413,11 @@ class HarikApfPolicy:
         return float(self.diagonal()) if callable(self.diagonal) else float(self.diagonal)
 
     def start_episode(self, i: int) -> None:
-        """Clear the per-episode memory of env ``i``."""
-        self._controller(i).reset()
+        """Clear the per-episode memory of env ``i`` (and take the episode's gains and limits, if drawn)."""
+        controller = self._controller(i)
+        if self.episode_setup is not None:
+            controller.p, (self.max_speed, self.max_reverse_speed, self.max_turn_rate) = self.episode_setup()
+        controller.reset()
 
     def waypoint_error(self, i: int, obs: dict[str, np.ndarray], scan: np.ndarray) -> tuple[float, float]:
         """Distance d (m) and angle alpha (rad) of the current waypoint for env ``i`` (eqs. 2-4)."""
@@ -479,15 +486,34 @@ def robot_geometry(env: Any) -> RobotGeometry:
     )
 
 
-def robot_params(env: Any, d_min: float) -> HarikApfParams:
-    """The paper's gains, waypoint radius ``d_min``, adapted to the env's robot (:meth:`HarikApfParams.for_robot`)."""
-    cfg = env.unwrapped.config
+def robot_params(env: Any, d_min: float, cfg: Any = None) -> HarikApfParams:
+    """The paper's gains, waypoint radius ``d_min``, adapted to the env's robot (:meth:`HarikApfParams.for_robot`).
+
+    ``cfg``: the arguments of the episode (``env.unwrapped.episode_config``); None takes the env's config.
+    """
+    cfg = env.unwrapped.config if cfg is None else cfg
     period = cfg.control_period * cfg.frame_skip  # the controller acts once per env step
     params = HarikApfParams(d_min=d_min).for_robot(cfg.max_speed, cfg.max_turn_rate, cfg.max_accel, period)
     if cfg.scene == "greenhouse":  # the rows' spacing is part of the map the robot is given
         free = cfg.corridor_width - env.unwrapped.robot_spec.width
         params = params.for_corridor(free)
     return params
+
+
+def episode_setup(env: Any, d_min: float) -> Callable[[], tuple[HarikApfParams, tuple[float, float, float]]] | None:
+    """For a single env that draws its scene (and robot) per episode: the gains and limits of the episode.
+
+    None for an env with fixed arguments, whose gains :func:`robot_params` computes once.
+    """
+    e = env.unwrapped
+    if getattr(e, "distribution", None) is None:
+        return None
+
+    def setup() -> tuple[HarikApfParams, tuple[float, float, float]]:
+        spec = e.robot_spec
+        return robot_params(env, d_min, e.episode_config), (spec.max_speed, spec.max_reverse_speed, spec.max_turn_rate)
+
+    return setup
 
 
 def make_harik_apf_gt(env: Any) -> HarikApfPolicy:
@@ -497,8 +523,8 @@ def make_harik_apf_gt(env: Any) -> HarikApfPolicy:
 
     Env arguments it adapts to: ``waypoint_radius`` (its ``d_min``), ``max_speed``, ``max_turn_rate`` and
     ``max_accel`` (its saturations and speed cap before obstacles, :meth:`HarikApfParams.for_robot`),
-    ``corridor_width`` of a greenhouse (its front zone's margin, :meth:`HarikApfParams.for_corridor`; a width
-    drawn per episode by ``scene_distribution`` lies in 1.1-1.5 m, where the margin is the paper's), the scene
+    ``corridor_width`` of a greenhouse (its front zone's margin, :meth:`HarikApfParams.for_corridor`), each
+    episode's own where ``scene_distribution`` draws them (:func:`episode_setup`), the scene
     and its scale (read from the observation). It ignores the reward weights and ``time_limit_*`` (it drives the
     same whatever the limit) and needs ``frame_skip=1`` to act at the paper's 15 Hz.
     """
@@ -513,6 +539,7 @@ def make_harik_apf_gt(env: Any) -> HarikApfPolicy:
         e.robot_spec.max_reverse_speed,
         e.robot_spec.max_turn_rate,
         params=robot_params(env, cfg.waypoint_radius),
+        episode_setup=episode_setup(env, cfg.waypoint_radius),
     )
 
 
@@ -587,6 +614,7 @@ def make_harik_apf_slam(env: Any, localization_margin: float = 0.1, slam_config:
         spec.max_reverse_speed,
         spec.max_turn_rate,
         params=robot_params(env, d_min),
+        episode_setup=episode_setup(env, d_min),
         slam_config=slam_config,
     )
 

@@ -134,6 +134,10 @@ class GreenhouseNavEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
     observation is the drawn scene's diagonal, as it would be in an env made with those arguments. The
     arguments it draws cannot also be given to ``gym.make``. Training uses seeds below 100000; held-out
     suites (100000 and up) run the plain env, and ``greenhouse-generalization`` lies outside every range.
+    ``scene_distribution="robust"`` (:data:`agri_envs.rover.distribution.ROBUST`) widens it along the stress
+    suites' axes and also draws the robot's ``max_speed`` (0.6-1.4 m/s) per episode; the observation's
+    velocity and the action are then scaled by the drawn limit. Its draws need the single env
+    (``gym.make_vec`` with ``vectorization_mode="sync"``): the batched form keeps one robot for all sub-envs.
 
     ## Episode End
 
@@ -183,7 +187,7 @@ class GreenhouseNavEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
     | ``post_spacing`` | 3 | m | in [1.0, 20.0] | distance between structural posts along rows and walls |
     | ``n_trees`` | 0 |  | in [0, 50] | trees placed at random plant positions (Harik Fig. 10) |
     | ``layout_seed`` | -1 |  | in [-1, 2147483647] | seed of the scene layout; -1 draws a new layout every episode |
-    | ``scene_distribution`` | 'off' |  | one of 'off', 'training' | scenes drawn per episode (see Starting State) |
+    | ``scene_distribution`` | 'off' |  | one of 'off', 'training', 'robust' | scenes drawn per episode (see Starting State) |
     | ``office_length`` | 14 | m | in [6.0, 60.0] | corridor length (scene='corridor') |
     | ``office_width`` | 1.6 | m | in [1.0, 4.0] | corridor width (scene='corridor') |
     | ``office_route`` | 'experiment' |  | one of 'experiment', 'repeatability' | corridor mission: Harik 3.4 or 3.5 |
@@ -247,7 +251,8 @@ class GreenhouseNavEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
       ``next_waypoint`` (the route is known, so a driver can line up for the next leg). With v1's
       penalties PPO learned to stand still. Later, without a version change (the defaults are unchanged):
       the ``frame_skip`` argument; the batched form (``gym.make_vec``) and resets that reuse the pymunk world;
-      the ``scene_distribution`` argument (a scene drawn per episode from the training distribution).
+      the ``scene_distribution`` argument (a scene drawn per episode from the training distribution); its
+      ``"robust"`` value, which also draws the robot's ``max_speed`` per episode (single envs only).
 
     ## References
 
@@ -372,6 +377,8 @@ class GreenhouseNavEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
         self.diagonal = self._extent(cfg)[0]
         start_pose = self._arrival_pose(targets, int(start_waypoint))
         start = start_pose + self.np_random.uniform([-0.05, -0.05, -0.1], [0.05, 0.05, 0.1])
+        if self.distribution is not None:  # the robot's limits too, where the distribution draws them
+            self.robot_spec = rover.rover_spec(cfg.max_speed, cfg.max_turn_rate, cfg.max_accel, cfg.max_angular_accel)
         if self.world is None or len(self.world.movers) != cfg.n_people:  # the first episode builds the world ...
             if self.world is not None:
                 self.world.close()
@@ -380,6 +387,7 @@ class GreenhouseNavEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
         else:  # ... later ones move what is in it
             self.world.set_scene(layout.geometry)
             self.world.place_robot(self.robot, start)
+            self.robot.spec = self.robot_spec
         self.crowd = Crowd(self.world, self.layout.routes, CrowdSpec(tease_prob=cfg.people_tease_prob), cfg.n_people)
         self.crowd.reset(self.np_random, start)
         self.max_episode_steps, self.time_limit_source = self._time_limit(start_pose, targets[start_waypoint:])

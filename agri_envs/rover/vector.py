@@ -22,6 +22,7 @@ import numpy as np
 from gymnasium.vector import AutoresetMode
 
 from agri_envs._vector import BatchedEnv, InfoKey, grown
+from agri_envs.rover.distribution import ROBOT_ARGUMENTS
 from agri_envs.rover.greenhouse_nav import GreenhouseNavEnv
 from agri_envs.sim2d.batched import (
     drive_box,
@@ -419,6 +420,15 @@ class GreenhouseNavVectorEnv(BatchedEnv):
     ) -> None:
         super().__init__(GreenhouseNavEnv, num_envs, autoreset_mode, max_episode_steps, render_mode, kwargs)
         self.envs: list[GreenhouseNavEnv] = self.envs  # type: ignore[assignment]
+        distribution = self.envs[0].distribution
+        drawn = sorted(ROBOT_ARGUMENTS & distribution.arguments) if distribution is not None else []
+        if drawn:
+            self.close()
+            raise ValueError(
+                f"GreenhouseNav's batched form keeps one robot for every sub-env; "
+                f"scene_distribution={self.envs[0].config.scene_distribution!r} draws {drawn} per episode: "
+                "use single envs (gym.make, or gym.make_vec(..., vectorization_mode='sync'))."
+            )
         for env in self.envs:  # what SyncTimeLimit tells a single env made with an explicit limit
             env.explicit_max_episode_steps = self.max_episode_steps
         first = self.envs[0]

@@ -38,6 +38,7 @@ from agri_training.learned.arm_observation import NearestBoxes
 from agri_training.learned.inference import PolicyNetwork
 from agri_training.learned.parameter_sharing import predict_shared
 from agri_training.learned.range_features import Differences, Ramp
+from agri_training.learned.slam_pose import SlamWaypoint
 
 #: Algorithms ``agri train`` knows: name -> (module, class).
 ALGORITHMS: dict[str, tuple[str, str]] = {
@@ -214,7 +215,12 @@ WRAPPERS: dict[str, type[gym.ObservationWrapper[Any, Any, Any]]] = {
     "Proximity": Proximity,
     "Differences": Differences,
     "Ramp": Ramp,
+    "SlamWaypoint": SlamWaypoint,
 }
+
+
+#: Wrappers that remember the episode (cleared by :class:`ObservationReplay` when one starts).
+EPISODE_MEMORY = (ObservationHistory, SlamWaypoint)
 
 
 class UnsafeCheckpointError(ValueError):
@@ -422,8 +428,9 @@ class ObsNormalization:
 class ObservationReplay:
     """The training's observation path replayed on raw env observations: the wrappers, then normalisation.
 
-    Call it once per decision (as the network saw observations in training). Wrappers with a memory
-    (:class:`ObservationHistory`) are cleared when ``new_episode`` is true.
+    Call it once per decision (as the network saw observations in training). Wrappers with a memory of the
+    episode (a ``clear`` method: :class:`ObservationHistory`, :class:`~agri_training.learned.slam_pose.
+    SlamWaypoint`) are cleared when ``new_episode`` is true.
 
     Args:
         chain: Observation wrappers, innermost first (:func:`observation_chain`).
@@ -439,7 +446,7 @@ class ObservationReplay:
     def __call__(self, observation: Any, new_episode: bool = False) -> Any:
         """``observation`` as the network saw it in training."""
         for w in self.chain:
-            if new_episode and isinstance(w, ObservationHistory):
+            if new_episode and isinstance(w, EPISODE_MEMORY):
                 w.clear()
             observation = w.observation(observation)
         if self.normalization is not None:

@@ -290,20 +290,20 @@ def demonstrate(
         learner: When given, the learner drives and the baseline only labels each decision (a DAgger round).
 
     Raises:
-        ValueError: When the baseline drives another env or needs arguments the training env contradicts.
+        ValueError: When the baseline drives another env, or its arguments change the training env's dynamics.
     """
     baseline = policy_spec(spec.policy)
     env_id = config["env_id"]
     if baseline.env_id != env_id:
         raise ValueError(f"pretrain: {spec.policy} drives {baseline.env_id}, not {env_id}")
     learner_kwargs = {**config["env_kwargs"], **config.get("train_env_kwargs", {})}
-    for key, value in baseline.env_kwargs.items():
-        if key in learner_kwargs and learner_kwargs[key] != value:
-            raise ValueError(
-                f"pretrain: {spec.policy} needs {key}={value!r}, the training env has {learner_kwargs[key]!r}"
-            )
     seeds = range(spec.seed, spec.seed + spec.episodes) if seeds is None else seeds
     if agri_envs.is_parallel_id(env_id):
+        for key, value in baseline.env_kwargs.items():
+            if key in learner_kwargs and learner_kwargs[key] != value:
+                raise ValueError(
+                    f"pretrain: {spec.policy} needs {key}={value!r}, the training env has {learner_kwargs[key]!r}"
+                )
         # One env serves baseline and learner (no observation wrappers), so the baseline may add no argument.
         extra = sorted(set(baseline.env_kwargs) - set(learner_kwargs))
         if extra:
@@ -316,7 +316,8 @@ def demonstrate(
     env = gym.make(env_id, **{**learner_kwargs, **baseline.env_kwargs})
     # Where the baseline's arguments change more than extra observation keys (a true pose for the baseline,
     # not a scan only it reads), the learner's own env runs beside it in lockstep and the learner sees what
-    # that env shows.
+    # that env shows: a learner without localization can learn from a teacher on the true pose. An argument
+    # of the baseline's that changes the dynamics is refused there (_lockstep), on the first step it shows.
     unwrapped: Any = learner_env.unwrapped
     own = learner_env if unwrapped.config.differences(baseline.env_kwargs) else None
     expert = make_policy(spec.policy, env)

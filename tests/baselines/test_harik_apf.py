@@ -17,6 +17,7 @@ from agri_baselines.harik_apf import (
     scan_zones_reference,
 )
 from agri_envs.rover import robot as rover
+from agri_envs.rover.distribution import ROBUST
 from agri_envs.sim2d.sensors import tim561
 from agri_training.evaluation.episode import run_episode
 
@@ -359,3 +360,24 @@ def test_front_zone_fits_narrow_corridors_and_is_the_papers_from_0_9_m():
             policy.params = dataclasses.replace(policy.params, front_margin=margin)
         records = [run_episode(env, policy, seed, None)["record"] for seed in (100007, 100011)]
         assert all(r["is_success"] == arrives and not r["collision"] for r in records), (margin, records)
+
+
+@pytest.mark.parametrize("name", ["harik-apf-gt", "harik-apf"])
+def test_takes_each_drawn_episodes_robot_and_corridor(name):
+    # scene_distribution="robust" draws the robot's speed and the corridor's width per episode: the controller's
+    # gains and limits are the episode's, as for an env made with those arguments.
+    localization = "ground_truth" if name == "harik-apf-gt" else "none"
+    env = gym.make(ENV_ID, full_scan=True, localization=localization, scene_distribution="robust")
+    policy = make_policy(name, env)
+    seen = set()
+    for seed in range(8):
+        obs, _ = env.reset(seed=seed)
+        policy.predict(obs, episode_start=np.array([True]))
+        cfg = env.unwrapped.episode_config
+        fixed = make_policy(name, gym.make(ENV_ID, full_scan=True, localization=localization,
+                                           **{k: getattr(cfg, k) for k in ROBUST.arguments}))
+        assert policy.controllers[0].p == fixed.params
+        assert (policy.max_speed, policy.max_turn_rate) == (fixed.max_speed, fixed.max_turn_rate) == (
+            cfg.max_speed, cfg.max_turn_rate)
+        seen.add((round(cfg.max_speed, 3), policy.controllers[0].p.front_margin))
+    assert len({speed for speed, _ in seen}) == 8 and len({margin for _, margin in seen}) >= 2

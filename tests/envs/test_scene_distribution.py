@@ -135,3 +135,50 @@ def test_outside_needs_every_family_to_exclude():
 def test_malformed_distributions_are_refused(make):
     with pytest.raises(ValueError):
         make()
+
+
+def test_the_robust_distribution_draws_valid_scenes_and_robots_in_range():
+    from agri_envs.rover.distribution import ROBOT_ARGUMENTS, ROBUST
+
+    base = GreenhouseNavConfig(scene_distribution="robust")
+    rng = np.random.default_rng(1)
+    speeds = []
+    for _ in range(300):
+        name, kwargs = ROBUST.sample(rng)
+        family = ROBUST.family(name)
+        assert all(r.contains(kwargs[k]) for k, r in family.ranges.items()) and not family.excludes(kwargs, {})
+        base.replace(**kwargs)  # a valid config, or this raises
+        speeds.append(kwargs["max_speed"])
+    assert min(speeds) < 0.7 and max(speeds) > 1.3 and ROBOT_ARGUMENTS & ROBUST.arguments == {"max_speed"}
+    narrow = ROBUST.family("narrow")  # its tightest corner: narrowest corridor at the most growth
+    base.replace(**narrow.fixed, **{**{k: r.largest() for k, r in narrow.ranges.items()}, "corridor_width": 0.85})
+
+
+def test_a_robust_episode_drives_the_robot_it_drew():
+    # Full speed ahead until the robot stops accelerating: it reaches the episode's drawn limit, never more,
+    # and the observation's velocity is read against that limit. Two episodes in a row with different limits,
+    # so that the second moves (and re-limits) the robot built for the first.
+    env = gym.make(NAV, scene_distribution="robust", localization="ground_truth")
+    speeds = []
+    for seed in (7, 8):  # both without people: the second episode keeps the first one's world
+        env.reset(seed=seed)
+        e = env.unwrapped
+        limit = e.episode_config.max_speed
+        speeds.append(limit)
+        assert e.robot.spec is e.robot_spec and e.robot_spec.max_speed == limit
+        fastest = 0.0
+        for _ in range(int(limit / e.robot_spec.max_accel / e.config.control_period) + 3):
+            obs, _, terminated, truncated, _ = env.step(np.array([1.0, 0.0], np.float32))
+            assert not (terminated or truncated)
+            fastest = max(fastest, e.robot.v)
+            assert obs["velocity"][0] == np.float32(e.robot.v / limit)
+        assert fastest == pytest.approx(limit, abs=1e-9)
+    assert abs(speeds[0] - speeds[1]) > 0.1
+
+
+def test_the_batched_form_refuses_a_distribution_that_draws_the_robot():
+    with pytest.raises(ValueError, match=r"draws \['max_speed'\] per episode: use single envs"):
+        gym.make_vec(NAV, num_envs=2, scene_distribution="robust")
+    envs = gym.make_vec(NAV, num_envs=2, vectorization_mode="sync", scene_distribution="robust")
+    envs.reset(seed=0)
+    envs.close()

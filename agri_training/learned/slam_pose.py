@@ -1,0 +1,74 @@
+"""A learned policy's own localization: Hector SLAM on the LIDAR, as ``harik-apf`` runs it, feeding the waypoint.
+
+GreenhouseNav made with ``localization="none"`` gives a robot what a real one has: LIDAR, sonars, its achieved
+velocity, and the mission's current waypoint in the frame it started in (``target``, a map-frame waypoint on a
+robot that starts at the map's origin). :class:`SlamWaypoint` turns that into the ``waypoint`` key the
+privileged policies read from the true pose, ``[d / diagonal, sin(alpha), cos(alpha)]``, with ``d`` and ``alpha``
+measured from a Hector SLAM estimate (:class:`agri_baselines.hector_slam.HectorSlam`, the configuration
+``harik-apf`` uses) updated on the full scan of each observation it sees. Nothing privileged is read: the scan
+geometry is the robot's own, and the diagonal (the scale the env writes ``target`` in) is the scene's, which
+the map gives.
+
+The wrapper sees one observation per decision (the policy's rate: every ``action_repeat``-th scan), in
+training and in evaluation alike (:class:`~agri_training.learned.policy.ObservationReplay`), so the SLAM
+the network learned with is the SLAM it drives with.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+
+from agri_baselines.hector_slam import HectorSlam, HectorSlamConfig
+
+
+class SlamWaypoint(gym.ObservationWrapper[dict[str, Any], Any, dict[str, Any]]):
+    """Add ``waypoint`` (from a Hector SLAM pose) to a GreenhouseNav observation made without localization.
+
+    Needs the env made with ``localization="none"`` and ``full_scan=True`` (keys ``target`` and ``scan``). The
+    SLAM map starts afresh with each episode (:meth:`clear`, which a reset calls and the replay of a learned
+    policy calls when an episode starts). In a config: ``SlamWaypoint`` (put it before ``FlattenObservation``).
+
+    Raises:
+        ValueError: For an observation without ``target`` or ``scan``.
+    """
+
+    def __init__(self, env: gym.Env[Any, Any]) -> None:
+        space = env.observation_space
+        if not isinstance(space, gym.spaces.Dict) or not {"target", "scan"} <= set(space.spaces):
+            raise ValueError(
+                "SlamWaypoint needs GreenhouseNav made with localization='none' and full_scan=True (observation "
+                f"keys 'target' and 'scan'), got {space}"
+            )
+        super().__init__(env)
+        polar = gym.spaces.Box(np.array([0, -1, -1], np.float32), np.ones(3, np.float32), dtype=np.float32)
+        self.observation_space = gym.spaces.Dict({**space.spaces, "waypoint": polar})
+        lidar = env.unwrapped.lidar.spec
+        self.max_range = float(lidar.max_range)
+        self.slam = HectorSlam(HectorSlamConfig(), lidar.beam_angles, lidar.mount)
+        self._fresh = True
+
+    def clear(self) -> None:
+        """Forget the map: the next observation starts a new one, at the origin of its start frame."""
+        self._fresh = True
+
+    def reset(self, **kwargs: Any) -> tuple[dict[str, Any], dict[str, Any]]:
+        """Reset the env and start a new map."""
+        self.clear()
+        return super().reset(**kwargs)
+
+    def observation(self, observation: dict[str, Any]) -> dict[str, Any]:
+        """The observation with ``waypoint`` measured from the SLAM pose after this scan."""
+        if self._fresh:
+            self.slam.reset((0.0, 0.0, 0.0))
+            self._fresh = False
+        x, y, yaw = self.slam.update(np.asarray(observation["scan"], dtype=np.float64) * self.max_range)
+        diagonal = float(self.env.unwrapped.diagonal)
+        tx, ty = np.asarray(observation["target"], dtype=np.float64) * diagonal
+        d = math.hypot(tx - x, ty - y)
+        alpha = math.atan2(ty - y, tx - x) - yaw
+        waypoint = np.array([min(1.0, d / diagonal), math.sin(alpha), math.cos(alpha)], np.float32)
+        return {**observation, "waypoint": waypoint}

@@ -1,0 +1,99 @@
+"""SlamWaypoint: a learned policy's own Hector SLAM, checked against harik-apf's and replayed as training saw it."""
+
+import math
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+import agri_envs  # noqa: F401
+from agri_baselines import make_policy
+from agri_training.learned.policy import (
+    ActionRepeat,
+    HeldActions,
+    ObservationReplay,
+    apply_wrappers,
+    decide_held,
+    observation_chain,
+)
+from agri_training.learned.slam_pose import SlamWaypoint
+
+ENV_ID = "agri_envs/GreenhouseNav-v2"
+BLIND = {"localization": "none", "full_scan": True, "n_rows": 2, "row_length": 4.0, "n_people": 1}
+WRAPPERS = [
+    "SlamWaypoint",
+    {"FilterObservation": {"filter_keys": ["lidar", "sonar", "velocity", "waypoint"]}},
+    "FlattenObservation",
+]
+
+
+def _act(k):
+    """The k-th decision of an episode: slow ahead, weaving (the same in training and evaluation)."""
+    return np.array([0.3, 0.5 * math.sin(k / 5)], np.float32)
+
+
+def test_waypoint_is_harik_apfs_distance_and_bearing_on_the_same_slam():
+    # The oracle: harik-apf runs the same Hector SLAM on every scan and computes d and alpha its own way.
+    env = SlamWaypoint(gym.make(ENV_ID, **BLIND))
+    harik = make_policy("harik-apf", env)
+    diagonal = env.unwrapped.diagonal
+    for seed in (3, 4):
+        obs, _ = env.reset(seed=seed)
+        start, done, steps, far = True, False, 0, 0.0
+        while not done and steps < 200:
+            scan = obs["scan"] * harik.robot.lidar_max_range
+            if start:
+                harik.start_episode(0)
+            d, alpha = harik.waypoint_error(0, obs, scan)  # its SLAM update on this scan, then eqs. 2-4
+            np.testing.assert_allclose(obs["waypoint"][0], min(1.0, d / diagonal), rtol=1e-6, atol=1e-7)
+            np.testing.assert_allclose(obs["waypoint"][1:], [math.sin(alpha), math.cos(alpha)], atol=1e-6)
+            far = max(far, d)
+            obs, _, terminated, truncated, _ = env.step(_act(steps))
+            start, done, steps = False, terminated or truncated, steps + 1
+        assert far > 1.0 and steps > 50
+
+
+def test_a_loaded_policy_replays_the_slam_training_saw():
+    """Training: the wrappers outside ActionRepeat. Evaluation: raw env, replayed once per held action, the
+    SLAM map started afresh with each episode."""
+    repeat, episodes, decisions = 4, (11, 12), 40
+    train_env = apply_wrappers(ActionRepeat(gym.make(ENV_ID, **BLIND), repeat), WRAPPERS)
+    trained = []
+    for seed in episodes:
+        obs, _ = train_env.reset(seed=seed)
+        for k in range(decisions):
+            trained.append(obs)
+            obs, _, terminated, truncated, _ = train_env.step(_act(k))
+            if terminated or truncated:
+                break
+
+    class Recorder:
+        """Records what it is shown; acts by its decision count in the episode."""
+
+        def __init__(self):
+            self.seen, self.k = [], 0
+
+        def predict(self, observation, state=None, episode_start=None, deterministic=True):
+            self.k = 0 if episode_start[0] else self.k + 1
+            self.seen.append(np.array(observation))
+            return _act(self.k), state
+
+    eval_env = gym.make(ENV_ID, **BLIND)
+    replay = ObservationReplay(observation_chain(eval_env, WRAPPERS)[1])
+    hold, loaded = HeldActions(repeat), Recorder()
+    for seed in episodes:
+        obs, _ = eval_env.reset(seed=seed)
+        for step in range(decisions * repeat):
+            action, _ = decide_held(hold, replay, loaded, obs, None, np.array([step == 0]), True)
+            obs, _, terminated, truncated, _ = eval_env.step(action)
+            if terminated or truncated:
+                break
+    assert len(loaded.seen) == len(trained) > 20
+    for k, (a, b) in enumerate(zip(trained, loaded.seen, strict=True)):
+        np.testing.assert_array_equal(a, b, err_msg=f"decision {k}")
+
+
+@pytest.mark.parametrize("kwargs", [{}, {"localization": "none"}, {"full_scan": True}])
+def test_needs_an_env_without_pose_and_with_the_scan(kwargs):
+    with pytest.raises(ValueError, match="localization='none' and full_scan=True"):
+        SlamWaypoint(gym.make(ENV_ID, **kwargs))
