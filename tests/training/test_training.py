@@ -382,6 +382,35 @@ def test_a_baseline_whose_arguments_change_the_dynamics_is_refused(tmp_path, mon
         pretrain.demonstrate(pretrain.PretrainSpec.from_config(config["pretrain"]), config)
 
 
+def test_a_learner_without_localization_learns_from_a_teacher_on_the_true_pose(tmp_path):
+    # harik-apf-gt needs localization='ground_truth'; the learner's env has none. The teacher drives its own env,
+    # the learner's runs beside it in lockstep, and the learner is shown its own keys (target, no waypoint).
+    import agri_training.learned.pretrain as pretrain
+    from agri_baselines import make_policy
+
+    blind = {**TINY_ENV, "n_people": 1, "localization": "none", "full_scan": True}
+    hp = {**TINY_HP, "env_kwargs": blind, "wrappers": [], "action_repeat": 1,
+          "pretrain": {"policy": "harik-apf-gt", "episodes": 1, "seed": 50000}}
+    config = resolve_config(TrainRequest(ENV_ID, "ppo", tmp_path / "run", seed=4, overrides=hp))
+    demos = pretrain.demonstrate(pretrain.PretrainSpec.from_config(config["pretrain"]), config)
+    assert "target" in demos.observations and "waypoint" not in demos.observations
+    # The oracle: harik-apf-gt alone on the true pose takes the same actions, and the learner's env shows what
+    # an env made with its own arguments shows when driven by them.
+    trained_on = {**config["env_kwargs"], **config["train_env_kwargs"]}
+    truth = gym.make(ENV_ID, **{**trained_on, "localization": "ground_truth"})
+    own = gym.make(ENV_ID, **trained_on)
+    teacher = make_policy("harik-apf-gt", truth)
+    obs, _ = truth.reset(seed=50000)
+    shown, _ = own.reset(seed=50000)
+    for k, label in enumerate(demos.actions):
+        np.testing.assert_array_equal(demos.observations["target"][k], shown["target"])
+        action, _ = teacher.predict(obs, episode_start=np.array([k == 0]))
+        np.testing.assert_array_equal(label, np.clip(action, -1, 1), err_msg=f"decision {k}")
+        obs, *_ = truth.step(action)
+        shown, *_ = own.step(action)
+    assert len(demos.actions) == 40
+
+
 def test_emphasized_decisions_count_as_copies_in_the_action_loss():
     from agri_training.learned.pretrain import PretrainSpec, action_loss_of
 
