@@ -70,6 +70,11 @@ class BatchedEnv(VectorEnv[dict[str, np.ndarray], np.ndarray, np.ndarray]):
     #: The info keys of a step, in the single env's order.
     INFO_KEYS: tuple[InfoKey, ...] = ()
 
+    @classmethod
+    def refusal(cls, kwargs: dict[str, Any]) -> str | None:
+        """Why this batched form cannot run envs made with ``kwargs`` (valid single-env arguments); None: it can."""
+        return None
+
     def __init__(
         self,
         make_env: Callable[..., gym.Env[Any, Any]],

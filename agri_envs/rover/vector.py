@@ -22,7 +22,7 @@ import numpy as np
 from gymnasium.vector import AutoresetMode
 
 from agri_envs._vector import BatchedEnv, InfoKey, grown
-from agri_envs.rover.distribution import ROBOT_ARGUMENTS
+from agri_envs.rover.distribution import DISTRIBUTIONS, ROBOT_ARGUMENTS
 from agri_envs.rover.greenhouse_nav import GreenhouseNavEnv
 from agri_envs.sim2d.batched import (
     drive_box,
@@ -418,17 +418,11 @@ class GreenhouseNavVectorEnv(BatchedEnv):
         render_mode: str | None = None,
         **kwargs: Any,
     ) -> None:
+        refused = self.refusal(kwargs)
+        if refused:
+            raise ValueError(refused)
         super().__init__(GreenhouseNavEnv, num_envs, autoreset_mode, max_episode_steps, render_mode, kwargs)
         self.envs: list[GreenhouseNavEnv] = self.envs  # type: ignore[assignment]
-        distribution = self.envs[0].distribution
-        drawn = sorted(ROBOT_ARGUMENTS & distribution.arguments) if distribution is not None else []
-        if drawn:
-            self.close()
-            raise ValueError(
-                f"GreenhouseNav's batched form keeps one robot for every sub-env; "
-                f"scene_distribution={self.envs[0].config.scene_distribution!r} draws {drawn} per episode: "
-                "use single envs (gym.make, or gym.make_vec(..., vectorization_mode='sync'))."
-            )
         for env in self.envs:  # what SyncTimeLimit tells a single env made with an explicit limit
             env.explicit_max_episode_steps = self.max_episode_steps
         first = self.envs[0]
@@ -460,6 +454,19 @@ class GreenhouseNavVectorEnv(BatchedEnv):
             info_b=self._info[bool],
             trail=self._trail,
             periods=self._periods,
+        )
+
+    @classmethod
+    def refusal(cls, kwargs: dict[str, Any]) -> str | None:
+        """A scene distribution that draws the robot's limits per episode: the kernel keeps one robot for all."""
+        distribution = DISTRIBUTIONS.get(kwargs.get("scene_distribution", "off"))
+        drawn = sorted(ROBOT_ARGUMENTS & distribution.arguments) if distribution is not None else []
+        if not drawn:
+            return None
+        return (
+            f"GreenhouseNav's batched form keeps one robot for every sub-env; scene_distribution="
+            f"{kwargs['scene_distribution']!r} draws {drawn} per episode: use single envs (gym.make, or "
+            "gym.make_vec(..., vectorization_mode='sync'))."
         )
 
     @staticmethod

@@ -30,6 +30,7 @@ from typing import Any
 
 import gymnasium as gym
 import numpy as np
+from gymnasium.envs.registration import load_env_creator
 
 import agri_envs
 from agri_training.core.documents import EpisodeOutput
@@ -43,20 +44,30 @@ BATCH_SIZE = 16
 SINGLE_STEP_COST = 3.0
 
 
-def has_batched_form(env_id: str) -> bool:
-    """Whether ``gym.make_vec(env_id, ...)`` builds the env's own vector env (a ``vector_entry_point``)."""
+def has_batched_form(env_id: str, env_kwargs: Mapping[str, Any] | None = None) -> bool:
+    """Whether ``gym.make_vec(env_id, **env_kwargs)`` builds the env's own vector env (a ``vector_entry_point``).
+
+    False also where that vector env refuses these arguments (its ``refusal``: GreenhouseNav's for a scene
+    distribution that draws the robot per episode).
+    """
     if agri_envs.is_parallel_id(env_id) or env_id not in gym.registry:
         return False
-    return gym.registry[env_id].vector_entry_point is not None
+    entry_point = gym.registry[env_id].vector_entry_point
+    if entry_point is None:
+        return False
+    vector_class = load_env_creator(entry_point) if isinstance(entry_point, str) else entry_point
+    refusal = getattr(vector_class, "refusal", None)
+    return refusal is None or refusal(dict(env_kwargs or {})) is None
 
 
-def batchable(env_id: str, policy: PolicyRef) -> bool:
-    """Whether ``policy``'s episodes on ``env_id`` may be stepped together in the env's batched form.
+def batchable(env_id: str, policy: PolicyRef, env_kwargs: Mapping[str, Any] | None = None) -> bool:
+    """Whether ``policy``'s episodes on ``env_id`` (made with ``env_kwargs``) may be stepped together in batches.
 
-    True when the env has a batched form and the policy acts on its observations alone: a network (a zoo name,
-    an ``agri train`` run folder, an ONNX or SB3 file) or a baseline registered with ``observation_only=True``.
+    True when the env has a batched form for these arguments and the policy acts on its observations alone: a
+    network (a zoo name, an ``agri train`` run folder, an ONNX or SB3 file) or a baseline registered with
+    ``observation_only=True``.
     """
-    return has_batched_form(env_id) and policy.observation_only
+    return has_batched_form(env_id, env_kwargs) and policy.observation_only
 
 
 class _InfoRow(Mapping[str, Any]):

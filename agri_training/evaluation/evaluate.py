@@ -171,7 +171,7 @@ def episode_jobs(request: EvalRequest, kwargs: Mapping[str, Any], batch: int = 1
     if isinstance(batch, bool) or not isinstance(batch, int) or batch < 1:
         raise ValueError(f"batch must be an int >= 1, got {batch!r}")
     runs = request.campaign_runs
-    if runs == 1 and batch > 1 and batchable(request.env_id, request.ref):
+    if runs == 1 and batch > 1 and batchable(request.env_id, request.ref, kwargs):
         traced = min(request.record_traces, request.episodes)
         return [
             EpisodeJob(request.env_id, kwargs, request.ref, request.seed + first, first < traced, batch=size)

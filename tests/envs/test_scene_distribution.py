@@ -182,3 +182,4 @@ def test_the_batched_form_refuses_a_distribution_that_draws_the_robot():
     envs = gym.make_vec(NAV, num_envs=2, vectorization_mode="sync", scene_distribution="robust")
     envs.reset(seed=0)
     envs.close()
+

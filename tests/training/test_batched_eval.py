@@ -163,3 +163,11 @@ def test_learned_policies_share_their_network_until_the_weights_change(tmp_path)
     third = LearnedPolicy(folder, env)
     assert third.network is not first.network
     assert np.allclose(third.network.output[1], first.network.output[1] + 1.0)
+
+
+def test_evaluation_runs_robust_scenes_on_single_envs():
+    # The evaluator batches observation-only policies where the batched form takes the arguments; here it does not.
+    from agri_training.evaluation.batched import has_batched_form
+
+    assert has_batched_form("agri_envs/GreenhouseNav-v2", {"scene_distribution": "training"})
+    assert not has_batched_form("agri_envs/GreenhouseNav-v2", {"scene_distribution": "robust"})
