@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from typing import Any
 
@@ -217,7 +218,11 @@ class GreenhouseCoverageEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
     * v2: the ``memory`` observation is a flat ``(512,)`` vector (the same values, the ``(2, 16, 16)`` grid in
       C order), so that learners take it as it is: SB3 reads a float box of image shape as an image that
       should be uint8 and warns. Everything else is unchanged; a policy that flattened v1's ``memory``
-      (SB3's ``MultiInputPolicy`` does) sees the same input.
+      (SB3's ``MultiInputPolicy`` does) sees the same input. Later, without a version change (the defaults
+      are unchanged): the sensors take the episode's drawn arguments (sonar slip probability, compass noise and
+      bias, encoder noise and scale error); before, the sonars kept the config's ``vegetation_echo_prob``, so
+      ``scene_distribution="training"`` episodes change (their drawn echoes now apply; ``"off"`` gives the same
+      episodes).
 
     ## References
 
@@ -323,6 +328,7 @@ class GreenhouseCoverageEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
             _, drawn = self.distribution.sample(rng)
             cfg = self.config.replace(**drawn).with_options(options, allowed)
         self.episode_config = cfg
+        self._apply_sensor_arguments(cfg)
         self.n_corridors = cfg.n_rows + 1
         self.max_steps = int(math.ceil(cfg.mission_time() / cfg.control_period))
         params = cfg.layout_params()
@@ -372,6 +378,15 @@ class GreenhouseCoverageEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
         if self.render_mode == "human":
             self.render()
         return obs, info
+
+    def _apply_sensor_arguments(self, cfg: GreenhouseCoverageConfig) -> None:
+        """Give the sonars, compass and encoders the episode's arguments (a distribution may draw them).
+
+        Updated in place: without a distribution they are the config's, and every draw stays as it was.
+        """
+        self.sonars.spec = dataclasses.replace(self.sonars.spec, foliage_slip_prob=cfg.vegetation_echo_prob)
+        self.compass.noise_std, self.compass.bias = cfg.compass_noise_std, cfg.compass_bias
+        self.encoders.noise, self.encoders.scale_std = cfg.encoder_noise, cfg.encoder_scale_std
 
     # -- stepping --------------------------------------------------------------------------------------
     def step(self, action: np.ndarray) -> tuple[dict[str, np.ndarray], float, bool, bool, dict[str, Any]]:

@@ -69,7 +69,7 @@ _INFO: tuple[InfoKey, ...] = (
 
 
 class _Constants(NamedTuple):
-    """What every world of the batch shares: the config, the robot and its sensors."""
+    """What every world of the batch shares: the config, the robot and its sensors' layout."""
 
     dt: float
     limits: np.ndarray  # max_speed, max_reverse_speed, max_turn_rate, max_accel, max_angular_accel
@@ -79,17 +79,13 @@ class _Constants(NamedTuple):
     ground_truth: bool
     terminate_on_contact: bool
     weights: np.ndarray  # coverage, progress, success, contact, cross_track, time
-    compass_bias: float
-    compass_noise: float
     gauge: float
-    encoder_noise: float
     pose_scale: np.ndarray  # (2,) m
     sonar_mounts: np.ndarray
     sonar_half_aperture: float
     sonar_min: float
     sonar_max: float
     sonar_noise: float
-    slip_prob: float
     memory_cell: float  # the memory grid's cell size (m)
 
 
@@ -102,6 +98,11 @@ class _State(NamedTuple):
     encoder: np.ndarray  # (n, 2) the measured v, w
     scale: np.ndarray  # (n, 2) the encoders' scale errors
     compass: np.ndarray  # (n,) the last compass reading (rad)
+    # the episode's sensor arguments (a scene distribution may draw them)
+    compass_bias: np.ndarray  # (n,) rad
+    compass_noise: np.ndarray  # (n,) rad
+    encoder_noise: np.ndarray  # (n,)
+    slip_prob: np.ndarray  # (n,) the sonars' foliage slip probability
     path_length: np.ndarray
     min_clearance: np.ndarray
     cross_sum: np.ndarray
@@ -236,9 +237,11 @@ def _step_worlds(rngs: Any, actions: np.ndarray, active: np.ndarray, c: _Constan
         s.crop_contacts[i] += crop_contact
         s.other_contacts[i] += other_contact
         s.steps[i] += 1
-        h = compass_read(rng, pose[2], c.compass_bias, c.compass_noise)
+        h = compass_read(rng, pose[2], s.compass_bias[i], s.compass_noise[i])
         s.compass[i] = h
-        enc_v, enc_w = track_odometry(rng, vel[0], vel[1], h, c.dt, c.gauge, s.scale[i], c.encoder_noise, s.estimate[i])
+        enc_v, enc_w = track_odometry(
+            rng, vel[0], vel[1], h, c.dt, c.gauge, s.scale[i], s.encoder_noise[i], s.estimate[i]
+        )
         s.encoder[i, 0], s.encoder[i, 1] = enc_v, enc_w
         o.trail[i, 0, 0], o.trail[i, 0, 1] = pose[0], pose[1]
         # CoverageTask.evaluate
@@ -299,7 +302,7 @@ def _step_worlds(rngs: Any, actions: np.ndarray, active: np.ndarray, c: _Constan
             c.sonar_min,
             c.sonar_max,
             c.sonar_noise,
-            c.slip_prob,
+            s.slip_prob[i],
             circles,
             capsules,
             s.solid_circles[i, : n[4]],
@@ -431,17 +434,13 @@ class GreenhouseCoverageVectorEnv(BatchedEnv):
                     weights.time,
                 ]
             ),
-            compass_bias=float(first.compass.bias),
-            compass_noise=float(first.compass.noise_std),
             gauge=float(first.encoders.gauge),
-            encoder_noise=float(first.encoders.noise),
             pose_scale=np.array(first.pose_scale, dtype=np.float64),
             sonar_mounts=np.ascontiguousarray(first.sonars.mounts),
             sonar_half_aperture=0.5 * sonar.aperture,
             sonar_min=float(sonar.min_range),
             sonar_max=float(sonar.max_range),
             sonar_noise=float(sonar.noise_std),
-            slip_prob=float(sonar.foliage_slip_prob),
             memory_cell=float(first.memory.spec.cell),
         )
         n = self.num_envs
@@ -453,6 +452,10 @@ class GreenhouseCoverageVectorEnv(BatchedEnv):
             encoder=f((n, 2)),
             scale=f((n, 2)),
             compass=f(n),
+            compass_bias=f(n),
+            compass_noise=f(n),
+            encoder_noise=f(n),
+            slip_prob=f(n),
             path_length=f(n),
             min_clearance=f(n),
             cross_sum=f(n),
@@ -569,6 +572,10 @@ class GreenhouseCoverageVectorEnv(BatchedEnv):
         s.encoder[i] = (env.encoders.v, env.encoders.w)
         s.scale[i] = env.encoders.scale
         s.compass[i] = env._compass
+        s.compass_bias[i] = env.compass.bias
+        s.compass_noise[i] = env.compass.noise_std
+        s.encoder_noise[i] = env.encoders.noise
+        s.slip_prob[i] = env.sonars.spec.foliage_slip_prob
         s.path_length[i] = env._path_length
         s.min_clearance[i] = env._min_clearance
         s.cross_sum[i] = env._cross_sum

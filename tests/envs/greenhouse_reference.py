@@ -4,8 +4,10 @@
 fast (pymunk worlds moved instead of rebuilt, static scenes cached): GreenhouseNav's as recorded then,
 GreenhouseCoverage-v2's and the ``distribution`` cases' recorded on the ``learn2d`` branch before it merged the
 fast resets (commit a6d4610, whose GreenhouseNav digests equal the recorded ones); ``test_greenhouse_env.py`` and
-``test_coverage_env.py`` recompute them. Write the file anew only for a deliberate change of the envs'
-episodes (which also bumps their versions):
+``test_coverage_env.py`` recompute them. GreenhouseCoverage's ``distribution`` digests were recorded anew when
+its sensors began to take each episode's drawn arguments (the drawn ``vegetation_echo_prob`` had been ignored;
+no version bump: only ``scene_distribution="training"`` episodes changed, every other digest stayed). Write
+the file anew only for a deliberate change of the envs' episodes (which also bumps their versions):
 
     python tests/envs/greenhouse_reference.py tests/data/greenhouse_digests.json
 """
