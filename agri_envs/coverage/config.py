@@ -39,7 +39,7 @@ class GreenhouseCoverageConfig(StrictConfig):
     layout_seed: int = param(-1, "layout seed; -1: a new greenhouse every episode", low=-1, high=2**31 - 1)
     scene_distribution: str = param(
         "off",
-        "scenes drawn per episode (see Starting State)",
+        "per-episode scenes (see Starting State)",
         choices=("off", *DISTRIBUTIONS),
     )
     # Robot (756 kg: low accelerations)

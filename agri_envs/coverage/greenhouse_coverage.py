@@ -128,6 +128,15 @@ class GreenhouseCoverageEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
     arguments it draws cannot also be given to ``gym.make``. Training uses seeds below 100000; held-out
     suites (100000 and up) run the plain env, and ``coverage-generalization`` lies outside every range.
 
+    ``scene_distribution="robust"`` (:data:`agri_envs.coverage.distribution.ROBUST`) widens it along the
+    stress suites' axes, each suite keeping a level outside: ``n_rows`` 1..6, ``row_length`` [4, 16] m,
+    ``corridor_width`` [1.3, 2.5] m (below 1.5 m with ``growth`` up to 0.7, or, at 1.4-1.5 m in rows of up to
+    12 m, up to 1), ``vegetation_echo_prob`` [0, 0.7], and the dead reckoning: ``encoder_noise`` [0, 0.2],
+    ``encoder_scale_std`` [0, 0.05], ``compass_noise_std`` [0, 0.2] rad, ``compass_bias`` [-0.2, 0.2] rad;
+    jitter, incline, bend and growth as in training. Every training scene is one of its scenes, and so is
+    ``coverage-generalization``'s. The sensors take each episode's drawn arguments (the sonars' slip
+    probability, the compass, the encoders).
+
     ## Episode End
 
     Terminated when every corridor is covered end to end (success) or, with ``terminate_on_contact``, when
@@ -166,7 +175,7 @@ class GreenhouseCoverageEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
     | ``growth`` | 0.6 |  | in [0.0, 1.0] | season: plant size and leaves reaching into corridors |
     | ``post_spacing`` | 4 | m | in [1.0, 20.0] | distance between structural posts along rows and walls |
     | ``layout_seed`` | -1 |  | in [-1, 2147483647] | layout seed; -1: a new greenhouse every episode |
-    | ``scene_distribution`` | 'off' |  | one of 'off', 'training' | scenes drawn per episode (see Starting State) |
+    | ``scene_distribution`` | 'off' |  | one of 'off', 'training', 'robust' | per-episode scenes (see Starting State) |
     | ``max_speed`` | 0.5 | m/s | in [0.1, 1.5] | forward speed limit (reverse: half of it) |
     | ``max_turn_rate`` | 0.6 | rad/s | in [0.1, 2.0] | angular speed limit |
     | ``max_accel`` | 0.3 | m/s^2 | in [0.05, 2.0] | linear acceleration limit |
@@ -222,7 +231,7 @@ class GreenhouseCoverageEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
       are unchanged): the sensors take the episode's drawn arguments (sonar slip probability, compass noise and
       bias, encoder noise and scale error); before, the sonars kept the config's ``vegetation_echo_prob``, so
       ``scene_distribution="training"`` episodes change (their drawn echoes now apply; ``"off"`` gives the same
-      episodes).
+      episodes). New value ``scene_distribution="robust"``.
 
     ## References
 

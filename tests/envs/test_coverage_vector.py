@@ -43,6 +43,8 @@ CASES = {
     "small-quick": ({**SMALL, "terminate_on_contact": False, "control_period": 0.5}, AutoresetMode.SAME_STEP),
     # a greenhouse drawn per episode (sizes, shapes, growth, echoes): the arrays grow as larger ones come
     "distribution": ({"scene_distribution": "training", "max_episode_steps": 25}, AutoresetMode.SAME_STEP),
+    # ... and its sensors too (echoes, compass noise and bias, encoder noise and drift): per-world values
+    "robust": ({"scene_distribution": "robust", "max_episode_steps": 20}, AutoresetMode.NEXT_STEP),
     "progress-only": (
         {"reward_progress": 1.0, "reward_coverage": 0.0, "localization": "ground_truth", "n_rows": 3},
         AutoresetMode.DISABLED,

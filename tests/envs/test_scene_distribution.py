@@ -12,11 +12,17 @@ from agri_envs.scenes.distribution import Choice, IntRange, SceneDistribution, S
 NAV = "agri_envs/GreenhouseNav-v2"
 COVER = "agri_envs/GreenhouseCoverage-v2"
 CONFIGS = {NAV: GreenhouseNavConfig, COVER: GreenhouseCoverageConfig}
+#: (env id, scene_distribution) of the distributions the generic tests check.
+DISTRIBUTIONS = [(NAV, "training"), (COVER, "training"), (NAV, "robust"), (COVER, "robust")]
 
 
-@pytest.mark.parametrize("env_id", [NAV, COVER])
-def test_draws_stay_in_range_and_follow_the_seed(env_id):
-    distribution, _ = agri_envs.training_distribution(env_id)
+def _distribution(env_id, name):
+    return CONFIGS[env_id](scene_distribution=name).distribution()
+
+
+@pytest.mark.parametrize(("env_id", "name"), DISTRIBUTIONS)
+def test_draws_stay_in_range_and_follow_the_seed(env_id, name):
+    distribution = _distribution(env_id, name)
     draws = [distribution.sample(np.random.default_rng(seed)) for seed in range(400)]
     assert draws == [distribution.sample(np.random.default_rng(seed)) for seed in range(400)]
     seen = {f.name: 0 for f in distribution.families}
@@ -40,10 +46,10 @@ def test_draws_stay_in_range_and_follow_the_seed(env_id):
                 assert len(set(values)) == (r.high - r.low + 1 if isinstance(r, IntRange) else len(r.values)), k
 
 
-@pytest.mark.parametrize("env_id", [NAV, COVER])
-def test_every_draw_and_the_tightest_corner_are_valid_scenes(env_id):
-    distribution, _ = agri_envs.training_distribution(env_id)
-    base = CONFIGS[env_id](scene_distribution="training")
+@pytest.mark.parametrize(("env_id", "name"), DISTRIBUTIONS)
+def test_every_draw_and_the_tightest_corner_are_valid_scenes(env_id, name):
+    distribution = _distribution(env_id, name)
+    base = CONFIGS[env_id](scene_distribution=name)
     rng = np.random.default_rng(0)
     for _ in range(300):
         base.replace(**distribution.sample(rng)[1])
@@ -183,3 +189,44 @@ def test_the_batched_form_refuses_a_distribution_that_draws_the_robot():
     envs.reset(seed=0)
     envs.close()
 
+
+def test_the_coverage_robust_distribution_widens_training_and_keeps_a_level_of_each_stress_suite_outside():
+    from agri_envs.coverage.distribution import ROBUST, TRAINING
+
+    defaults = GreenhouseCoverageConfig().to_dict()
+    rng = np.random.default_rng(2)
+    assert not any(ROBUST.lies_outside(TRAINING.sample(rng)[1], defaults) for _ in range(300))
+    inside = [{"corridor_width": w} for w in (1.4, 2.0, 2.5)] + [
+        {"vegetation_echo_prob": 0.7},
+        {"n_rows": 4, "row_length": 10.0},
+        {"encoder_noise": 0.2, "encoder_scale_std": 0.05, "compass_noise_std": 0.2, "compass_bias": 0.2},
+    ]
+    outside = [{"corridor_width": w} for w in (1.2, 3.0)] + [
+        {"vegetation_echo_prob": 1.0},
+        {"n_rows": 7, "row_length": 20.0},
+        {"encoder_noise": 0.5, "encoder_scale_std": 0.1, "compass_noise_std": 0.5, "compass_bias": 0.5},
+    ]
+    assert not any(ROBUST.lies_outside(kwargs, defaults) for kwargs in inside)
+    assert all(ROBUST.lies_outside(kwargs, defaults) for kwargs in outside)
+
+
+def test_a_robust_coverage_episode_gives_its_sensors_the_drawn_arguments():
+    # Two episodes in a row, so that the second updates the sensors the first one set. The compass bias is
+    # checked by what the compass reads too: standing still, its mean error is the episode's bias.
+    env = gym.make(COVER, scene_distribution="robust", localization="ground_truth")
+    biases = []
+    for seed in (0, 6):
+        env.reset(seed=seed)
+        e = env.unwrapped
+        cfg = e.episode_config
+        assert e.sonars.spec.foliage_slip_prob == cfg.vegetation_echo_prob
+        assert (e.compass.noise_std, e.compass.bias) == (cfg.compass_noise_std, cfg.compass_bias)
+        assert (e.encoders.noise, e.encoders.scale_std) == (cfg.encoder_noise, cfg.encoder_scale_std)
+        errors = []
+        for _ in range(100):
+            _, _, terminated, truncated, info = env.step(np.zeros(2, np.float32))
+            assert not (terminated or truncated)
+            errors.append(np.angle(np.exp(1j * (info["compass"] - info["yaw"]))))
+        assert np.mean(errors) == pytest.approx(cfg.compass_bias, abs=3 * cfg.compass_noise_std / 10 + 1e-9)
+        biases.append(cfg.compass_bias)
+    assert abs(biases[0] - biases[1]) > 0.1 and all(abs(b - e.config.compass_bias) > 0.1 for b in biases)
