@@ -38,6 +38,7 @@ from agri_training.learned.arm_observation import NearestBoxes
 from agri_training.learned.inference import PolicyNetwork
 from agri_training.learned.parameter_sharing import predict_shared
 from agri_training.learned.range_features import Differences, Ramp
+from agri_training.learned.robot_limits import RobotLimits
 from agri_training.learned.slam_pose import SlamWaypoint
 
 #: Algorithms ``agri train`` knows: name -> (module, class).
@@ -216,6 +217,7 @@ WRAPPERS: dict[str, type[gym.ObservationWrapper[Any, Any, Any]]] = {
     "Differences": Differences,
     "Ramp": Ramp,
     "SlamWaypoint": SlamWaypoint,
+    "RobotLimits": RobotLimits,
 }
 
 
