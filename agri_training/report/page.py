@@ -44,7 +44,7 @@ from agri_training.evaluation.reference import PolicyRef, build_policy
 from agri_training.evaluation.video import shrink_frame, write_clip
 from agri_training.learned.zoo import ZOO_DIR
 from agri_training.report.generalization import generalization_section
-from agri_training.report.robustness import glance_table, robustness_section
+from agri_training.report.robustness import glance_table, own_sensors_section, robustness_section
 
 #: Per-env report sections: env id -> ``"module:function"`` (see the module docstring).
 SECTION_HOOKS: dict[str, str] = {
@@ -856,6 +856,9 @@ def build_report(
     for env_id in env_ids:
         env_suites = [s for s in suites if s.env_id == env_id]
         parts += [f"## {env_id}", "", _env_blurb(env_id), ""]
+        own = own_sensors_section(env_id, shown)
+        if own:
+            parts += ["### Learned and scripted from the robot's own sensors", "", *own]
         robust = robustness_section(env_id, suites, shown, out_dir)
         if robust:
             parts += [f"### {_robustness_heading(env_id)}", "", *robust, ""]

@@ -279,3 +279,73 @@ def robustness_section(
         "",
         *lines,
     ]
+
+
+def _collisions(level: Mapping[str, Any]) -> tuple[int, int]:
+    episodes = level["episodes"]
+    return sum(bool(e.get("collision")) for e in episodes), len(episodes)
+
+
+def _rate_text(k: int, n: int) -> str:
+    low, high = wilson_interval(k, n)
+    return f"{k / n:.2f} [{low:.2f}, {high:.2f}]"
+
+
+def own_sensors_section(env_id: str, shown: Sequence[tuple[lb.Suite, Mapping[str, Any]]]) -> list[str]:
+    """Markdown: each learned policy that uses nothing privileged against the env's best such scripted policy.
+
+    The scripted side is the non-privileged baseline with the highest success pooled over the suites both ran
+    (GreenhouseNav: ``harik-apf``, Hector SLAM on the LIDAR). One row per suite level both ran: success of each with
+    its Wilson interval, the difference, collisions; a level where the learned policy trails by more than 0.05
+    is marked. Empty when the env has no such pair.
+    """
+    entries = [(s, e) for s, e in shown if s.env_id == env_id and not e["privileged"]]
+    learned = sorted({e["policy"]["name"] for _, e in entries if lb.is_learned(e["policy"])})
+    scripted = sorted({e["policy"]["name"] for _, e in entries if not lb.is_learned(e["policy"])})
+    if not learned or not scripted:
+        return []
+    by_name: dict[str, dict[str, tuple[lb.Suite, Mapping[str, Any]]]] = {}
+    for suite, entry in entries:
+        by_name.setdefault(entry["policy"]["name"], {})[suite.name] = (suite, entry)
+    lines = []
+    for name in learned:
+        mine = by_name[name]
+
+        def pooled(other: str, mine: Mapping[str, Any] = mine) -> float:
+            common = [by_name[other][s][1] for s in mine if s in by_name[other]]
+            k, n = map(sum, zip(*(_rate(e) for e in common), strict=True)) if common else (0, 0)
+            return k / n if n else -1.0
+
+        rival = max(scripted, key=lambda other: (pooled(other), other))
+        rows, behind = [], 0
+        for suite_name in sorted(mine, key=lambda s: (mine[s][0].stress is not None, s)):
+            if suite_name not in by_name[rival]:
+                continue
+            theirs = by_name[rival][suite_name][1]
+            for level, other in zip(mine[suite_name][1]["levels"], theirs["levels"], strict=True):
+                (k, n), (k2, n2) = level_success(level), level_success(other)
+                gap = k / n - k2 / n2
+                mark = "**" if gap < -0.05 - 1e-9 else ""
+                behind += bool(mark)
+                c, _ = _collisions(level)
+                c2, _ = _collisions(other)
+                rows.append(
+                    f"| {mark}`{level['label']}`{mark} | {_rate_text(k, n)} | {_rate_text(k2, n2)} | {gap:+.2f} | "
+                    f"{c / n:.2f} | {c2 / n2:.2f} |"
+                )
+        verdict = (
+            f"trails `{rival}` by more than 0.05 on {behind} of {len(rows)} suite levels (marked)"
+            if behind
+            else f"within 0.05 of `{rival}` or better on every one of the {len(rows)} suite levels both ran"
+        )
+        lines += [
+            f"`{name}` (learned, from the robot's own sensors) against `{rival}` (the best scripted policy "
+            f"that uses nothing privileged): {verdict}. Held-out seeds; success with its 95 % Wilson interval.",
+            "",
+            f"| suite level | `{name}` success | `{rival}` success | difference | `{name}` collisions | "
+            f"`{rival}` collisions |",
+            "|---|---|---|---|---|---|",
+            *rows,
+            "",
+        ]
+    return lines

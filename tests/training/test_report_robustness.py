@@ -149,3 +149,30 @@ def test_every_policy_kind_but_a_baseline_is_listed_as_learned():
     entries = [{"policy": {"kind": k, "name": k}, "privileged": False} for k in ("baseline", *kinds)]
     order = policy_order(entries)
     assert order[0] == ("baseline", False, False) and all(learned for _, learned, _ in order[1:])
+
+
+def test_own_sensors_section_sets_each_unprivileged_learned_policy_against_the_best_unprivileged_script():
+    from agri_training.report.robustness import own_sensors_section
+
+    crowd, paper = lb.parse_suite(CROWD), lb.parse_suite(PAPER)
+    privileged = _entry(crowd, "oracle", [[], [], []])
+    privileged["privileged"] = True  # never the rival: it sees what the robot cannot
+    shown = [
+        (crowd, _entry(crowd, "steady", [[], ["time-out"], ["crash", "crash"]])),
+        (crowd, _entry(crowd, "slow", [[], [], ["time-out"] * 5])),
+        (crowd, _entry(crowd, "student", [[], ["crash"] * 3, ["crash"]], kind="learned")),
+        (crowd, privileged),
+        (paper, _entry(paper, "steady", [[]])),
+        (paper, _entry(paper, "student", [["time-out"]], kind="learned")),
+    ]
+    lines = own_sensors_section(NAV, shown)
+    text = "\n".join(lines)
+    # the rival: the unprivileged script with the best success pooled over the suites the student ran
+    # (steady 77 of 80, slow 55 of 60)
+    assert "against `steady`" in text and "oracle" not in text
+    rows = [line for line in lines if line.startswith("| ") and "---" not in line and "suite level" not in line]
+    assert rows[0].startswith("| `nav-paper` | 0.95 [")  # paper suites first, then the stress levels
+    assert rows[2] == "| **`nav-stress-crowd n_people=4`** | 0.85 [0.64, 0.95] | 0.95 [0.76, 0.99] | -0.10 | 0.15 | 0.00 |"
+    assert "| `nav-stress-crowd n_people=8` | 0.95 [" in text  # ahead by 0.05: not marked
+    assert "trails `steady` by more than 0.05 on 1 of 4 suite levels" in text
+    assert own_sensors_section(NAV, [(crowd, privileged)]) == []
