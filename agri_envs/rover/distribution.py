@@ -56,15 +56,13 @@ ROBOT_SPEED = Uniform(0.6, 1.4)
 ROBUST_GREENHOUSE = SceneFamily(
     "greenhouse",
     weight=0.45,
-    fixed={"scene": "greenhouse", "mission_cycles": 1},
+    fixed=GREENHOUSE.fixed,
     ranges={
+        **GREENHOUSE.ranges,
         "n_rows": IntRange(2, 5),
         "row_length": Uniform(4.0, 10.0),
         "corridor_width": Uniform(1.1, 2.2),
-        "growth": Uniform(0.0, 1.0),
-        "n_trees": IntRange(0, 8),
         "n_people": IntRange(0, 8),
-        "people_tease_prob": Uniform(0.0, 0.6),
         "max_speed": ROBOT_SPEED,
     },
 )
