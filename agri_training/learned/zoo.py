@@ -129,6 +129,23 @@ register_policy(
 
 register_policy(
     PolicySpec(
+        name="dagger-greenhouse-nav-robust",
+        env_id="agri_envs/GreenhouseNav-v2",
+        entry_point="agri_training.learned.zoo:load_zoo_policy",
+        env_kwargs={"localization": "ground_truth"},
+        description="Learned by imitation (agri_training/zoo/dagger-greenhouse-nav-robust): dagger-greenhouse-nav's "
+        "inputs plus the robot's own limits, deciding every 2nd scan; harik-apf-gt cloned with 8 DAgger rounds on the "
+        "env's robust distribution (robots of 0.6-1.4 m/s, corridors 0.85-2.2 m, up to 8 people), no PPO steps",
+        privileged=True,
+        learned=True,
+        algo="ppo",
+        train_command="agri train --env agri_envs/GreenhouseNav-v2 --algo ppo --hyperparams "
+        "agri_training/hyperparams/dagger_robust.yml --seed 0 --out runs/nav-robust-s0",
+    )
+)
+
+register_policy(
+    PolicySpec(
         name="dagger-greenhouse-coverage",
         env_id="agri_envs/GreenhouseCoverage-v2",
         entry_point="agri_training.learned.zoo:load_zoo_policy",
