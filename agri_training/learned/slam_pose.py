@@ -9,6 +9,13 @@ measured from a Hector SLAM estimate (:class:`agri_baselines.hector_slam.HectorS
 geometry is the robot's own, and the diagonal (the scale the env writes ``target`` in) is the scene's, which
 the map gives.
 
+``aim_inside`` (m, default 0) adds a margin to the distance it reports, as ``harik-apf`` aims its ``d_min``
+``localization_margin`` inside the waypoint radius: the env counts a waypoint reached from the true position, so a
+policy that learned to stop at the radius (its teacher's rule, on the true pose) would stand a few centimetres
+short of it on an estimate that is that far off, and wait there. It is a deployment setting: trained with a margin,
+the network would learn to stop at the radius plus the margin. ``dagger-greenhouse-nav-slam`` was trained without
+one and ships with ``aim_inside: 0.1`` (its ``config.yaml`` differs from its run's in that line).
+
 The wrapper sees one observation per decision (the policy's rate: every ``action_repeat``-th scan), in
 training and in evaluation alike (:class:`~agri_training.learned.policy.ObservationReplay`), so the SLAM
 the network learned with is the SLAM it drives with.
@@ -30,13 +37,17 @@ class SlamWaypoint(gym.ObservationWrapper[dict[str, Any], Any, dict[str, Any]]):
 
     Needs the env made with ``localization="none"`` and ``full_scan=True`` (keys ``target`` and ``scan``). The
     SLAM map starts afresh with each episode (:meth:`clear`, which a reset calls and the replay of a learned
-    policy calls when an episode starts). In a config: ``SlamWaypoint`` (put it before ``FlattenObservation``).
+    policy calls when an episode starts). In a config: ``SlamWaypoint`` or ``{SlamWaypoint: {aim_inside: 0.1}}``
+    (see the module doc; put it before ``FlattenObservation``).
 
     Raises:
-        ValueError: For an observation without ``target`` or ``scan``.
+        ValueError: For an observation without ``target`` or ``scan``, or ``aim_inside`` outside [0, 1) m.
     """
 
-    def __init__(self, env: gym.Env[Any, Any]) -> None:
+    def __init__(self, env: gym.Env[Any, Any], aim_inside: float = 0.0) -> None:
+        if not 0.0 <= float(aim_inside) < 1.0:
+            raise ValueError(f"SlamWaypoint aim_inside must be in [0, 1) m, got {aim_inside}")
+        self.aim_inside = float(aim_inside)
         space = env.observation_space
         if not isinstance(space, gym.spaces.Dict) or not {"target", "scan"} <= set(space.spaces):
             raise ValueError(
@@ -68,7 +79,7 @@ class SlamWaypoint(gym.ObservationWrapper[dict[str, Any], Any, dict[str, Any]]):
         x, y, yaw = self.slam.update(np.asarray(observation["scan"], dtype=np.float64) * self.max_range)
         diagonal = float(self.env.unwrapped.diagonal)
         tx, ty = np.asarray(observation["target"], dtype=np.float64) * diagonal
-        d = math.hypot(tx - x, ty - y)
+        d = math.hypot(tx - x, ty - y) + self.aim_inside
         alpha = math.atan2(ty - y, tx - x) - yaw
         waypoint = np.array([min(1.0, d / diagonal), math.sin(alpha), math.cos(alpha)], np.float32)
         return {**observation, "waypoint": waypoint}

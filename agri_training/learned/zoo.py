@@ -146,6 +146,24 @@ register_policy(
 
 register_policy(
     PolicySpec(
+        name="dagger-greenhouse-nav-slam",
+        env_id="agri_envs/GreenhouseNav-v2",
+        entry_point="agri_training.learned.zoo:load_zoo_policy",
+        env_kwargs={"localization": "none", "full_scan": True},
+        description="Learned by imitation (agri_training/zoo/dagger-greenhouse-nav-slam), nothing privileged: LIDAR, "
+        "sonars, velocity and its own limits, the waypoint from its own Hector SLAM (harik-apf's) on the LIDAR; "
+        "harik-apf-gt on the true pose labels it in lockstep, 8 DAgger rounds on the robust distribution, no PPO steps; "
+        "deployed aiming 10 cm inside the waypoint radius, as harik-apf does",
+        privileged=False,
+        learned=True,
+        algo="ppo",
+        train_command="agri train --env agri_envs/GreenhouseNav-v2 --algo ppo --hyperparams "
+        "agri_training/hyperparams/dagger_slam.yml --seed 1 --out runs/nav-slam-s1",
+    )
+)
+
+register_policy(
+    PolicySpec(
         name="dagger-greenhouse-coverage",
         env_id="agri_envs/GreenhouseCoverage-v2",
         entry_point="agri_training.learned.zoo:load_zoo_policy",

@@ -97,3 +97,17 @@ def test_a_loaded_policy_replays_the_slam_training_saw():
 def test_needs_an_env_without_pose_and_with_the_scan(kwargs):
     with pytest.raises(ValueError, match="localization='none' and full_scan=True"):
         SlamWaypoint(gym.make(ENV_ID, **kwargs))
+
+
+def test_aim_inside_adds_its_margin_to_the_distance_only():
+    plain, aimed = (SlamWaypoint(gym.make(ENV_ID, **BLIND), aim_inside=m) for m in (0.0, 0.1))
+    a, _ = plain.reset(seed=5)
+    b, _ = aimed.reset(seed=5)
+    for k in range(30):
+        diagonal = plain.unwrapped.diagonal
+        assert b["waypoint"][0] * diagonal == pytest.approx(a["waypoint"][0] * diagonal + 0.1, abs=1e-5)
+        np.testing.assert_array_equal(a["waypoint"][1:], b["waypoint"][1:])
+        a, *_ = plain.step(_act(k))
+        b, *_ = aimed.step(_act(k))
+    with pytest.raises(ValueError, match="aim_inside must be in"):
+        SlamWaypoint(gym.make(ENV_ID, **BLIND), aim_inside=-0.1)
