@@ -55,7 +55,7 @@ class GreenhouseNavConfig(StrictConfig):
     )
     scene_distribution: str = param(
         "off",
-        "scenes drawn per episode (see Starting State)",
+        "per-episode scenes (see Starting State)",
         choices=("off", *DISTRIBUTIONS),
     )
     office_length: float = param(14.0, "corridor length (scene='corridor')", unit="m", low=6.0, high=60.0)

@@ -187,7 +187,7 @@ class GreenhouseNavEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
     | ``post_spacing`` | 3 | m | in [1.0, 20.0] | distance between structural posts along rows and walls |
     | ``n_trees`` | 0 |  | in [0, 50] | trees placed at random plant positions (Harik Fig. 10) |
     | ``layout_seed`` | -1 |  | in [-1, 2147483647] | seed of the scene layout; -1 draws a new layout every episode |
-    | ``scene_distribution`` | 'off' |  | one of 'off', 'training', 'robust' | scenes drawn per episode (see Starting State) |
+    | ``scene_distribution`` | 'off' |  | one of 'off', 'training', 'robust' | per-episode scenes (see Starting State) |
     | ``office_length`` | 14 | m | in [6.0, 60.0] | corridor length (scene='corridor') |
     | ``office_width`` | 1.6 | m | in [1.0, 4.0] | corridor width (scene='corridor') |
     | ``office_route`` | 'experiment' |  | one of 'experiment', 'repeatability' | corridor mission: Harik 3.4 or 3.5 |

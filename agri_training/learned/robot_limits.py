@@ -39,6 +39,7 @@ class RobotLimits(gym.ObservationWrapper[dict[str, Any], Any, dict[str, Any]]):
 
     def observation(self, observation: dict[str, Any]) -> dict[str, Any]:
         """The observation with the current robot's ``limits``."""
-        spec = self.env.unwrapped.robot_spec
+        unwrapped: Any = self.env.unwrapped
+        spec = unwrapped.robot_spec
         limits = np.array([getattr(spec, name) / scale for name, scale in LIMITS], np.float32)
         return {**observation, "limits": limits}

@@ -57,7 +57,8 @@ class SlamWaypoint(gym.ObservationWrapper[dict[str, Any], Any, dict[str, Any]]):
         super().__init__(env)
         polar = gym.spaces.Box(np.array([0, -1, -1], np.float32), np.ones(3, np.float32), dtype=np.float32)
         self.observation_space = gym.spaces.Dict({**space.spaces, "waypoint": polar})
-        lidar = env.unwrapped.lidar.spec
+        robot: Any = env.unwrapped  # a GreenhouseNav env: its LIDAR's geometry, its scene's diagonal
+        lidar = robot.lidar.spec
         self.max_range = float(lidar.max_range)
         self.slam = HectorSlam(HectorSlamConfig(), lidar.beam_angles, lidar.mount)
         self._fresh = True
@@ -77,7 +78,8 @@ class SlamWaypoint(gym.ObservationWrapper[dict[str, Any], Any, dict[str, Any]]):
             self.slam.reset((0.0, 0.0, 0.0))
             self._fresh = False
         x, y, yaw = self.slam.update(np.asarray(observation["scan"], dtype=np.float64) * self.max_range)
-        diagonal = float(self.env.unwrapped.diagonal)
+        unwrapped: Any = self.env.unwrapped
+        diagonal = float(unwrapped.diagonal)
         tx, ty = np.asarray(observation["target"], dtype=np.float64) * diagonal
         d = math.hypot(tx - x, ty - y) + self.aim_inside
         alpha = math.atan2(ty - y, tx - x) - yaw

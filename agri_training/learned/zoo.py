@@ -152,8 +152,8 @@ register_policy(
         env_kwargs={"localization": "none", "full_scan": True},
         description="Learned by imitation (agri_training/zoo/dagger-greenhouse-nav-slam), nothing privileged: LIDAR, "
         "sonars, velocity and its own limits, the waypoint from its own Hector SLAM (harik-apf's) on the LIDAR; "
-        "harik-apf-gt on the true pose labels it in lockstep, 8 DAgger rounds on the robust distribution, no PPO steps; "
-        "deployed aiming 10 cm inside the waypoint radius, as harik-apf does",
+        "harik-apf-gt on the true pose labels it in lockstep, 8 DAgger rounds on the robust distribution, no PPO "
+        "steps; deployed aiming 10 cm inside the waypoint radius, as harik-apf does",
         privileged=False,
         learned=True,
         algo="ppo",

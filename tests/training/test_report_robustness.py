@@ -172,7 +172,8 @@ def test_own_sensors_section_sets_each_unprivileged_learned_policy_against_the_b
     assert "against `steady`" in text and "oracle" not in text
     rows = [line for line in lines if line.startswith("| ") and "---" not in line and "suite level" not in line]
     assert rows[0].startswith("| `nav-paper` | 0.95 [")  # paper suites first, then the stress levels
-    assert rows[2] == "| **`nav-stress-crowd n_people=4`** | 0.85 [0.64, 0.95] | 0.95 [0.76, 0.99] | -0.10 | 0.15 | 0.00 |"
+    marked = "| **`nav-stress-crowd n_people=4`** | 0.85 [0.64, 0.95] | 0.95 [0.76, 0.99] | -0.10 | 0.15 | 0.00 |"
+    assert rows[2] == marked
     assert "| `nav-stress-crowd n_people=8` | 0.95 [" in text  # ahead by 0.05: not marked
     assert "trails `steady` by more than 0.05 on 1 of 4 suite levels" in text
     assert own_sensors_section(NAV, [(crowd, privileged)]) == []
