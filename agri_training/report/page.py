@@ -166,7 +166,8 @@ def level_results(
 ) -> list[dict[str, Any]]:
     """The evaluator's per-level result documents of the rows, with traces of the episodes to be plotted.
 
-    Traced: per level, the first seed of the lead policy (the first unprivileged one) and the first failed
+    Traced: per level, the first seed of the lead policy (the first unprivileged scripted one: the paper's robot;
+    else the first unprivileged one) and the first failed
     seed of every policy; nothing of a stress suite, which the report shows as its robustness matrix (its many
     levels would re-run a failure of nearly every policy at every level). With ``clips`` (and ``out_dir``),
     every policy also gets a clip of one success and one failure per suite (where it has both), recorded
@@ -177,7 +178,9 @@ def level_results(
     plan: list[tuple[Row, int, list[int], dict[int, str]]] = []
     for suite_name in dict.fromkeys(r.suite.name for r in rows):
         group = [r for r in rows if r.suite.name == suite_name]
-        lead = next((r for r in group if not r.entry.get("privileged")), group[0])
+        unprivileged = [r for r in group if not r.entry.get("privileged")]
+        scripted = [r for r in unprivileged if not lb.is_learned(r.entry["policy"])]
+        lead = (scripted or unprivileged or group)[0]
         for r in group:
             levels = r.entry["levels"]
             seeds: list[list[int]] = []

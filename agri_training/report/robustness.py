@@ -333,6 +333,8 @@ def own_sensors_section(env_id: str, shown: Sequence[tuple[lb.Suite, Mapping[str
                     f"| {mark}`{level['label']}`{mark} | {_rate_text(k, n)} | {_rate_text(k2, n2)} | {gap:+.2f} | "
                     f"{c / n:.2f} | {c2 / n2:.2f} |"
                 )
+        if not rows:  # no suite level that both ran
+            continue
         verdict = (
             f"trails `{rival}` by more than 0.05 on {behind} of {len(rows)} suite levels (marked)"
             if behind

@@ -300,8 +300,16 @@ def policy_table(results: list[dict[str, Any]]) -> list[str]:
 
 
 def lead_result(results: list[dict[str, Any]]) -> dict[str, Any]:
-    """The result whose episode is plotted: the first policy that is not privileged (the paper's robot)."""
-    return next((r for r in results if not r["privileged"]), results[0])
+    """The result whose episode is plotted: the first scripted policy that is not privileged (the paper's robot)."""
+    scripted = [r for r in results if _is_baseline(r["policy"])]
+    return next((r for r in scripted + results if not r["privileged"]), results[0])
+
+
+def _is_baseline(name: str) -> bool:
+    try:
+        return not policy_spec(name).learned
+    except ValueError:  # not registered: a run folder, an ONNX or SB3 file, a module:attribute
+        return False
 
 
 def _slug(text: str) -> str:

@@ -67,11 +67,13 @@ def test_report_from_entries_and_fresh_runs(tmp_path, capsys):
     assert "## Who wins where" in md and "`harik-apf-gt` **P**" in md
     assert "1.00 [0.34, 1.00]" in md  # 2 of 2 successes: a Wilson interval, not a point
     fresh = (
-        "Evaluated for this report (no current leaderboard entry): `dagger-greenhouse-nav`, `harik-apf`, "
-        "`harik-apf-hector-plain`"
+        "Evaluated for this report (no current leaderboard entry): `dagger-greenhouse-nav`, "
+        "`dagger-greenhouse-nav-robust`, `dagger-greenhouse-nav-slam`, `harik-apf`, `harik-apf-hector-plain`"
     )
     assert fresh in md
     assert sorted(p.name for p in (out / "results" / "tiny-rover").glob("*.json")) == [
+        "dagger-greenhouse-nav-robust.json",
+        "dagger-greenhouse-nav-slam.json",
         "dagger-greenhouse-nav.json",
         "harik-apf-hector-plain.json",
         "harik-apf.json",
