@@ -7,7 +7,9 @@ import math
 from pathlib import Path
 
 from agri_envs._config import StrictConfig, param
+from agri_envs.chain.distribution import DISTRIBUTIONS
 from agri_envs.chain.task import ChainWeights, GhostParams
+from agri_envs.scenes.distribution import SceneDistribution
 from agri_envs.scenes.greenhouse import LayoutParams
 from agri_envs.scenes.office import OfficeFloorParams
 
@@ -25,6 +27,9 @@ class RobotChainConfig(StrictConfig):
     office_rooms: int = param(3, "rooms on each side of the corridor (scene='office')", low=1, high=20)
     n_rows: int = param(3, "rows of plants (scene='greenhouse')", low=1, high=12)
     row_length: float = param(8.0, "length of the rows (scene='greenhouse')", unit="m", low=2.0, high=40.0)
+    scene_distribution: str = param(
+        "off", "per-episode floors and obstacles (see Starting State)", choices=("off", *DISTRIBUTIONS)
+    )
     start: tuple = param((), "leader start (x, y); empty: sampled", unit="m", valid="() or (x, y)")
     goal: tuple = param((), "leader goal (x, y); empty: sampled", unit="m", valid="() or (x, y)")
     min_goal_distance: float = param(6.0, "shortest A* distance of a sampled goal", unit="m", low=0.0, high=500.0)
@@ -85,6 +90,13 @@ class RobotChainConfig(StrictConfig):
                 )
         elif self.map_yaml:
             raise ValueError("RobotChainConfig: map_yaml applies only to scene='map'.")
+        if self.scene_distribution != "off" and (
+            self.scene == "map" or self.layout_seed >= 0 or self.start or self.goal
+        ):
+            raise ValueError(
+                f"RobotChainConfig: scene_distribution={self.scene_distribution!r} draws a new floor every episode; "
+                "it takes neither scene='map', a layout_seed >= 0, nor a given start or goal."
+            )
         for name in ("start", "goal"):
             value = getattr(self, name)
             if value != () and (
@@ -115,6 +127,10 @@ class RobotChainConfig(StrictConfig):
             raise ValueError("RobotChainConfig: reward_collision must be > 0 while terminate_on_collision is set.")
         if self.terminate_on_break and not self.reward_break > 0:
             raise ValueError("RobotChainConfig: reward_break must be > 0 while terminate_on_break is set.")
+
+    def distribution(self) -> SceneDistribution | None:
+        """The distribution ``scene_distribution`` names, or None when it is ``"off"``."""
+        return DISTRIBUTIONS.get(self.scene_distribution)
 
     def office_params(self) -> OfficeFloorParams:
         """The office floor of ``scene="office"``."""

@@ -43,6 +43,14 @@ from agri_envs.sim2d.world import World2D
 _PARK = 1.0e6  # where dynamic obstacles wait before they are dropped (far outside any map)
 LAYOUT_TRIES = 3  # generated maps drawn for an episode with random goals
 FALLBACK_LAYOUTS = 16  # further generated maps drawn (goals known to fit) before a chain that fits none is refused
+SCENE_TRIES = 8  # floors drawn from a distribution before a chain that fits none is refused
+
+
+def _floor_bounds(cfg: RobotChainConfig) -> tuple[float, float, float, float]:
+    """``(xmin, ymin, xmax, ymax)`` of the largest generated floor of ``cfg`` (office or greenhouse)."""
+    if cfg.scene == "office":
+        return cfg.office_params().bounds()
+    return cfg.greenhouse_params().max_bounds()
 
 
 class RobotChainEnv(ParallelEnv):  # type: ignore[misc]
@@ -151,6 +159,14 @@ class RobotChainEnv(ParallelEnv):  # type: ignore[misc]
     leader has covered random fractions (0.15-0.7) of the path, onto the path 1.2-3 m ahead of it, only
     where at least a robot's width stays free beside them.
 
+    With ``scene_distribution="robust"`` (default ``"off"``) each episode first draws its floor and its number
+    of dropped obstacles from :data:`agri_envs.chain.distribution.ROBUST` (office floors of 14-24 x 9-14 m
+    with 2-4 rooms a side, greenhouses of 2-8 rows of 6-20 m, 0-12 obstacles), with the episode's own
+    Generator; ``env.episode_config`` holds the episode's arguments. A drawn floor that holds no chain of
+    ``n_robots`` is drawn again (8 floors, then the refusal above). The arguments it draws cannot be given
+    beside it, nor ``scene="map"``, a ``layout_seed`` or a ``start``/``goal``. The world holds the most
+    obstacles any episode drops (the state's obstacle part has that size), parking those it does not drop.
+
     ## Episode End
 
     Success (every agent terminates): every robot k is within ``R_k`` of the goal (straight distance) at
@@ -200,7 +216,9 @@ class RobotChainEnv(ParallelEnv):  # type: ignore[misc]
       changed, and its leaderboard entries with it). Later, without a version change (every episode that
       started before starts the same): a reset whose random goals all lie too central falls back to goals
       known to fit, where it raised before (8 robots on the example map: 13 of 500 seeds); a chain the floor
-      cannot hold is refused naming the largest ``n_robots`` it holds, up front for a fixed floor.
+      cannot hold is refused naming the largest ``n_robots`` it holds, up front for a fixed floor. New argument
+      ``scene_distribution`` (default ``"off"``: every episode as before), ``"robust"`` drawing floors and
+      obstacles per episode.
     * v0: initial release (success when the leader arrived with the chain intact at that moment).
 
     ## References
@@ -247,13 +265,22 @@ class RobotChainEnv(ParallelEnv):  # type: ignore[misc]
         self._inflation = cfg.robot_radius + cfg.planning_margin
         self._fixed_map: ChainMap | None = None  # a loaded map, or the generated one of a fixed layout_seed
         self._fixed_reach: FloorReach | None = None  # how long a chain the fixed map holds (when first needed)
+        #: The distribution each episode's floor and obstacles are drawn from (None: the arguments' own).
+        self.distribution = cfg.distribution()
+        #: The arguments of the current episode: the config, with the floor drawn from the distribution if any.
+        self.episode_config = cfg
+        largest = [cfg]
+        if self.distribution is not None:
+            self.distribution.refuse_given(kwargs, f"robot_chain_v1: scene_distribution={cfg.scene_distribution!r}")
+            largest = [cfg.replace(**f.largest()) for f in self.distribution.families]
+        #: Obstacles the world holds: the most any episode drops.
+        self.n_obstacle_bodies = max(c.n_dynamic_obstacles for c in largest)
         if cfg.scene == "map":
             self._fixed_map = ros_map(cfg.map_yaml, self._inflation)
             canvas = self._fixed_map.geometry.bounds
-        elif cfg.scene == "office":
-            canvas = cfg.office_params().bounds()
         else:
-            canvas = cfg.greenhouse_params().max_bounds()
+            boxes = np.array([_floor_bounds(c) for c in largest])
+            canvas = (*boxes[:, :2].min(axis=0), *boxes[:, 2:].max(axis=0))
         if cfg.layout_seed >= 0 and cfg.scene != "map":
             self._draw_map(None)  # the fixed layout, made once (it draws nothing from the episode's stream)
         if self._fixed_map is not None and not cfg.start and not cfg.goal:
@@ -268,7 +295,7 @@ class RobotChainEnv(ParallelEnv):  # type: ignore[misc]
         self.task: ChainTask | None = None
         self._radii = np.array(cfg.arrival_radii())
         self._excess = np.zeros(cfg.n_robots)
-        n_dyn = cfg.n_dynamic_obstacles
+        n_dyn = self.n_obstacle_bodies
         self.state_space = spaces.Box(-np.inf, np.inf, (5 * cfg.n_robots + 4 + 3 * n_dyn,), np.float32)
 
     # -- spaces ----------------------------------------------------------------------------------------
@@ -318,7 +345,7 @@ class RobotChainEnv(ParallelEnv):  # type: ignore[misc]
     # -- episode set-up --------------------------------------------------------------------------------
     def _draw_map(self, rng: np.random.Generator | None) -> ChainMap:
         """The episode's map: the fixed one, or a new one drawn with ``rng`` (unused with a fixed layout_seed)."""
-        cfg = self.config
+        cfg = self.episode_config
         if self._fixed_map is not None:
             return self._fixed_map
         layout_rng = rng if cfg.layout_seed < 0 else np.random.default_rng(cfg.layout_seed)
@@ -334,14 +361,12 @@ class RobotChainEnv(ParallelEnv):  # type: ignore[misc]
     def _reach(self, cmap: ChainMap) -> FloorReach:
         """How long a chain ``cmap`` holds (computed once for a fixed map)."""
         if cmap is not self._fixed_map:
-            return floor_reach(cmap, self.config)
+            return floor_reach(cmap, self.episode_config)
         if self._fixed_reach is None:
             self._fixed_reach = floor_reach(cmap, self.config)
         return self._fixed_reach
 
-    def _plan(
-        self, rng: np.random.Generator, goal_distance: tuple[float, float] | None
-    ) -> tuple[ChainMap, Mission]:
+    def _plan(self, rng: np.random.Generator, goal_distance: tuple[float, float] | None) -> tuple[ChainMap, Mission]:
         """Map and mission of an episode: random goals first, then goals known to fit the chain.
 
         Random goals on each generated map (drawn anew up to ``LAYOUT_TRIES`` times) come first, as they
@@ -354,7 +379,7 @@ class RobotChainEnv(ParallelEnv):  # type: ignore[misc]
             ChainDoesNotFit: When none of the floors holds the chain; the message names the largest
                 ``n_robots`` they hold.
         """
-        cfg = self.config
+        cfg = self.episode_config
         tried: list[ChainMap] = []
         for attempt in range(LAYOUT_TRIES):
             cmap = self._draw_map(rng)
@@ -376,6 +401,26 @@ class RobotChainEnv(ParallelEnv):  # type: ignore[misc]
             if mission is not None:
                 return cmap, mission
         raise does_not_fit(cfg, reaches, goal_distance, generated=generated)
+
+    def _plan_episode(
+        self, rng: np.random.Generator, goal_distance: tuple[float, float] | None
+    ) -> tuple[ChainMap, Mission]:
+        """The episode's arguments (drawn, under a distribution), map and mission.
+
+        Under a distribution, a drawn floor that holds no chain of ``n_robots`` is drawn again (from the same
+        stream), up to ``SCENE_TRIES`` times; the last refusal is raised.
+        """
+        if self.distribution is None:
+            return self._plan(rng, goal_distance)
+        for attempt in range(SCENE_TRIES):
+            _, drawn = self.distribution.sample(rng)
+            self.episode_config = self.config.replace(**drawn)
+            try:
+                return self._plan(rng, goal_distance)
+            except ChainDoesNotFit:
+                if attempt == SCENE_TRIES - 1:
+                    raise
+        raise AssertionError("unreachable")
 
     def reset(
         self, seed: int | None = None, options: dict[str, Any] | None = None
@@ -408,7 +453,8 @@ class RobotChainEnv(ParallelEnv):  # type: ignore[misc]
             self.np_random = np.random.default_rng(seed)
         cfg = self.config
         rng = self.np_random
-        cmap, mission = self._plan(rng, goal_distance)
+        cmap, mission = self._plan_episode(rng, goal_distance)
+        episode = self.episode_config
         self.chain_map = cmap
         xmin, ymin, xmax, ymax = cmap.geometry.bounds
         self._bounds = np.array([xmin, ymin, xmax, ymax])
@@ -428,12 +474,12 @@ class RobotChainEnv(ParallelEnv):  # type: ignore[misc]
         yaw = mission.start_yaws()
         poses = np.column_stack([positions, yaw])
         if self.world is None:
-            self.world = World2D(cmap.geometry, n_movers=cfg.n_dynamic_obstacles)
+            self.world = World2D(cmap.geometry, n_movers=self.n_obstacle_bodies)
             self.robots = self.world.add_disc_robots(self.spec, poses, cfg.robot_radius)
         else:  # the same bodies, in the new scene (nothing to do for a fixed map)
             self.world.set_scene(cmap.geometry)
             self.world.place_robots(self.robots, poses)
-        for k in range(cfg.n_dynamic_obstacles):
+        for k in range(self.n_obstacle_bodies):
             self.world.place_mover(k, _PARK + 10.0 * k, _PARK, cfg.obstacle_radius)
         self._robot_rows = np.array([r.circle_index for r in self.robots], dtype=np.int64)
         task = ChainTask(
@@ -454,7 +500,7 @@ class RobotChainEnv(ParallelEnv):  # type: ignore[misc]
         task.arrived = arrived
         self.task = task
         # Obstacle schedule: drop k when the leader has covered fraction f_k of the path.
-        self._drop_at = np.sort(rng.uniform(0.15, 0.7, cfg.n_dynamic_obstacles)) * self.astar_length
+        self._drop_at = np.sort(rng.uniform(0.15, 0.7, episode.n_dynamic_obstacles)) * self.astar_length
         self._next_drop = 0
         self._n_dropped = 0
         self.agents = list(self.possible_agents)
@@ -539,7 +585,7 @@ class RobotChainEnv(ParallelEnv):  # type: ignore[misc]
     def _drop_obstacle(self) -> None:
         """Drop the next scheduled obstacle onto the path ahead of the leader (retried each step until it fits)."""
         assert self.world is not None and self.task is not None and self.chain_map is not None
-        cfg = self.config
+        cfg = self.episode_config
         spot = drop_spot(self.chain_map, cfg, self.task.path, self.task.ghost.s_leader, self._poses)
         if spot is not None:
             self.world.place_mover(self._next_drop, float(spot[0]), float(spot[1]), cfg.obstacle_radius)

@@ -490,3 +490,59 @@ def test_a_refusal_names_the_goal_distance_window_when_the_floor_holds_the_chain
     assert "widen the window" in str(narrow) and "holds at most" not in str(narrow)
     tight = FloorReach(candidates=np.array([0]), bound=np.array([7.0]), longest=7.0)
     assert "holds at most n_robots=2" in str(does_not_fit(cfg, [tight], None, generated=False))  # 6 m + 0.55 m
+
+
+def test_the_robust_distribution_draws_each_episode_floor_and_obstacles_from_its_seed():
+    from agri_envs.chain.distribution import ROBUST
+
+    env = robot_chain_v1.parallel_env(n_robots=8, scene_distribution="robust")
+    assert env.state_space.shape == (5 * 8 + 4 + 3 * 12,)  # room for the most obstacles an episode drops
+    defaults = robot_chain_v1.RobotChainConfig().to_dict()
+    drawn = []
+    for seed in range(6):
+        env.reset(seed=seed)
+        cfg = env.episode_config
+        kwargs = {a: getattr(cfg, a) for a in ROBUST.arguments}
+        assert not ROBUST.lies_outside(kwargs, defaults)
+        drawn.append(kwargs)
+        # The episode schedules the obstacles it drew; the world holds (and parks) the most any episode drops.
+        assert len(env._drop_at) == cfg.n_dynamic_obstacles
+        assert env.state().shape == env.state_space.shape
+    assert len({d["scene"] for d in drawn}) == 2 and len({d["n_dynamic_obstacles"] for d in drawn}) > 2
+    again = robot_chain_v1.parallel_env(n_robots=8, scene_distribution="robust")
+    obs, _ = again.reset(seed=3)
+    first, _ = env.reset(seed=3)
+    assert {a: getattr(again.episode_config, a) for a in ROBUST.arguments} == drawn[3]
+    assert all(np.array_equal(obs[a], first[a]) for a in obs)
+
+
+def test_the_robust_distribution_keeps_a_level_of_each_chain_stress_suite_outside():
+    from agri_envs.chain.distribution import ROBUST
+
+    defaults = robot_chain_v1.RobotChainConfig().to_dict()
+    inside = [{"scene": "office", "n_dynamic_obstacles": k} for k in (1, 3, 6, 12)] + [
+        {"scene": "greenhouse", "n_rows": 6, "row_length": 16.0},
+        {"scene": "greenhouse"},
+    ]
+    outside = [
+        {"scene": "office", "n_dynamic_obstacles": 20},
+        {"scene": "greenhouse", "n_rows": 12, "row_length": 30.0},
+    ]
+    assert not any(ROBUST.lies_outside({"n_dynamic_obstacles": 1, **k}, defaults) for k in inside)
+    assert all(ROBUST.lies_outside(k, defaults) for k in outside)
+
+
+def test_the_robust_distribution_refuses_what_it_draws_or_cannot_draw():
+    with pytest.raises(ValueError, match=r"draws \['n_dynamic_obstacles'\] per episode"):
+        robot_chain_v1.parallel_env(scene_distribution="robust", n_dynamic_obstacles=3)
+    for kwargs in ({"layout_seed": 4}, {"start": (1.0, 1.0)}):
+        with pytest.raises(ValueError, match="draws a new floor every episode"):
+            robot_chain_v1.parallel_env(scene_distribution="robust", **kwargs)
+    with pytest.raises(ValueError, match="scene_distribution"):
+        robot_chain_v1.parallel_env(scene_distribution="training")
+
+
+def test_a_chain_too_long_for_every_drawn_floor_is_refused_after_drawing_others():
+    env = robot_chain_v1.parallel_env(n_robots=200, scene_distribution="robust")
+    with pytest.raises(ChainDoesNotFit, match="n_robots"):
+        env.reset(seed=0)

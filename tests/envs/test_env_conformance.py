@@ -386,9 +386,7 @@ def test_batched_form_reports_its_seeds_as_sync_vector_env_does(env_id):
             sync.reset(seed=seed)
             assert native.np_random_seed == sync.np_random_seed == seeds
             assert all(type(s) is int for s in native.np_random_seed)
-            assert [g.bit_generator.state for g in native.np_random] == [
-                g.bit_generator.state for g in sync.np_random
-            ]
+            assert [g.bit_generator.state for g in native.np_random] == [g.bit_generator.state for g in sync.np_random]
         native.step(native.action_space.sample())
         assert native.np_random_seed == (7, 8, 9)
     finally:
@@ -422,6 +420,7 @@ PARALLEL_EXTRA_KWARGS: dict[str, list[dict[str, Any]]] = {
         {"n_robots": 16, "office_width": 18.0, "office_height": 12.0, "min_goal_distance": 3.0},
         {"n_robots": 4, "scene": "greenhouse", "n_rows": 2},
         {"n_robots": 3, "scene": "map", "map_yaml": str(EXAMPLE_MAP), "min_goal_distance": 2.0},
+        {"n_robots": 8, "scene_distribution": "robust"},
     ],
 }
 PARALLEL_CASES = [
@@ -452,7 +451,7 @@ def test_pettingzoo_seeding_max_cycles_and_render(env_id):
     render_test(lambda render_mode=None: module.env(render_mode=render_mode, render_width=200))
 
 
-@pytest.mark.parametrize(("env_id", "kwargs"), PARALLEL_CASES[:1] + PARALLEL_CASES[4:5])
+@pytest.mark.parametrize(("env_id", "kwargs"), PARALLEL_CASES[:1] + PARALLEL_CASES[4:5] + PARALLEL_CASES[-1:])
 def test_pettingzoo_frames_keep_one_shape_across_episodes(env_id, kwargs):
     env = agri_envs.make(env_id, render_mode="rgb_array", render_width=200, **kwargs)
     shapes = set()
