@@ -179,6 +179,23 @@ register_policy(
 
 register_policy(
     PolicySpec(
+        name="dagger-greenhouse-coverage-robust",
+        env_id="agri_envs/GreenhouseCoverage-v2",
+        entry_point="agri_training.learned.zoo:load_zoo_policy",
+        env_kwargs={},
+        description="Learned by imitation (agri_training/zoo/dagger-greenhouse-coverage-robust): "
+        "dagger-greenhouse-coverage's inputs and recipe on the env's robust distribution (corridors 1.3-2.5 m, 1-6 "
+        "rows of 4-16 m, echoes up to 0.7, dead-reckoning errors up to the odometry suite's third level), no PPO "
+        "steps",
+        learned=True,
+        algo="ppo",
+        train_command="agri train --env agri_envs/GreenhouseCoverage-v2 --algo ppo --hyperparams "
+        "agri_training/hyperparams/dagger_coverage_robust.yml --seed 0 --out runs/cov-robust-s0",
+    )
+)
+
+register_policy(
+    PolicySpec(
         name="ppo-chain",
         env_id="robot_chain_v1",
         entry_point="agri_training.learned.zoo:load_zoo_policy",
@@ -189,6 +206,22 @@ register_policy(
         learned=True,
         algo="ppo",
         train_command="agri train --env robot_chain_v1 --algo ppo --seed 0 --out runs/chain-dagger-s0",
+    )
+)
+
+register_policy(
+    PolicySpec(
+        name="dagger-chain-robust",
+        env_id="robot_chain_v1",
+        entry_point="agri_training.learned.zoo:load_zoo_policy",
+        env_kwargs={},
+        description="Learned by imitation (agri_training/zoo/dagger-chain-robust): ppo-chain's network and inputs, "
+        "apoorva-chain cloned with 6 noisy DAgger rounds on the env's robust distribution (offices of 14-24 x 9-14 m, "
+        "greenhouses of 2-8 rows of 6-20 m, 0-12 dropped obstacles) with chains of 16 robots, no PPO steps",
+        learned=True,
+        algo="ppo",
+        train_command="agri train --env robot_chain_v1 --algo ppo --hyperparams "
+        "agri_training/hyperparams/dagger_chain_robust.yml --seed 1 --out runs/chain-robust-s1",
     )
 )
 
