@@ -33,8 +33,9 @@ from agri_envs.chain.mission import (
 )
 from agri_envs.chain.observation import ChainObservation, Trails
 from agri_envs.chain.task import ChainTask
+from agri_envs.scenes.distribution import largest_scenes
 from agri_envs.sim2d.astar import distance_field
-from agri_envs.sim2d.geometry import Kind
+from agri_envs.sim2d.geometry import Kind, enclosing_bounds
 from agri_envs.sim2d.polyline import Polyline
 from agri_envs.sim2d.render import TopDownRenderer
 from agri_envs.sim2d.view import SceneView
@@ -269,18 +270,16 @@ class RobotChainEnv(ParallelEnv):  # type: ignore[misc]
         self.distribution = cfg.distribution()
         #: The arguments of the current episode: the config, with the floor drawn from the distribution if any.
         self.episode_config = cfg
-        largest = [cfg]
         if self.distribution is not None:
             self.distribution.refuse_given(kwargs, f"robot_chain_v1: scene_distribution={cfg.scene_distribution!r}")
-            largest = [cfg.replace(**f.largest()) for f in self.distribution.families]
+        largest = largest_scenes(self.distribution, cfg)
         #: Obstacles the world holds: the most any episode drops.
         self.n_obstacle_bodies = max(c.n_dynamic_obstacles for c in largest)
         if cfg.scene == "map":
             self._fixed_map = ros_map(cfg.map_yaml, self._inflation)
             canvas = self._fixed_map.geometry.bounds
         else:
-            boxes = np.array([_floor_bounds(c) for c in largest])
-            canvas = (*boxes[:, :2].min(axis=0), *boxes[:, 2:].max(axis=0))
+            canvas = enclosing_bounds(_floor_bounds(c) for c in largest)
         if cfg.layout_seed >= 0 and cfg.scene != "map":
             self._draw_map(None)  # the fixed layout, made once (it draws nothing from the episode's stream)
         if self._fixed_map is not None and not cfg.start and not cfg.goal:
@@ -366,7 +365,9 @@ class RobotChainEnv(ParallelEnv):  # type: ignore[misc]
             self._fixed_reach = floor_reach(cmap, self.config)
         return self._fixed_reach
 
-    def _plan(self, rng: np.random.Generator, goal_distance: tuple[float, float] | None) -> tuple[ChainMap, Mission]:
+    def _plan(
+        self, rng: np.random.Generator, goal_distance: tuple[float, float] | None
+    ) -> tuple[ChainMap, Mission]:
         """Map and mission of an episode: random goals first, then goals known to fit the chain.
 
         Random goals on each generated map (drawn anew up to ``LAYOUT_TRIES`` times) come first, as they
@@ -412,15 +413,14 @@ class RobotChainEnv(ParallelEnv):  # type: ignore[misc]
         """
         if self.distribution is None:
             return self._plan(rng, goal_distance)
-        for attempt in range(SCENE_TRIES):
-            _, drawn = self.distribution.sample(rng)
-            self.episode_config = self.config.replace(**drawn)
+        for _ in range(SCENE_TRIES - 1):
+            self.episode_config = self.config.replace(**self.distribution.sample(rng)[1])
             try:
                 return self._plan(rng, goal_distance)
             except ChainDoesNotFit:
-                if attempt == SCENE_TRIES - 1:
-                    raise
-        raise AssertionError("unreachable")
+                pass
+        self.episode_config = self.config.replace(**self.distribution.sample(rng)[1])
+        return self._plan(rng, goal_distance)  # the last floor: its refusal is the episode's
 
     def reset(
         self, seed: int | None = None, options: dict[str, Any] | None = None

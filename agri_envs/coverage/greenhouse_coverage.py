@@ -13,10 +13,11 @@ from gymnasium import spaces
 from agri_envs.coverage import robot as fito
 from agri_envs.coverage.config import GreenhouseCoverageConfig
 from agri_envs.coverage.task import CoverageTask
+from agri_envs.scenes.distribution import largest_scenes
 from agri_envs.scenes.greenhouse import generate_layout
 from agri_envs.scenes.layout import Layout, LayoutCache
 from agri_envs.sim2d.egomap import EgoMap
-from agri_envs.sim2d.geometry import Kind
+from agri_envs.sim2d.geometry import Kind, enclosing_bounds
 from agri_envs.sim2d.gridmap import rasterize
 from agri_envs.sim2d.odometry import Compass, TrackOdometry
 from agri_envs.sim2d.raycast import footprint_clearance
@@ -275,15 +276,11 @@ class GreenhouseCoverageEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
         self.config = cfg = GreenhouseCoverageConfig.from_kwargs(kwargs)
         #: The training distribution each episode's greenhouse is drawn from (None: the arguments' own).
         self.distribution = cfg.distribution()
-        largest = [cfg]
         if self.distribution is not None:
             self.distribution.refuse_given(kwargs, f"GreenhouseCoverage: scene_distribution={cfg.scene_distribution!r}")
-            largest = [cfg.replace(**f.largest()) for f in self.distribution.families]
-        bounds = np.array([c.layout_params().max_bounds() for c in largest])
-        self.view = SceneView(
-            render_mode, (*bounds[:, :2].min(axis=0), *bounds[:, 2:].max(axis=0)), cfg.render_width,
-            self.metadata["render_fps"],
-        )
+        largest = largest_scenes(self.distribution, cfg)
+        canvas = enclosing_bounds(c.layout_params().max_bounds() for c in largest)
+        self.view = SceneView(render_mode, canvas, cfg.render_width, self.metadata["render_fps"])
         self.robot_spec = fito.fitorobot_spec(cfg.max_speed, cfg.max_turn_rate, cfg.max_accel, cfg.max_angular_accel)
         self.sonars = SonarArray(
             SonarSpec(

@@ -12,12 +12,13 @@ from gymnasium import spaces
 from agri_envs.rover import robot as rover
 from agri_envs.rover.config import GreenhouseNavConfig
 from agri_envs.rover.task import WaypointTask, mission_time_limit
+from agri_envs.scenes.distribution import largest_scenes
 from agri_envs.scenes.greenhouse import LayoutParams, generate_layout
 from agri_envs.scenes.layout import Layout, LayoutCache
 from agri_envs.scenes.office import CorridorParams, generate_office_corridor
 from agri_envs.scenes.rosmap import layout_from_map, map_geometry
 from agri_envs.sim2d.crowd import Crowd, CrowdSpec
-from agri_envs.sim2d.geometry import Kind
+from agri_envs.sim2d.geometry import Kind, enclosing_bounds
 from agri_envs.sim2d.gridmap import rasterize
 from agri_envs.sim2d.odometry import WheelOdometry
 from agri_envs.sim2d.render import TopDownRenderer
@@ -302,10 +303,9 @@ class GreenhouseNavEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
             self._map_geometry = map_geometry(cfg.map_yaml)
         #: The arguments of the current episode: the config, with the scene drawn from the distribution if any.
         self.episode_config = cfg
-        self.diagonal, canvas = self._extent(cfg)
-        if self.distribution is not None:  # one canvas that holds the largest scene of every family
-            boxes = [self._extent(cfg.replace(**f.largest()))[1] for f in self.distribution.families]
-            canvas = (*np.min(boxes, axis=0)[:2], *np.max(boxes, axis=0)[2:])
+        self.diagonal = self._extent(cfg)[0]
+        # One canvas that holds the largest scene of every family.
+        canvas = enclosing_bounds(self._extent(c)[1] for c in largest_scenes(self.distribution, cfg))
         self.view = SceneView(render_mode, canvas, cfg.render_width, self.metadata["render_fps"])
         self.render_mode = render_mode
         n = self.lidar.spec.n_beams

@@ -17,7 +17,7 @@ from __future__ import annotations
 import dataclasses
 import math
 from collections.abc import Iterable, Mapping
-from typing import Any
+from typing import Any, Protocol, TypeVar
 
 import numpy as np
 
@@ -266,3 +266,27 @@ class SceneDistribution:
             parts = [f"{k}={v!r}" for k, v in f.fixed.items()] + [f"{k} {r.describe()}" for k, r in f.ranges.items()]
             lines.append(f"{f.name} ({f.weight / total:.0%}): " + ", ".join(parts))
         return lines
+
+
+C = TypeVar("C", bound="_Config")
+
+
+class _Config(Protocol):
+    """An env's arguments: a frozen config with ``replace`` (:class:`agri_envs._config.StrictConfig`)."""
+
+    def replace(self: C, **changes: Any) -> C: ...
+
+
+def largest_scenes(distribution: SceneDistribution | None, config: C) -> list[C]:
+    """The env arguments of the largest scenes an env must make room for (its canvas, its observation scales).
+
+    Args:
+        distribution: The env's distribution, or None (``scene_distribution="off"``).
+        config: The env's arguments.
+
+    Returns:
+        ``[config]`` without a distribution, else ``config`` with each family's largest scene.
+    """
+    if distribution is None:
+        return [config]
+    return [config.replace(**f.largest()) for f in distribution.families]

@@ -12,6 +12,7 @@ Every obstacle is one of three primitives, stored in flat float64 arrays so numb
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Iterable
 from enum import IntEnum
 
 import numpy as np
@@ -142,3 +143,9 @@ class GeometryBuilder:
             polygon_kinds=list(self._polygon_kinds),
             bounds=tuple(float(b) for b in bounds),  # type: ignore[arg-type]
         )
+
+
+def enclosing_bounds(boxes: Iterable[tuple[float, float, float, float]]) -> tuple[float, float, float, float]:
+    """The smallest ``(xmin, ymin, xmax, ymax)`` that holds every box (e.g. one canvas for several scenes)."""
+    b = np.array(list(boxes), dtype=np.float64).reshape(-1, 4)
+    return (float(b[:, 0].min()), float(b[:, 1].min()), float(b[:, 2].max()), float(b[:, 3].max()))

@@ -386,7 +386,9 @@ def test_batched_form_reports_its_seeds_as_sync_vector_env_does(env_id):
             sync.reset(seed=seed)
             assert native.np_random_seed == sync.np_random_seed == seeds
             assert all(type(s) is int for s in native.np_random_seed)
-            assert [g.bit_generator.state for g in native.np_random] == [g.bit_generator.state for g in sync.np_random]
+            assert [g.bit_generator.state for g in native.np_random] == [
+                g.bit_generator.state for g in sync.np_random
+            ]
         native.step(native.action_space.sample())
         assert native.np_random_seed == (7, 8, 9)
     finally:

@@ -230,3 +230,22 @@ def test_a_robust_coverage_episode_gives_its_sensors_the_drawn_arguments():
         assert np.mean(errors) == pytest.approx(cfg.compass_bias, abs=3 * cfg.compass_noise_std / 10 + 1e-9)
         biases.append(cfg.compass_bias)
     assert abs(biases[0] - biases[1]) > 0.1 and all(abs(b - e.config.compass_bias) > 0.1 for b in biases)
+
+
+def test_every_drawn_scene_fits_the_one_canvas_of_its_env():
+    # The canvas is fixed at construction (frames keep one size); every episode's scene must lie inside it.
+    from agri_envs.chain import robot_chain_v1
+    from agri_envs.sim2d.geometry import enclosing_bounds
+
+    assert enclosing_bounds([(0, 1, 2, 3), (-1, 2, 1, 5)]) == (-1.0, 1.0, 2.0, 5.0)
+    envs = [
+        (gym.make(NAV, scene_distribution="robust").unwrapped, lambda e: e.world.geometry.bounds),
+        (gym.make(COVER, scene_distribution="robust").unwrapped, lambda e: e.world.geometry.bounds),
+        (robot_chain_v1.parallel_env(scene_distribution="robust"), lambda e: e.chain_map.geometry.bounds),
+    ]
+    for env, scene_bounds in envs:
+        xmin, ymin, xmax, ymax = env.view.canvas
+        for seed in range(8):
+            env.reset(seed=seed)
+            bx0, by0, bx1, by1 = scene_bounds(env)
+            assert xmin <= bx0 + 1e-9 and ymin <= by0 + 1e-9 and bx1 <= xmax + 1e-9 and by1 <= ymax + 1e-9, seed
