@@ -338,16 +338,26 @@ class HarikApfController:
             # sec. 3.1). Clamping at r_max applies that same limit to the repulsive term; it changes r only
             # when a side is closer than k_rep / (r_max - K_a |alpha|), i.e. 2.5 cm at alpha = 0.
             r = min(p.r_max, max(-p.r_max, r))
-        # Passive motion safety (sec. 3.1): something in front -> stop, step back a few cm, wait. The front
-        # detection acts whatever u is, also in a turn on the spot (u = 0, eq. 14): in a corridor the
-        # robot faces the wall halfway through a 180 deg turn, steps back and keeps turning until the
-        # front is free (sec. 3.4, Figs. 14-15: d stays almost constant while alpha decreases).
+        return self.passive_safety(u, front, sonar, turning=abs(alpha) > p.alpha_max), r
+
+    def passive_safety(self, u: float, front: float, sonar: np.ndarray, turning: bool = False) -> float:
+        """The linear speed ``u`` (m/s) after the passive motion safety of sec. 3.1, for a gap ``front`` m ahead.
+
+        Something in the front zone closer than the stop distance: stop, step back a few centimetres (while the
+        rear sonars leave room), and wait with no forward motion until the front is free. Before that the
+        speed is capped so the robot can still stop short of it (:meth:`HarikApfParams.governed_speed`). The
+        detection acts whatever ``u`` is, also in a turn on the spot (``turning``, u = 0 by eq. 14): in a
+        corridor the robot faces the wall halfway through a 180 deg turn, steps back and keeps turning until the
+        front is free (sec. 3.4, Figs. 14-15: d stays almost constant while alpha decreases). The angular
+        speed is never changed. Counts stops and blocked steps (:meth:`reset` clears them).
+        """
+        p = self.p
         u = p.governed_speed(u, front)
         if front < p.front_stop_distance:
             if not self.blocked:
                 self.blocked = True
                 self.stops += 1
-                self.turn_stops += int(abs(alpha) > p.alpha_max)
+                self.turn_stops += int(turning)
                 self.backing_left = p.step_back_distance
             self.blocked_steps += 1
             u = 0.0
@@ -360,7 +370,7 @@ class HarikApfController:
                 self.backing_left -= p.step_back_speed * self.robot.control_period
             else:
                 self.backing_left = 0.0
-        return u, r
+        return u
 
 
 class HarikApfPolicy:

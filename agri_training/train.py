@@ -26,6 +26,8 @@ evaluated. The keys:
 | ``eval_freq``, ``eval_episodes``, ``eval_seed`` | periodic evaluation every N steps on seeds S.. S+n-1 |
 | ``checkpoint_freq`` | weights-only checkpoint every N steps (0: none) |
 | ``torch_threads`` | torch CPU threads (1 beside env workers) |
+| ``safety_layer`` | a fixed rule between the network and the robot wherever the weights act (evaluation, |
+| | validation, leaderboard; not PPO's rollouts), its interventions counted (``learned.safety``); null: none |
 | ``update_threads`` | torch CPU threads of the gradient updates, at most (null: ``torch_threads``); PPO's |
 | | rollout and updates alternate, so each update uses up to this many of the cores idle when it starts |
 
@@ -89,11 +91,13 @@ from agri_training.learned.policy import (
     algorithm_class,
     apply_wrappers,
     decide_held,
+    guarded,
     observation_chain,
     resolve_algo_kwargs,
     resolve_policy_kwargs,
 )
 from agri_training.learned.pretrain import PretrainSpec, pretrain_from_baseline
+from agri_training.learned.safety import check_safety_layer, make_safety_layer
 from agri_training.learned.vector import VECTOR_WRAPPERS, apply_vector_wrappers, make_sync_vector_env
 
 HYPERPARAMS_DIR = Path(__file__).parent / "hyperparams"
@@ -121,6 +125,7 @@ HYPERPARAM_KEYS = (
     "checkpoint_freq",
     "torch_threads",
     "update_threads",
+    "safety_layer",
     "scenarios",
 )
 VEC_ENVS = ("dummy", "subproc", "vector")
@@ -246,6 +251,8 @@ def resolve_config(request: TrainRequest) -> dict[str, Any]:
     update_threads = int(hp["update_threads"]) if hp.get("update_threads") is not None else torch_threads
     if torch_threads < 1 or update_threads < 1:
         raise ValueError(f"torch_threads and update_threads must be >= 1, got {torch_threads} and {update_threads}")
+    safety_layer = hp.get("safety_layer")
+    check_safety_layer(safety_layer, request.env_id)
     algo_kwargs = dict(hp.get("algo_kwargs", {}) or {})
     her = dict(hp.get("her", {}) or {}) if request.her else None
     if vec_env == "vector":  # refused here, before anything is written
@@ -303,6 +310,7 @@ def resolve_config(request: TrainRequest) -> dict[str, Any]:
         "checkpoint_freq": int(hp.get("checkpoint_freq", 0)),
         "torch_threads": torch_threads,
         "update_threads": update_threads,
+        "safety_layer": safety_layer,
         "hyperparams_source": hp["hyperparams_source"],
         # Labelled like the baselines: a policy fed the ground-truth pose uses what a real robot lacks.
         "privileged": env_kwargs.get("localization") == "ground_truth",
@@ -497,6 +505,7 @@ class _LivePolicy:
         self.multiagent = agri_envs.is_parallel_env(env)
         self.replay = ObservationReplay([] if self.multiagent else observation_chain(env, config["wrappers"])[1])
         self._hold = HeldActions(config["action_repeat"])
+        self.safety = make_safety_layer(config.get("safety_layer"), env)
         self.network: PolicyNetwork | None = None
 
     def refresh(self, normalization: ObsNormalization | None) -> None:
@@ -509,7 +518,14 @@ class _LivePolicy:
     ) -> tuple[Any, Any]:
         if self.multiagent:  # per-agent dicts in and out, one batched pass of the shared network
             return predict_shared(self.network, observation, self.replay, deterministic), state
-        return decide_held(self._hold, self.replay, self.network, observation, state, episode_start, deterministic)
+        action, state = decide_held(
+            self._hold, self.replay, self.network, observation, state, episode_start, deterministic
+        )
+        return guarded(self.safety, observation, action, episode_start), state
+
+    def episode_metrics(self, index: int = 0) -> dict[str, float]:
+        """The safety layer's counts of the episode (none without a layer)."""
+        return {} if self.safety is None else self.safety.episode_metrics()
 
 
 def save_weights(model: Any, folder: Path) -> None:

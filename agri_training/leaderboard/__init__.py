@@ -27,20 +27,23 @@ from agri_training.leaderboard.entries import (
     verify_sample,
     write_entry,
 )
+from agri_training.leaderboard.gains import GAINS_NOTE, Gain, gain_rows, gains_lines
 from agri_training.leaderboard.markdown import (
-    MIN_COMPLETED_PAIRS,
-    compare_entries,
-    episode_values,
     format_metric,
-    is_conditional,
     leaderboard_is_current,
     metric_format,
     metric_label,
     metric_scale,
-    paired_values,
-    rank_key,
     render_markdown,
     write_markdown,
+)
+from agri_training.leaderboard.pairing import (
+    MIN_COMPLETED_PAIRS,
+    compare_entries,
+    episode_values,
+    is_conditional,
+    paired_values,
+    rank_key,
 )
 from agri_training.leaderboard.robustness import (
     SUCCESS_FLOOR,
@@ -73,6 +76,10 @@ from agri_training.leaderboard.suites import (
 )
 
 __all__ = [
+    "GAINS_NOTE",
+    "Gain",
+    "gain_rows",
+    "gains_lines",
     "Block",
     "Drop",
     "ENTRIES_DIR",

@@ -39,6 +39,7 @@ from agri_training.learned.inference import PolicyNetwork
 from agri_training.learned.parameter_sharing import predict_shared
 from agri_training.learned.range_features import Differences, Ramp
 from agri_training.learned.robot_limits import RobotLimits
+from agri_training.learned.safety import make_safety_layer
 from agri_training.learned.slam_pose import SlamWaypoint
 
 #: Algorithms ``agri train`` knows: name -> (module, class).
@@ -551,6 +552,8 @@ class LearnedPolicy:
         self.network, self.normalization = _network_of(folder, self.config, observation_space, action_space)
         self._replay = ObservationReplay(chain, self.normalization)
         self._hold = HeldActions(int(self.config.get("action_repeat", 1)))
+        #: The run's safety layer (``safety_layer`` in its config), between the network and the robot, or None.
+        self.safety = make_safety_layer(self.config.get("safety_layer"), env)
 
     def transform(self, observation: Any, new_episode: bool = False) -> Any:
         """The raw env observation as the network saw it in training (wrappers, then normalisation)."""
@@ -570,7 +573,27 @@ class LearnedPolicy:
         """
         if self.multiagent:
             return predict_shared(self.network, observation, self.transform, deterministic), state
-        return decide_held(self._hold, self._replay, self.network, observation, state, episode_start, deterministic)
+        action, state = decide_held(
+            self._hold, self._replay, self.network, observation, state, episode_start, deterministic
+        )
+        return guarded(self.safety, observation, action, episode_start), state
+
+    def episode_metrics(self, index: int = 0) -> dict[str, float]:
+        """The safety layer's counts of the episode (none without a layer)."""
+        return {} if self.safety is None else self.safety.episode_metrics()
+
+
+def guarded(safety: Any, observation: Any, action: Any, episode_start: Any) -> Any:
+    """``action`` through the safety layer ``safety`` (None: as it is), for one env's observation.
+
+    Raises:
+        ValueError: For a batch of observations (a layer keeps one robot's safety state).
+    """
+    if safety is None:
+        return action
+    if np.ndim(action) != 1:
+        raise ValueError(f"a run with safety_layer {safety.name!r} acts on one env at a time, got {np.shape(action)}")
+    return safety.apply(observation, action, episode_start is not None and bool(np.asarray(episode_start).any()))
 
 
 def decide_held(

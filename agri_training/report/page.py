@@ -902,6 +902,9 @@ def build_report(
             except ImportError as exc:
                 section = f"(plots unavailable: {exc})"
             parts += ["### Paper reproduction and plots", "", section, ""]
+    gains = lb.gains_lines(env_ids, suites, [r.entry for r in rows])
+    if gains:
+        parts += ["## Where learning beats the papers", "", lb.GAINS_NOTE, "", *gains]
     parts += who_wins_where(env_ids, suites, rows)
     commits = sorted({r.entry["git_commit"][:10] for r in rows})
     parts += [

@@ -1,0 +1,118 @@
+"""Safety layers: a fixed rule between a learned policy's action and the robot, which the network cannot override.
+
+A run names its layer in its config (``safety_layer``, :data:`SAFETY_LAYERS`); wherever its weights act (the
+periodic evaluation of training, ``agri validate``, ``agri evaluate``, the leaderboard) they act through it. PPO's
+rollouts and DAgger's data are the network's own actions: the layer is part of the deployed policy, not of what
+the network learned. Every intervention is counted, and an entry's episodes carry the counts
+(:meth:`HarikPassiveSafety.episode_metrics`), so a reader sees how often the rule, not the network, drove.
+
+``harik-passive-safety`` (GreenhouseNav) is the passive motion safety of Harik & Korsæth (2018, sec. 3.1), the
+same code that ``harik-apf`` runs (:meth:`agri_baselines.harik_apf.HarikApfController.passive_safety`): with
+something in the front zone closer than the stop distance the robot stops, steps back a few centimetres and
+waits until the front is free; before that its speed is capped so it can still stop short. The network keeps
+the steering. It reads the observation the network reads: the min-pooled LIDAR (each sector's range placed at
+the sector's centre angle, within 1.5 deg of the beam that measured it at the default 90 sectors) and the
+sonars, with the gains :func:`agri_baselines.harik_apf.robot_params` gives the robot and corridor of the
+episode, as ``harik-apf`` has them.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Callable, Mapping
+from typing import Any
+
+import numpy as np
+
+#: The env each safety layer guards.
+SAFETY_LAYER_ENVS = {"harik-passive-safety": "agri_envs/GreenhouseNav-v2"}
+
+
+class HarikPassiveSafety:
+    """Harik's passive motion safety over a learned GreenhouseNav policy's linear speed (see the module).
+
+    Args:
+        env: The GreenhouseNav env the policy drives (its robot, sensors and the episode's arguments are read
+            when an episode starts, never during one).
+    """
+
+    name = "harik-passive-safety"
+
+    def __init__(self, env: Any) -> None:
+        from agri_baselines.harik_apf import robot_geometry
+
+        e = env.unwrapped
+        self.env = env
+        geometry = robot_geometry(env)
+        n = len(geometry.beam_angles)
+        edges = np.linspace(0, n, e.config.lidar_beams + 1).round().astype(np.int64)
+        centres = np.array([geometry.beam_angles[a:b].mean() for a, b in zip(edges[:-1], edges[1:], strict=True)])
+        #: What the layer knows of the robot: its footprint and sonars, the LIDAR as the pooled observation.
+        self.geometry = dataclasses.replace(geometry, beam_angles=centres)
+        self.controller: Any = None
+        self.interventions = 0
+
+    def start_episode(self) -> None:
+        """A fresh safety state with the gains of the episode that just started (its robot and corridor)."""
+        from agri_baselines.harik_apf import HarikApfController, robot_params
+
+        e = self.env.unwrapped
+        cfg = getattr(e, "episode_config", e.config)
+        self.controller = HarikApfController(robot_params(self.env, cfg.waypoint_radius, cfg), self.geometry)
+        self.spec = e.robot_spec
+        self.interventions = 0
+
+    def apply(self, observation: Mapping[str, Any], action: np.ndarray, episode_start: bool) -> np.ndarray:
+        """The action the robot gets: ``action`` with its speed through the passive safety (steering unchanged)."""
+        if episode_start or self.controller is None:
+            self.start_episode()
+        g, spec = self.geometry, self.spec
+        a = np.array(action, dtype=np.float32, copy=True)
+        u = float(a[0]) * (spec.max_speed if a[0] >= 0 else spec.max_reverse_speed)
+        ranges = np.asarray(observation["lidar"], dtype=np.float64) * g.lidar_max_range
+        sonar = np.asarray(observation["sonar"], dtype=np.float64) * g.sonar_max_range
+        front, _, _ = self.controller.obstacle_zones(ranges, sonar)
+        safe = self.controller.passive_safety(u, front, sonar)
+        if safe != u:
+            self.interventions += 1
+            a[0] = safe / spec.max_speed if safe >= 0 else safe / max(spec.max_reverse_speed, 1e-9)
+        return a
+
+    def episode_metrics(self) -> dict[str, float]:
+        """The layer's counts in the episode so far.
+
+        Returns:
+            ``safety_interventions`` (steps whose speed the layer changed), ``safety_stops`` (stops it made) and
+            ``safety_blocked_time`` (s it held the robot in front of something).
+        """
+        c = self.controller
+        if c is None:
+            return {"safety_interventions": 0.0, "safety_stops": 0.0, "safety_blocked_time": 0.0}
+        return {
+            "safety_interventions": float(self.interventions),
+            "safety_stops": float(c.stops),
+            "safety_blocked_time": c.blocked_steps * self.geometry.control_period,
+        }
+
+
+#: The safety layers a run may name (``safety_layer`` in its config), name -> factory taking the env.
+SAFETY_LAYERS: dict[str, Callable[[Any], Any]] = {"harik-passive-safety": HarikPassiveSafety}
+
+
+def check_safety_layer(name: str | None, env_id: str) -> None:
+    """Refuse an unknown layer, or one for another env (the message lists the known ones).
+
+    Raises:
+        ValueError: As above.
+    """
+    if name is None:
+        return
+    if name not in SAFETY_LAYERS:
+        raise ValueError(f"safety_layer must be one of {', '.join(SAFETY_LAYERS)} or null, got {name!r}")
+    if SAFETY_LAYER_ENVS[name] != env_id:
+        raise ValueError(f"safety_layer {name!r} guards {SAFETY_LAYER_ENVS[name]}, not {env_id}")
+
+
+def make_safety_layer(name: str | None, env: Any) -> Any:
+    """The layer ``name`` on ``env`` (None: no layer)."""
+    return None if name is None else SAFETY_LAYERS[name](env)
