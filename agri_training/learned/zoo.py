@@ -34,19 +34,20 @@ def how_trained(config: Mapping[str, Any]) -> str:
 
     ``imitation of harik-apf-gt, 8 DAgger rounds`` for a run of ``timesteps: 0`` with a ``pretrain`` block;
     ``imitation of apoorva-chain, 4 DAgger rounds, then PPO`` when the clone was fine-tuned; ``SAC + HER`` or
-    ``PPO`` for a run that learned from its reward alone.
+    ``PPO`` for a run that learned from its reward alone; a run with a ``safety_layer`` says so.
     """
     algo = str(config.get("algo", "?")).upper() + (" + HER" if config.get("her") else "")
+    layer = f"; acts behind the safety layer {config['safety_layer']}" if config.get("safety_layer") else ""
     pretrain = config.get("pretrain")
     if not isinstance(pretrain, Mapping):
-        return algo
+        return algo + layer
     teacher = pretrain.get("policy") or pretrain.get("dataset", "a baseline")
     parts = [f"imitation of {teacher}"]
     rounds = int(pretrain.get("dagger_rounds") or 0)
     if rounds:
         parts.append(f"{rounds} DAgger rounds")
     text = ", ".join(parts)
-    return text if not config.get("timesteps") else f"{text}, then {algo}"
+    return (text if not config.get("timesteps") else f"{text}, then {algo}") + layer
 
 
 def zoo_training(name: str) -> str:
@@ -107,6 +108,25 @@ register_policy(
         algo="ppo",
         train_command="agri train --env agri_envs/GreenhouseNav-v2 --algo ppo --hyperparams "
         "agri_training/hyperparams/ppo_generalization.yml --seed 1 --out runs/nav-dagger-s1",
+    )
+)
+
+register_policy(
+    PolicySpec(
+        name="ppo-greenhouse-nav-general-shielded",
+        env_id="agri_envs/GreenhouseNav-v2",
+        entry_point="agri_training.learned.zoo:load_zoo_policy",
+        env_kwargs={"localization": "ground_truth"},
+        description="ppo-greenhouse-nav-general's network (the same weights, retrained bit for bit) behind a safety "
+        "layer: harik-apf's passive motion safety (stop, step back, wait while something is in front; slow down "
+        "to stop short of it) on the pooled LIDAR and sonars, which only changes its speed, never its steering; "
+        "its interventions are counted per episode (agri_training/learned/safety.py)",
+        privileged=True,
+        learned=True,
+        algo="ppo",
+        train_command="agri train --env agri_envs/GreenhouseNav-v2 --algo ppo --hyperparams "
+        "agri_training/hyperparams/ppo_generalization.yml --seed 1 --hp safety_layer=harik-passive-safety "
+        "--out runs/nav-shielded-s1",
     )
 )
 

@@ -32,6 +32,7 @@ def _entry(suite: str, policy: str) -> dict:
         ("greenhouse-corridor", "ppo-greenhouse-nav", 20),  # learned; lengths 79-1323 steps: the last ones re-run
         ("greenhouse-sim-loop", "harik-apf", 3),  # Hector SLAM: the trajectory error of its own pose estimate
         ("greenhouse-sim-loop", "dagger-greenhouse-nav-slam", 3),  # learned, on its own SLAM: one map per episode
+        ("greenhouse-default", "ppo-greenhouse-nav-general-shielded", 3),  # behind a safety layer, people about
         pytest.param("greenhouse-repeatability", "harik-apf-gt", 2, marks=pytest.mark.slow),  # 10 missions, TimeLimit
     ],
 )
