@@ -166,6 +166,41 @@ register_policy(
 
 register_policy(
     PolicySpec(
+        name="dagger-greenhouse-nav-robust-shielded",
+        env_id="agri_envs/GreenhouseNav-v2",
+        entry_point="agri_training.learned.zoo:load_zoo_policy",
+        env_kwargs={"localization": "ground_truth"},
+        description="dagger-greenhouse-nav-robust's recipe (seed 1) behind the safety layer harik-passive-safety "
+        "(harik-apf's passive motion safety over its speed; agri_training/learned/safety.py)",
+        privileged=True,
+        learned=True,
+        algo="ppo",
+        train_command="agri train --env agri_envs/GreenhouseNav-v2 --algo ppo --hyperparams "
+        "agri_training/hyperparams/dagger_robust.yml --seed 1 --hp safety_layer=harik-passive-safety "
+        "--out runs/nav-robust-shielded-s1",
+    )
+)
+
+register_policy(
+    PolicySpec(
+        name="dagger-greenhouse-nav-slam-shielded",
+        env_id="agri_envs/GreenhouseNav-v2",
+        entry_point="agri_training.learned.zoo:load_zoo_policy",
+        env_kwargs={"localization": "none", "full_scan": True},
+        description="dagger-greenhouse-nav-slam's recipe (seed 2) behind the safety layer harik-passive-safety, "
+        "nothing privileged: the layer reads the pooled LIDAR and sonars and the robot's own limits, as harik-apf "
+        "does (agri_training/learned/safety.py)",
+        privileged=False,
+        learned=True,
+        algo="ppo",
+        train_command="agri train --env agri_envs/GreenhouseNav-v2 --algo ppo --hyperparams "
+        "agri_training/hyperparams/dagger_slam.yml --seed 2 --hp safety_layer=harik-passive-safety "
+        "--out runs/nav-slam-shielded-s2",
+    )
+)
+
+register_policy(
+    PolicySpec(
         name="dagger-greenhouse-nav-slam",
         env_id="agri_envs/GreenhouseNav-v2",
         entry_point="agri_training.learned.zoo:load_zoo_policy",
