@@ -114,5 +114,13 @@ def check_safety_layer(name: str | None, env_id: str) -> None:
 
 
 def make_safety_layer(name: str | None, env: Any) -> Any:
-    """The layer ``name`` on ``env`` (None: no layer)."""
-    return None if name is None else SAFETY_LAYERS[name](env)
+    """The layer ``name`` on ``env`` (None: no layer).
+
+    Raises:
+        ValueError: For an unknown layer, or one that guards another env (:func:`check_safety_layer`).
+    """
+    if name is None:
+        return None
+    spec = getattr(env, "spec", None)
+    check_safety_layer(name, spec.id if spec is not None else SAFETY_LAYER_ENVS.get(name, ""))
+    return SAFETY_LAYERS[name](env)

@@ -68,15 +68,19 @@ def test_report_from_entries_and_fresh_runs(tmp_path, capsys):
     assert "1.00 [0.34, 1.00]" in md  # 2 of 2 successes: a Wilson interval, not a point
     fresh = (
         "Evaluated for this report (no current leaderboard entry): `dagger-greenhouse-nav`, "
-        "`dagger-greenhouse-nav-robust`, `dagger-greenhouse-nav-slam`, `harik-apf`, `harik-apf-hector-plain`"
+        "`dagger-greenhouse-nav-robust`, `dagger-greenhouse-nav-robust-shielded`, `dagger-greenhouse-nav-slam`, "
+        "`dagger-greenhouse-nav-slam-shielded`, `harik-apf`, `harik-apf-hector-plain`"
     )
     assert fresh in md
     assert sorted(p.name for p in (out / "results" / "tiny-rover").glob("*.json")) == [
+        "dagger-greenhouse-nav-robust-shielded.json",
         "dagger-greenhouse-nav-robust.json",
+        "dagger-greenhouse-nav-slam-shielded.json",
         "dagger-greenhouse-nav-slam.json",
         "dagger-greenhouse-nav.json",
         "harik-apf-hector-plain.json",
         "harik-apf.json",
+        "ppo-greenhouse-nav-general-shielded.json",
         "ppo-greenhouse-nav-general.json",
         "ppo-greenhouse-nav.json",
     ]

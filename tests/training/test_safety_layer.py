@@ -71,6 +71,10 @@ def test_bad_layers_are_refused(tmp_path):
     with pytest.raises(ValueError, match="must be one of"):
         resolve_config(TrainRequest(NAV, "ppo", tmp_path_for_refusal, overrides={"safety_layer": "airbag"}))
     assert make_safety_layer(None, None) is None
+    with pytest.raises(ValueError, match="must be one of"):
+        make_safety_layer("airbag", gym.make(NAV, **CORRIDOR))
+    with pytest.raises(ValueError, match="not agri_envs/GreenhouseCoverage-v2"):
+        make_safety_layer("harik-passive-safety", gym.make("agri_envs/GreenhouseCoverage-v2"))
     layer = HarikPassiveSafety(gym.make(NAV, **CORRIDOR))
     with pytest.raises(ValueError, match="one env at a time"):
         guarded(layer, {}, np.zeros((2, 2), dtype=np.float32), np.array([True, True]))
