@@ -26,10 +26,10 @@ evaluated. The keys:
 | ``eval_freq``, ``eval_episodes``, ``eval_seed`` | periodic evaluation every N steps on seeds S.. S+n-1 |
 | ``checkpoint_freq`` | weights-only checkpoint every N steps (0: none) |
 | ``torch_threads`` | torch CPU threads (1 beside env workers) |
-| ``safety_layer`` | a fixed rule between the network and the robot wherever the weights act (evaluation, |
-| | validation, leaderboard; not PPO's rollouts), its interventions counted (``learned.safety``); null: none |
 | ``update_threads`` | torch CPU threads of the gradient updates, at most (null: ``torch_threads``); PPO's |
 | | rollout and updates alternate, so each update uses up to this many of the cores idle when it starts |
+| ``safety_layer`` | a fixed rule between the network and the robot wherever the weights act (evaluation, |
+| | validation, leaderboard; not PPO's rollouts), its interventions counted (``learned.safety``); null: none |
 
 A run directory holds ``policy.pt`` (the final weights, a ``state_dict``), ``normalize.json`` (the
 observation statistics), ``config.yaml`` (the resolved config), ``meta.json`` (exact command, package
