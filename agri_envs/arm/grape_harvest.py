@@ -428,29 +428,8 @@ class GrapeHarvestEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
         return int(math.ceil(limit)) + approaches
 
     def _ee_target(self, a: np.ndarray) -> tuple[np.ndarray, bool]:
-        """Joint values for a clamp-pose delta by damped least squares on the arm's Jacobian.
-
-        Differential IK (like the controllers of panda-gym and robosuite) rather than the analytic IK:
-        near the wrist singularity (theta_5 = 0) the analytic solution nearest the current joints jumps,
-        and a learner would see the arm freeze there. ``ik_failed`` reports a motion the joint ranges cut.
-        """
-        cfg = self.config
-        twist = np.concatenate([a[:3] * cfg.max_ee_step, a[3:] * cfg.max_ee_rotation])
-        jac = _jacobian(self.q)
-        damping = 0.02
-        lo, hi = JOINT_LIMITS[:, 0], JOINT_LIMITS[:, 1]
-        free = np.ones(6, dtype=bool)
-        for _ in range(3):  # a joint that would pass its limit is locked there, the others solve the rest
-            j = jac * free
-            dq = j.T @ np.linalg.solve(j @ j.T + damping**2 * np.eye(6), twist)
-            dq *= min(1.0, _MAX_EE_JOINT_STEP / max(float(np.max(np.abs(dq))), 1e-12))
-            over = free & ((self.q + dq < lo) | (self.q + dq > hi))
-            if not over.any():
-                break
-            free &= ~over
-        q = self.q + dq
-        clipped = np.clip(q, lo, hi)
-        return clipped, bool(np.any(clipped != q) or not free.all())
+        """Joint values for a clamp-pose delta (:func:`end_effector_step` from the current joints)."""
+        return end_effector_step(self.q, a, self.config.max_ee_step, self.config.max_ee_rotation)
 
     def _achieved(self) -> np.ndarray:
         """The achieved goal, rounded to the observation's float32 so that rewards match ``compute_reward``."""
@@ -511,6 +490,37 @@ class GrapeHarvestEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
 _HOME_TIP = tip_pose(HOME_Q)
 #: Largest joint change of one end-effector step (rad): the damped solution near a singularity is bounded.
 _MAX_EE_JOINT_STEP = 0.3
+
+
+def end_effector_step(
+    q: np.ndarray, action: np.ndarray, max_ee_step: float, max_ee_rotation: float
+) -> tuple[np.ndarray, bool]:
+    """The joint values an end-effector action (``control="ee"``) moves the arm to from ``q``, and ``ik_failed``.
+
+    Damped least squares on the arm's Jacobian for the clamp twist ``(action[:3] * max_ee_step, action[3:] *
+    max_ee_rotation)``. Differential IK (like the controllers of panda-gym and robosuite) rather than the
+    analytic IK: near the wrist singularity (theta_5 = 0) the analytic solution nearest the current joints
+    jumps, and a learner would see the arm freeze there. ``ik_failed`` reports a motion the joint ranges cut.
+    A controller may call it to see where an action would take the arm (the safety layer of the learned
+    harvesters does).
+    """
+    a = np.asarray(action, dtype=np.float64)
+    twist = np.concatenate([a[:3] * max_ee_step, a[3:] * max_ee_rotation])
+    jac = _jacobian(q)
+    damping = 0.02
+    lo, hi = JOINT_LIMITS[:, 0], JOINT_LIMITS[:, 1]
+    free = np.ones(6, dtype=bool)
+    for _ in range(3):  # a joint that would pass its limit is locked there, the others solve the rest
+        j = jac * free
+        dq = j.T @ np.linalg.solve(j @ j.T + damping**2 * np.eye(6), twist)
+        dq *= min(1.0, _MAX_EE_JOINT_STEP / max(float(np.max(np.abs(dq))), 1e-12))
+        over = free & ((q + dq < lo) | (q + dq > hi))
+        if not over.any():
+            break
+        free &= ~over
+    q_new = q + dq
+    clipped = np.clip(q_new, lo, hi)
+    return clipped, bool(np.any(clipped != q_new) or not free.all())
 
 
 def _jacobian(q: np.ndarray, eps: float = 1e-6) -> np.ndarray:

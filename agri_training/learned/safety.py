@@ -14,6 +14,9 @@ the steering. It reads the observation the network reads: the min-pooled LIDAR (
 the sector's centre angle, within 1.5 deg of the beam that measured it at the default 90 sectors) and the
 sonars, with the gains :func:`agri_baselines.harik_apf.robot_params` gives the robot and corridor of the
 episode, as ``harik-apf`` has them.
+
+``luo-box-check`` (GrapeHarvest, end-effector control) tests where each action would take the arm against the
+observed boxes with Luo's point-set model (:class:`LuoBoxCheck`), and replaces an action that would touch one.
 """
 
 from __future__ import annotations
@@ -25,7 +28,7 @@ from typing import Any
 import numpy as np
 
 #: The env each safety layer guards.
-SAFETY_LAYER_ENVS = {"harik-passive-safety": "agri_envs/GreenhouseNav-v2"}
+SAFETY_LAYER_ENVS = {"harik-passive-safety": "agri_envs/GreenhouseNav-v2", "luo-box-check": "agri_envs/GrapeHarvest-v1"}
 
 
 class HarikPassiveSafety:
@@ -95,8 +98,72 @@ class HarikPassiveSafety:
         }
 
 
+class LuoBoxCheck:
+    """Luo's collision test (eqs. 6-9) on where each end-effector action would take a learned GrapeHarvest arm.
+
+    Before an action reaches the arm, the joints it leads to (:func:`agri_envs.arm.grape_harvest.
+    end_effector_step`, the env's own differential IK, from the joints in the observation) are tested against the
+    boxes in the observation (the clusters' and the stems' and leaves', as ``luo-apf`` reads them) with the
+    point set of the arm (:class:`agri_envs.arm.collision.ArmCollisionModel`, no margin). An action that would
+    touch a box is replaced by the first of these whose configuration is clear: half of it, a quarter of it, a
+    step back along the tool's approach axis, standing still. The network's action is kept whenever it is clear.
+
+    Args:
+        env: The GrapeHarvest env (end-effector control) the policy drives: its layout and step sizes are read
+            once, never the scene.
+    """
+
+    name = "luo-box-check"
+
+    def __init__(self, env: Any) -> None:
+        e = env.unwrapped
+        if e.config.control != "ee":
+            raise ValueError(f"safety_layer {self.name!r} checks end-effector actions: make the env with control='ee'")
+        self.layout = dict(e.layout)
+        self.steps = (float(e.config.max_ee_step), float(e.config.max_ee_rotation))
+        self.interventions = 0
+        self.stops = 0
+
+    def apply(self, observation: Mapping[str, Any], action: np.ndarray, episode_start: bool) -> np.ndarray:
+        """The network's action if its configuration is clear of every observed box, else the first clear fallback."""
+        from agri_baselines.luo_apf import joints_from_observation, targets_from_observation
+        from agri_envs.arm.collision import ArmCollisionModel
+        from agri_envs.arm.grape_harvest import end_effector_step
+
+        if episode_start:
+            self.interventions = self.stops = 0
+        obs = {k: np.asarray(v) for k, v in observation.items()}
+        targets, lo, hi = targets_from_observation(obs, self.layout)
+        model = ArmCollisionModel(
+            np.concatenate([np.array([t.box_lo for t in targets]).reshape(-1, 3), lo]),
+            np.concatenate([np.array([t.box_hi for t in targets]).reshape(-1, 3), hi]),
+        )
+        q = joints_from_observation(obs["observation"])
+        a = np.clip(np.asarray(action, dtype=np.float64), -1.0, 1.0)
+        back = np.concatenate([-np.asarray(obs["achieved_goal"][3:6], dtype=np.float64), np.zeros(3)])
+        for k, candidate in enumerate((a, 0.5 * a, 0.25 * a, back)):
+            if not model.collides(end_effector_step(q, candidate, *self.steps)[0])[0]:
+                self.interventions += int(k > 0)
+                return np.asarray(candidate, dtype=np.float32)
+        self.interventions += 1
+        self.stops += 1
+        return np.zeros(6, dtype=np.float32)
+
+    def episode_metrics(self) -> dict[str, float]:
+        """The layer's counts in the episode so far.
+
+        Returns:
+            ``safety_interventions`` (steps whose action the layer replaced) and ``safety_stops`` (steps it held
+            the arm still: no fallback was clear).
+        """
+        return {"safety_interventions": float(self.interventions), "safety_stops": float(self.stops)}
+
+
 #: The safety layers a run may name (``safety_layer`` in its config), name -> factory taking the env.
-SAFETY_LAYERS: dict[str, Callable[[Any], Any]] = {"harik-passive-safety": HarikPassiveSafety}
+SAFETY_LAYERS: dict[str, Callable[[Any], Any]] = {
+    "harik-passive-safety": HarikPassiveSafety,
+    "luo-box-check": LuoBoxCheck,
+}
 
 
 def check_safety_layer(name: str | None, env_id: str) -> None:

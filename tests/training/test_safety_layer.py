@@ -9,7 +9,7 @@ import pytest
 import agri_envs  # noqa: F401  (registers the envs)
 from agri_training.evaluation.episode import run_episode
 from agri_training.learned.policy import LearnedPolicy, guarded
-from agri_training.learned.safety import HarikPassiveSafety, check_safety_layer, make_safety_layer
+from agri_training.learned.safety import HarikPassiveSafety, LuoBoxCheck, check_safety_layer, make_safety_layer
 from agri_training.learned.zoo import ZOO_DIR
 from agri_training.train import TrainRequest, resolve_config
 
@@ -97,3 +97,42 @@ def test_a_run_with_a_layer_acts_through_it_and_reports_it(tmp_path):
     assert {"safety_interventions", "safety_stops", "safety_blocked_time"} <= set(shielded)
     if shielded["safety_interventions"] == 0:  # the layer never acted: the episode is the network's own
         assert shielded["steps"] == plain["steps"] and shielded["return"] == plain["return"]
+
+
+GRAPE = "agri_envs/GrapeHarvest-v1"
+GRAPE_EE = {"control": "ee", "max_ee_step": 0.04, "max_ee_rotation": 0.2, "min_clusters": 2, "max_clusters": 3}
+
+
+def _push_into_the_target_box(layer, seed=5, steps=60):
+    """Drive the clamp straight at the target cluster's box centre: the last info and the layer's counts."""
+    env = gym.make(GRAPE, **GRAPE_EE)
+    obs, info = env.reset(seed=seed)
+    box = env.unwrapped.layout["target_box"]
+    for step in range(steps):
+        lo_hi = obs["observation"][box]
+        toward = 0.5 * (lo_hi[1:4] + lo_hi[4:7]) - obs["achieved_goal"][:3]
+        action = np.concatenate([toward / max(np.linalg.norm(toward), 1e-9), np.zeros(3)]).astype(np.float32)
+        if layer is not None:
+            action = layer.apply(obs, action, step == 0)
+        obs, _, terminated, truncated, info = env.step(action)
+        if terminated or truncated:
+            break
+    return info
+
+
+def test_luo_box_check_keeps_the_arm_out_of_the_boxes():
+    assert _push_into_the_target_box(None)["collision"]
+    layer = LuoBoxCheck(gym.make(GRAPE, **GRAPE_EE))
+    assert not _push_into_the_target_box(layer)["collision"]
+    assert layer.episode_metrics()["safety_interventions"] >= 1
+    with pytest.raises(ValueError, match="control='ee'"):
+        LuoBoxCheck(gym.make(GRAPE))
+
+
+def test_luo_box_check_leaves_clear_actions_alone():
+    env = gym.make(GRAPE, **GRAPE_EE)
+    obs, _ = env.reset(seed=2)
+    layer = LuoBoxCheck(env)
+    still = np.zeros(6, dtype=np.float32)
+    assert np.array_equal(layer.apply(obs, still, True), still)
+    assert layer.episode_metrics() == {"safety_interventions": 0.0, "safety_stops": 0.0}
