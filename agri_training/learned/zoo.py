@@ -319,6 +319,22 @@ register_policy(
 
 register_policy(
     PolicySpec(
+        name="sac-her-grape-vine-shielded",
+        env_id="agri_envs/GrapeHarvest-v1",
+        entry_point="agri_training.learned.zoo:load_zoo_policy",
+        env_kwargs=dict(_GRAPE_EE),
+        description="sac-her-grape-vine's recipe (seed 2, its 110k-step checkpoint) behind the safety layer "
+        "luo-box-check: the joints each action leads to are tested against the observed boxes with Luo's point set, "
+        "and an action that would touch one is replaced (a shorter step, a step back, standing still); the line "
+        "'safety_layer: luo-box-check' was added to the run's config after training (agri_training/learned/safety.py)",
+        learned=True,
+        algo="sac",
+        train_command=_GRAPE_VINE_COMMAND.replace("SEED", "2"),
+    )
+)
+
+register_policy(
+    PolicySpec(
         name="sac-her-grape-vine-eq11",
         env_id="agri_envs/GrapeHarvest-v1",
         entry_point="agri_training.learned.harvest:load_zoo_harvester",
