@@ -27,6 +27,10 @@ from typing import Any
 
 import numpy as np
 
+from agri_baselines.luo_apf import joints_from_observation, targets_from_observation
+from agri_envs.arm.collision import ArmCollisionModel
+from agri_envs.arm.grape_harvest import end_effector_step
+
 #: The env each safety layer guards.
 SAFETY_LAYER_ENVS = {"harik-passive-safety": "agri_envs/GreenhouseNav-v2", "luo-box-check": "agri_envs/GrapeHarvest-v1"}
 
@@ -126,10 +130,6 @@ class LuoBoxCheck:
 
     def apply(self, observation: Mapping[str, Any], action: np.ndarray, episode_start: bool) -> np.ndarray:
         """The network's action if its configuration is clear of every observed box, else the first clear fallback."""
-        from agri_baselines.luo_apf import joints_from_observation, targets_from_observation
-        from agri_envs.arm.collision import ArmCollisionModel
-        from agri_envs.arm.grape_harvest import end_effector_step
-
         if episode_start:
             self.interventions = self.stops = 0
         obs = {k: np.asarray(v) for k, v in observation.items()}
