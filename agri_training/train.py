@@ -505,7 +505,7 @@ class _LivePolicy:
         self.multiagent = agri_envs.is_parallel_env(env)
         self.replay = ObservationReplay([] if self.multiagent else observation_chain(env, config["wrappers"])[1])
         self._hold = HeldActions(config["action_repeat"])
-        self.safety = make_safety_layer(config.get("safety_layer"), env)
+        self.safety = make_safety_layer(config.get("safety_layer"), env, config["env_id"])
         self.network: PolicyNetwork | None = None
 
     def refresh(self, normalization: ObsNormalization | None) -> None:

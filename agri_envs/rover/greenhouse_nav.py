@@ -311,6 +311,11 @@ class GreenhouseNavEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
         n = self.lidar.spec.n_beams
         # Equal sectors of the full scan for min-pooling to `lidar_beams` values.
         self._pool_edges = np.linspace(0, n, cfg.lidar_beams + 1).round().astype(np.int64)[:-1]
+        #: The centre angle (rad, LIDAR frame) of each sector the ``lidar`` observation min-pools: where a
+        #: controller that reads only the observation places each pooled range.
+        self.lidar_sector_angles = np.array(
+            [sector.mean() for sector in np.split(self.lidar.spec.beam_angles, self._pool_edges[1:])]
+        )
         obs: dict[str, spaces.Space[Any]] = {
             "lidar": spaces.Box(0.0, 1.0, (cfg.lidar_beams,), np.float32),
             "sonar": spaces.Box(0.0, 1.0, (len(self.sonars),), np.float32),

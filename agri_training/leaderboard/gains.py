@@ -19,7 +19,7 @@ import dataclasses
 from collections.abc import Mapping, Sequence
 from typing import Any
 
-from agri_training.leaderboard.pairing import compare_entries
+from agri_training.leaderboard.pairing import compare_entries, episode_values
 from agri_training.leaderboard.suites import Suite
 
 #: The efficiency keys a suite may rank by, in order of preference (the first one the suite ranks by is used).
@@ -93,11 +93,11 @@ def efficiency_metric(suite: Suite) -> str | None:
 
 
 def _collisions(entry: Mapping[str, Any]) -> int:
-    return sum(bool(e.get("collision")) for lv in entry["levels"] for e in lv["episodes"])
+    return sum(episode_values(entry, "collision_rate")[0])
 
 
-def _mean_episode_value(entry: Mapping[str, Any], key: str) -> float | None:
-    values = [e[key] for lv in entry["levels"] for e in lv["episodes"] if e.get(key) is not None]
+def _mean_interventions(entry: Mapping[str, Any]) -> float | None:
+    values = [v for v in episode_values(entry, "mean_" + SAFETY_LAYER_KEY)[0] if v is not None]
     return sum(values) / len(values) if values else None
 
 
@@ -148,7 +148,7 @@ def gain_rows(env_id: str, suites: Sequence[Suite], entries: Sequence[Mapping[st
                     success_verdict=None if s is None else s.verdict,
                     collisions=(_collisions(e), _collisions(best)),
                     episodes=int(e["summary"]["episodes"]),
-                    interventions=_mean_episode_value(e, SAFETY_LAYER_KEY),
+                    interventions=_mean_interventions(e),
                 )
             )
     return rows

@@ -553,7 +553,7 @@ class LearnedPolicy:
         self._replay = ObservationReplay(chain, self.normalization)
         self._hold = HeldActions(int(self.config.get("action_repeat", 1)))
         #: The run's safety layer (``safety_layer`` in its config), between the network and the robot, or None.
-        self.safety = make_safety_layer(self.config.get("safety_layer"), env)
+        self.safety = make_safety_layer(self.config.get("safety_layer"), env, self.config["env_id"])
 
     def transform(self, observation: Any, new_episode: bool = False) -> Any:
         """The raw env observation as the network saw it in training (wrappers, then normalisation)."""

@@ -22,7 +22,7 @@ observed boxes with Luo's point-set model (:class:`LuoBoxCheck`), and replaces a
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Callable, Mapping
+from collections.abc import Mapping
 from typing import Any
 
 import numpy as np
@@ -30,9 +30,6 @@ import numpy as np
 from agri_baselines.luo_apf import joints_from_observation, targets_from_observation
 from agri_envs.arm.collision import ArmCollisionModel
 from agri_envs.arm.grape_harvest import end_effector_step
-
-#: The env each safety layer guards.
-SAFETY_LAYER_ENVS = {"harik-passive-safety": "agri_envs/GreenhouseNav-v2", "luo-box-check": "agri_envs/GrapeHarvest-v1"}
 
 
 class HarikPassiveSafety:
@@ -44,19 +41,16 @@ class HarikPassiveSafety:
     """
 
     name = "harik-passive-safety"
+    env_id = "agri_envs/GreenhouseNav-v2"
 
     def __init__(self, env: Any) -> None:
         from agri_baselines.harik_apf import robot_geometry
 
-        e = env.unwrapped
         self.env = env
-        geometry = robot_geometry(env)
-        n = len(geometry.beam_angles)
-        edges = np.linspace(0, n, e.config.lidar_beams + 1).round().astype(np.int64)
-        centres = np.array([geometry.beam_angles[a:b].mean() for a, b in zip(edges[:-1], edges[1:], strict=True)])
         #: What the layer knows of the robot: its footprint and sonars, the LIDAR as the pooled observation.
-        self.geometry = dataclasses.replace(geometry, beam_angles=centres)
+        self.geometry = dataclasses.replace(robot_geometry(env), beam_angles=env.unwrapped.lidar_sector_angles)
         self.controller: Any = None
+        self.spec: Any = None
         self.interventions = 0
 
     def start_episode(self) -> None:
@@ -118,6 +112,7 @@ class LuoBoxCheck:
     """
 
     name = "luo-box-check"
+    env_id = "agri_envs/GrapeHarvest-v1"
 
     def __init__(self, env: Any) -> None:
         e = env.unwrapped
@@ -159,11 +154,9 @@ class LuoBoxCheck:
         return {"safety_interventions": float(self.interventions), "safety_stops": float(self.stops)}
 
 
-#: The safety layers a run may name (``safety_layer`` in its config), name -> factory taking the env.
-SAFETY_LAYERS: dict[str, Callable[[Any], Any]] = {
-    "harik-passive-safety": HarikPassiveSafety,
-    "luo-box-check": LuoBoxCheck,
-}
+#: The safety layers a run may name (``safety_layer`` in its config), name -> class (taking the env; its
+#: ``env_id`` is the env it guards).
+SAFETY_LAYERS: dict[str, Any] = {layer.name: layer for layer in (HarikPassiveSafety, LuoBoxCheck)}
 
 
 def check_safety_layer(name: str | None, env_id: str) -> None:
@@ -176,18 +169,18 @@ def check_safety_layer(name: str | None, env_id: str) -> None:
         return
     if name not in SAFETY_LAYERS:
         raise ValueError(f"safety_layer must be one of {', '.join(SAFETY_LAYERS)} or null, got {name!r}")
-    if SAFETY_LAYER_ENVS[name] != env_id:
-        raise ValueError(f"safety_layer {name!r} guards {SAFETY_LAYER_ENVS[name]}, not {env_id}")
+    guarded_env = SAFETY_LAYERS[name].env_id
+    if guarded_env != env_id:
+        raise ValueError(f"safety_layer {name!r} guards {guarded_env}, not {env_id}")
 
 
-def make_safety_layer(name: str | None, env: Any) -> Any:
-    """The layer ``name`` on ``env`` (None: no layer).
+def make_safety_layer(name: str | None, env: Any, env_id: str) -> Any:
+    """The layer ``name`` on ``env``, an ``env_id`` env (a run's: its config's ``env_id``); None: no layer.
 
     Raises:
         ValueError: For an unknown layer, or one that guards another env (:func:`check_safety_layer`).
     """
     if name is None:
         return None
-    spec = getattr(env, "spec", None)
-    check_safety_layer(name, spec.id if spec is not None else SAFETY_LAYER_ENVS.get(name, ""))
+    check_safety_layer(name, env_id)
     return SAFETY_LAYERS[name](env)

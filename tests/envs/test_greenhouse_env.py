@@ -293,3 +293,15 @@ def test_episodes_equal_the_digests_recorded_before_resets_were_made_fast():
     from greenhouse_reference import NAV_ID, digests, recorded
 
     assert digests(NAV_ID) == recorded(NAV_ID)
+
+
+def test_lidar_sector_angles_are_the_pooled_sectors_centres():
+    """Each pooled ``lidar`` value's sector: its centre angle lies within it; unpooled, it is the beam's angle."""
+    full = gym.make("agri_envs/GreenhouseNav-v2", lidar_beams=811).unwrapped
+    assert np.array_equal(full.lidar_sector_angles, full.lidar.spec.beam_angles)
+    pooled = gym.make("agri_envs/GreenhouseNav-v2", lidar_beams=90).unwrapped
+    angles, beams = pooled.lidar_sector_angles, pooled.lidar.spec.beam_angles
+    assert angles.shape == (90,) and np.all(np.diff(angles) > 0)
+    step = beams[1] - beams[0]
+    assert beams[0] < angles[0] < beams[0] + 9 * step  # the first of 9-beam sectors starts at the first beam
+    assert np.all(np.abs(np.diff(angles) - 270 / 90 * np.pi / 180) < 1.1 * step)  # 3 deg apart, give or take a beam

@@ -70,33 +70,42 @@ def test_bad_layers_are_refused(tmp_path):
         check_safety_layer("harik-passive-safety", "robot_chain_v1")
     with pytest.raises(ValueError, match="must be one of"):
         resolve_config(TrainRequest(NAV, "ppo", tmp_path_for_refusal, overrides={"safety_layer": "airbag"}))
-    assert make_safety_layer(None, None) is None
+    assert make_safety_layer(None, None, NAV) is None
     with pytest.raises(ValueError, match="must be one of"):
-        make_safety_layer("airbag", gym.make(NAV, **CORRIDOR))
+        make_safety_layer("airbag", gym.make(NAV, **CORRIDOR), NAV)
     with pytest.raises(ValueError, match="not agri_envs/GreenhouseCoverage-v2"):
-        make_safety_layer("harik-passive-safety", gym.make("agri_envs/GreenhouseCoverage-v2"))
+        coverage = "agri_envs/GreenhouseCoverage-v2"
+        make_safety_layer("harik-passive-safety", gym.make(coverage), coverage)
     layer = HarikPassiveSafety(gym.make(NAV, **CORRIDOR))
     with pytest.raises(ValueError, match="one env at a time"):
         guarded(layer, {}, np.zeros((2, 2), dtype=np.float32), np.array([True, True]))
 
 
 def test_a_run_with_a_layer_acts_through_it_and_reports_it(tmp_path):
-    """The same weights with ``safety_layer`` in their config: the records carry the layer's counts."""
+    """The same weights with ``safety_layer`` in their config: the records carry the layer's counts, and where the
+    layer never acts (an empty greenhouse) the episode is the network's own, number for number."""
     run = tmp_path / "shielded"
     shutil.copytree(ZOO_DIR / "ppo-greenhouse-nav-general", run)
     with open(run / "config.yaml", "a") as f:
         f.write("safety_layer: harik-passive-safety\n")
-    env = gym.make(NAV, **CORRIDOR)
 
-    def first_steps(step):  # 20 s of the mission is enough to meet the wall or a waypoint
-        return step >= 300
+    def both(kwargs, last_step):
+        env = gym.make(NAV, **kwargs)
+        plain = LearnedPolicy(ZOO_DIR / "ppo-greenhouse-nav-general", env)
+        return [
+            run_episode(env, p, 1, None, lambda step: step >= last_step)["record"]
+            for p in (plain, LearnedPolicy(run, env))
+        ]
 
-    plain = run_episode(env, LearnedPolicy(ZOO_DIR / "ppo-greenhouse-nav-general", env), 1, None, first_steps)["record"]
-    shielded = run_episode(env, LearnedPolicy(run, env), 1, None, first_steps)["record"]
+    plain, shielded = both(CORRIDOR, 2000)  # the whole mission: its turns face the corridor's walls
     assert "safety_interventions" not in plain
     assert {"safety_interventions", "safety_stops", "safety_blocked_time"} <= set(shielded)
-    if shielded["safety_interventions"] == 0:  # the layer never acted: the episode is the network's own
-        assert shielded["steps"] == plain["steps"] and shielded["return"] == plain["return"]
+    assert shielded["safety_interventions"] > 0
+    plain, shielded = both({"n_people": 0, "localization": "ground_truth"}, 300)  # 20 s among the first rows
+    assert shielded["safety_interventions"] == 0
+    assert {k: v for k, v in shielded.items() if k in plain and k != "wall_time_s"} == {
+        k: v for k, v in plain.items() if k != "wall_time_s"
+    }
 
 
 GRAPE = "agri_envs/GrapeHarvest-v1"
