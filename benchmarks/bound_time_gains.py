@@ -1,0 +1,142 @@
+"""How much time any policy could save against the best scripted one: GreenhouseCoverage and robot_chain.
+
+Issue 38 asks, for one of these two envs, a learned policy at least 10 % faster than the best scripted entry on
+every suite of the env that is not a stress suite, at 1.00 success without contact. This script measures how much
+room the envs leave, on the suites' own held-out seeds and arguments, against the committed entries (the best
+scripted entry as the leaderboard's "Where learning beats the papers" picks it):
+
+* GreenhouseCoverage: an oracle that knows the true corridor centre lines (``env.unwrapped.corridor_lines()``)
+  drives them end to end and turns into the next corridor on a half circle that starts right at the corridor's
+  end, with Pure Pursuit at the Fitorobot's limits (``gonzalez-deliberative``'s tracker, the same speed, turn
+  rate and acceleration). The straights at the speed limit take most of the time; only the headland turns
+  can get shorter. ``--extend`` moves the turns out into the headland (m).
+* robot_chain: ``apoorva-chain`` with the ghost (the env's pace setter along the A* path, 0.35 m/s, which is
+  all the leader sees of its path) run at the robots' top speed 0.4 m/s and beyond (the leader then runs at
+  its limit the whole way). A leader that ignores the ghost has no path ahead of it: only the goal's direction
+  and its sonars.
+
+The time it prints is the mean episode time (s); ``oracle / best`` below 0.90 leaves room for the 10 %.
+
+    python benchmarks/bound_time_gains.py [--episodes 20] [--extend 0.0] [--ghost-speeds 0.4 0.6]
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+from collections.abc import Sequence
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+
+import agri_envs
+from agri_baselines import make_policy
+from agri_baselines.gonzalez import PurePursuit
+from agri_baselines.gonzalez_policies import MIN_LOOKAHEAD, TRACKING_SPEED, TRACKING_TURN_RATE
+from agri_training.evaluation.episode import run_episode
+from agri_training.leaderboard.entries import load_entries
+from agri_training.leaderboard.gains import best_scripted
+from agri_training.leaderboard.suites import Suite, load_suites
+
+COVERAGE = "agri_envs/GreenhouseCoverage-v2"
+CHAIN = "robot_chain_v1"
+
+
+def serpentine_with_half_circles(corridors: Sequence[np.ndarray], start: np.ndarray, extend: float) -> np.ndarray:
+    """The corridors' centre lines in serpentine order joined by half circles ``extend`` m past their ends (m)."""
+    points: list[np.ndarray] = [np.asarray(start, dtype=np.float64)]
+    for k, line in enumerate(corridors):
+        forward = k % 2 == 0
+        line = np.asarray(line, dtype=np.float64) if forward else np.asarray(line, dtype=np.float64)[::-1]
+        out = 1.0 if forward else -1.0
+        points.extend(line)
+        end = line[-1] + (out * extend, 0.0)
+        points.append(end)
+        if k + 1 == len(corridors):
+            break
+        following = np.asarray(corridors[k + 1], dtype=np.float64)
+        mouth = (following[0] if (k + 1) % 2 == 0 else following[-1]) + (out * extend, 0.0)
+        centre, radius = (end + mouth) / 2.0, abs(mouth[1] - end[1]) / 2.0
+        side = math.copysign(1.0, end[1] - centre[1])
+        for t in np.linspace(0.0, math.pi, 24)[1:-1]:
+            points.append(centre + (out * radius * math.sin(t), side * radius * math.cos(t)))
+        points.append(mouth)
+    dense = [points[0]]
+    for a, b in zip(points[:-1], points[1:], strict=True):
+        n = max(1, math.ceil(float(np.hypot(*(b - a))) / 0.1))
+        dense.extend(a + (b - a) * i / n for i in range(1, n + 1))
+    return np.array(dense)
+
+
+def coverage_oracle_times(suite: Suite, extend: float, episodes: int) -> list[tuple[float, bool, bool]]:
+    """``(episode time, success, contact)`` of the half-circle oracle on the suite's first ``episodes`` seeds."""
+    env = gym.make(COVERAGE, **{**suite.env_kwargs, "localization": "ground_truth"})
+    e: Any = env.unwrapped
+    robot = e.robot_spec
+    out = []
+    for seed in suite.seeds[:episodes]:
+        env.reset(seed=seed)
+        path = serpentine_with_half_circles(e.corridor_lines(), e.robot.pose[:2], extend)
+        tracker = PurePursuit(path, lookahead=1.0, min_lookahead=MIN_LOOKAHEAD)
+        limits = (min(robot.max_speed, TRACKING_SPEED), min(robot.max_turn_rate, TRACKING_TURN_RATE), robot.max_accel)
+        while True:
+            v, w = tracker.command(np.asarray(e.robot.pose, dtype=np.float64), *limits)
+            action = np.clip([v / robot.max_speed, w / robot.max_turn_rate], -1.0, 1.0).astype(np.float32)
+            _, _, terminated, truncated, info = env.step(action)
+            if terminated or truncated:
+                break
+        out.append((float(info["episode_time"]), bool(info["is_success"]), bool(info["collision"])))
+    env.close()
+    return out
+
+
+def chain_times(suite: Suite, ghost_speed: float, episodes: int) -> list[tuple[float, bool, bool]]:
+    """``(episode time, success, contact)`` of ``apoorva-chain`` with the ghost at ``ghost_speed`` (m/s)."""
+    env = agri_envs.make(CHAIN, **{**suite.env_kwargs, "ghost_speed": ghost_speed})
+    out = []
+    for seed in suite.seeds[:episodes]:
+        record = run_episode(env, make_policy("apoorva-chain", env), seed, None)["record"]
+        out.append((float(record["episode_time"]), bool(record["is_success"]), bool(record["collision"])))
+    return out
+
+
+def best_time(suite: Suite, entries: Sequence[dict[str, Any]]) -> tuple[str, float]:
+    """The best scripted entry's name and mean episode time on ``suite`` (as the gains section picks it)."""
+    group = [e for e in entries if e["suite"]["name"] == suite.name]
+    best = best_scripted(group, "mean_episode_time", higher_is_better=False)
+    if best is None:
+        raise ValueError(f"suite {suite.name} has no scripted entry with an episode time")
+    return best["policy"]["name"], float(best["summary"]["mean_episode_time"])
+
+
+def main() -> None:
+    """Print the bounds, one line per suite and setting."""
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--episodes", type=int, default=20, help="seeds of each suite (from its first)")
+    parser.add_argument("--extend", type=float, default=0.0, help="oracle turns this far past the corridor ends (m)")
+    parser.add_argument("--ghost-speeds", type=float, nargs="+", default=[0.4, 0.6], help="ghost speeds (m/s)")
+    args = parser.parse_args()
+    entries = load_entries()
+    learned_suites = {e["suite"]["name"] for e in entries if e["policy"]["kind"] == "learned"}
+    suites = [s for s in load_suites() if s.stress is None and s.name in learned_suites]
+    print(f"{'suite':28s} {'best scripted':24s} {'its time':>9s} {'setting':>18s} {'time':>7s} {'ratio':>6s} ok")
+    for suite in suites:
+        if suite.env_id == COVERAGE:
+            runs = [(f"extend {args.extend:.2f} m", coverage_oracle_times(suite, args.extend, args.episodes))]
+        elif suite.env_id == CHAIN:
+            runs = [(f"ghost {g:.2f} m/s", chain_times(suite, g, args.episodes)) for g in args.ghost_speeds]
+        else:
+            continue
+        name, scripted = best_time(suite, entries)
+        for setting, results in runs:
+            mean = float(np.mean([t for t, _, _ in results]))
+            ok = sum(s and not c for _, s, c in results)
+            print(
+                f"{suite.name:28s} {name:24s} {scripted:9.1f} {setting:>18s} {mean:7.1f} {mean / scripted:6.3f} "
+                f"{ok}/{len(results)}"
+            )
+
+
+if __name__ == "__main__":
+    main()
