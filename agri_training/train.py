@@ -262,6 +262,13 @@ def resolve_config(request: TrainRequest) -> dict[str, Any]:
                 name = item if isinstance(item, str) else next(iter(item), None)
                 if name in single and name not in vector:
                     raise ValueError(f"{key}: {name} has no vector form; train with vec_env: dummy or subproc")
+        repeat = int(hp.get("action_repeat", 1))
+        single_agent = not agri_envs.is_parallel_id(request.env_id)
+        if repeat > 1 and single_agent and not batched_form_holds_actions(request.env_id):
+            raise ValueError(
+                f"{request.env_id}: action_repeat {repeat} on vec_env: vector needs the batched form to hold each "
+                "action itself (a frame_skip argument), and this env has none; train with vec_env: dummy or subproc"
+            )
     timesteps = int(request.timesteps if request.timesteps is not None else hp.get("n_timesteps", 100_000))
     if timesteps < 0 or (timesteps < 1 and not hp.get("pretrain")):
         raise ValueError(f"timesteps must be >= 1, or 0 with a pretrain block (imitation only), got {timesteps}")
@@ -384,10 +391,30 @@ def make_repeating(env_id: str, env_kwargs: Mapping[str, Any], repeat: int) -> g
     if "frame_skip" in env_kwargs:
         raise ValueError("set action_repeat, not env_kwargs.frame_skip: evaluation holds actions by action_repeat")
     env = gym.make(env_id, **env_kwargs)
-    if "frame_skip" in getattr(getattr(env.unwrapped, "config", None), "__dataclass_fields__", {}):
+    if has_frame_skip(env):
         env.close()
         return gym.make(env_id, **env_kwargs, frame_skip=repeat)
     return ActionRepeat(env, repeat)
+
+
+def has_frame_skip(env: gym.Env[Any, Any]) -> bool:
+    """Whether the env takes a ``frame_skip`` argument (its own way to hold an action for several periods)."""
+    return "frame_skip" in getattr(getattr(env.unwrapped, "config", None), "__dataclass_fields__", {})
+
+
+def batched_form_holds_actions(env_id: str) -> bool:
+    """Whether ``vec_env: vector`` can hold actions for ``action_repeat`` periods on ``env_id``.
+
+    It can where the env has no batched form (the single envs repeat actions themselves) or where the env takes
+    ``frame_skip``, which its batched form then implements (GreenhouseNav); GreenhouseCoverage's has none.
+    """
+    if gym.spec(env_id).vector_entry_point is None:
+        return True
+    env = gym.make(env_id)
+    try:
+        return has_frame_skip(env)
+    finally:
+        env.close()
 
 
 def make_vector_train_env(config: Mapping[str, Any], batched: bool = True) -> Any:

@@ -130,6 +130,12 @@ def test_hyperparameters_resolve_and_stay_strict(tmp_path):
         resolve_config(TrainRequest(ENV_ID, "ppo", tmp_path, overrides={"vec_env": "batched"}))
     with pytest.raises(ValueError, match="update_threads must be >= 1"):
         resolve_config(TrainRequest(ENV_ID, "ppo", tmp_path, overrides={"update_threads": 0}))
+    # GreenhouseCoverage's batched form cannot hold an action for 2 periods: refused by name, before training.
+    coverage = {"vec_env": "vector", "action_repeat": 2, "train_wrappers": []}
+    with pytest.raises(ValueError, match="GreenhouseCoverage-v2: action_repeat 2 on vec_env: vector"):
+        resolve_config(TrainRequest("agri_envs/GreenhouseCoverage-v2", "ppo", tmp_path, overrides=coverage))
+    resolve_config(TrainRequest("agri_envs/GreenhouseCoverage-v2", "ppo", tmp_path, overrides={**coverage, "action_repeat": 1}))
+    resolve_config(TrainRequest(ENV_ID, "ppo", tmp_path, overrides=coverage))  # GreenhouseNav's takes frame_skip
 
 
 def test_a_registered_trained_policy_loads_by_name(tiny_run, monkeypatch, capsys):
