@@ -134,7 +134,8 @@ def test_hyperparameters_resolve_and_stay_strict(tmp_path):
     coverage = {"vec_env": "vector", "action_repeat": 2, "train_wrappers": []}
     with pytest.raises(ValueError, match="GreenhouseCoverage-v2: action_repeat 2 on vec_env: vector"):
         resolve_config(TrainRequest("agri_envs/GreenhouseCoverage-v2", "ppo", tmp_path, overrides=coverage))
-    resolve_config(TrainRequest("agri_envs/GreenhouseCoverage-v2", "ppo", tmp_path, overrides={**coverage, "action_repeat": 1}))
+    held_once = {**coverage, "action_repeat": 1}
+    resolve_config(TrainRequest("agri_envs/GreenhouseCoverage-v2", "ppo", tmp_path, overrides=held_once))
     resolve_config(TrainRequest(ENV_ID, "ppo", tmp_path, overrides=coverage))  # GreenhouseNav's takes frame_skip
 
 
