@@ -297,10 +297,15 @@ register_policy(
 
 #: What the arm's whole-vine reach needs of the env: end-effector actions of the size it was trained with.
 _GRAPE_EE = {"control": "ee", "max_ee_step": 0.04, "max_ee_rotation": 0.2}
-#: How the whole-vine reach was trained (its zoo folder's command.txt has the run's exact line).
-_GRAPE_VINE_COMMAND = (
-    "agri train --env agri_envs/GrapeHarvest-v1 --scenario table2 --algo sac --her --seed SEED --out runs/vine-sSEED"
-)
+
+
+def _grape_vine_command(seed: int) -> str:
+    """How the whole-vine reach's seed ``seed`` was trained (its zoo folder's command.txt has the run's exact line)."""
+    return (
+        f"agri train --env agri_envs/GrapeHarvest-v1 --scenario table2 --algo sac --her --seed {seed} "
+        f"--out runs/vine-s{seed}"
+    )
+
 
 register_policy(
     PolicySpec(
@@ -313,7 +318,7 @@ register_policy(
         "order (the unharvested cluster nearest the clamp, then home)",
         learned=True,
         algo="sac",
-        train_command=_GRAPE_VINE_COMMAND,
+        train_command=_grape_vine_command(0),
     )
 )
 
@@ -329,7 +334,7 @@ register_policy(
         "'safety_layer: luo-box-check' was added to the run's config after training (agri_training/learned/safety.py)",
         learned=True,
         algo="sac",
-        train_command=_GRAPE_VINE_COMMAND.replace("SEED", "2"),
+        train_command=_grape_vine_command(2),
     )
 )
 
@@ -343,6 +348,6 @@ register_policy(
         "eq. 11 (as luo-apf), then home",
         learned=True,
         algo="sac",
-        train_command=_GRAPE_VINE_COMMAND,
+        train_command=_grape_vine_command(0),
     )
 )

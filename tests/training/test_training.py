@@ -1,6 +1,7 @@
 """agri train and weights-only loading: run directories, hyperparameter YAML, refusal of pickled checkpoints."""
 
 import json
+import shlex
 from pathlib import Path
 
 import gymnasium as gym
@@ -13,6 +14,8 @@ from stable_baselines3.common.vec_env import DummyVecEnv
 from tiny_runs import TINY_ENV, TINY_HP
 
 import agri_envs  # noqa: F401
+import agri_training.learned.zoo as zoo
+from agri_baselines import list_policies
 from agri_training.evaluation.evaluate import evaluate
 from agri_training.evaluation.policies import EvalRequest, load_policy
 from agri_training.learned.policy import LearnedPolicy, UnsafeCheckpointError, load_weights, resolve_policy_kwargs
@@ -141,7 +144,6 @@ def test_hyperparameters_resolve_and_stay_strict(tmp_path):
 
 def test_a_registered_trained_policy_loads_by_name(tiny_run, monkeypatch, capsys):
     import agri_baselines
-    import agri_training.learned.zoo as zoo
     from agri_training.cli import main
 
     monkeypatch.setattr(zoo, "ZOO_DIR", tiny_run.parent)
@@ -160,6 +162,21 @@ def test_a_registered_trained_policy_loads_by_name(tiny_run, monkeypatch, capsys
     assert isinstance(load_policy(spec.name, env), LearnedPolicy)
     assert main(["list"]) == 0
     assert f"{spec.name} [{ENV_ID}] (privileged) (learned: PPO)" in capsys.readouterr().out
+
+
+def test_each_shipped_policy_names_the_run_that_made_its_weights():
+    """A registered train_command agrees with its zoo folder's command.txt on every flag that shapes the run."""
+    shaping = ("--env", "--algo", "--seed", "--hyperparams", "--scenario", "--her")
+
+    def flags(command: str) -> dict[str, str]:
+        words = shlex.split(command)
+        return {w: "" if w == "--her" else words[i + 1] for i, w in enumerate(words) if w in shaping}
+
+    shipped = [s for s in list_policies() if s.learned]
+    assert len(shipped) >= 17
+    for spec in shipped:
+        recorded = (zoo.zoo_path(spec.name) / "command.txt").read_text()
+        assert flags(spec.train_command) == flags(recorded), spec.name
 
 
 def test_train_env_kwargs_reach_the_training_envs_only(tmp_path):
