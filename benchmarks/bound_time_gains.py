@@ -34,6 +34,7 @@ import agri_envs
 from agri_baselines import make_policy
 from agri_baselines.gonzalez import PurePursuit
 from agri_baselines.gonzalez_policies import MIN_LOOKAHEAD, TRACKING_SPEED, TRACKING_TURN_RATE
+from agri_envs.sim2d.polyline import Polyline
 from agri_training.evaluation.episode import run_episode
 from agri_training.leaderboard.entries import load_entries
 from agri_training.leaderboard.gains import best_scripted
@@ -44,11 +45,11 @@ CHAIN = "robot_chain_v1"
 
 
 def serpentine_with_half_circles(corridors: Sequence[np.ndarray], start: np.ndarray, extend: float) -> np.ndarray:
-    """The corridors' centre lines in serpentine order joined by half circles ``extend`` m past their ends (m)."""
+    """Points every 10 cm: the corridor centre lines in serpentine order, half circles ``extend`` m past their ends."""
     points: list[np.ndarray] = [np.asarray(start, dtype=np.float64)]
     for k, line in enumerate(corridors):
         forward = k % 2 == 0
-        line = np.asarray(line, dtype=np.float64) if forward else np.asarray(line, dtype=np.float64)[::-1]
+        line = np.asarray(line, dtype=np.float64)[:: 1 if forward else -1]
         out = 1.0 if forward else -1.0
         points.extend(line)
         end = line[-1] + (out * extend, 0.0)
@@ -62,11 +63,8 @@ def serpentine_with_half_circles(corridors: Sequence[np.ndarray], start: np.ndar
         for t in np.linspace(0.0, math.pi, 24)[1:-1]:
             points.append(centre + (out * radius * math.sin(t), side * radius * math.cos(t)))
         points.append(mouth)
-    dense = [points[0]]
-    for a, b in zip(points[:-1], points[1:], strict=True):
-        n = max(1, math.ceil(float(np.hypot(*(b - a))) / 0.1))
-        dense.extend(a + (b - a) * i / n for i in range(1, n + 1))
-    return np.array(dense)
+    path = Polyline(np.array(points))
+    return path.at_many(np.append(np.arange(0.0, path.length, 0.1), path.length))
 
 
 def coverage_oracle_times(suite: Suite, extend: float, episodes: int) -> list[tuple[float, bool, bool]]:
