@@ -282,6 +282,22 @@ register_policy(
 
 register_policy(
     PolicySpec(
+        name="dagger-chain-long",
+        env_id="robot_chain_v1",
+        entry_point="agri_training.learned.zoo:load_zoo_policy",
+        env_kwargs={},
+        description="Learned by imitation (agri_training/zoo/dagger-chain-long): dagger-chain-robust's network, "
+        "inputs and recipe with chains of 32 robots instead of 16 (the robust distribution's floors drawn again "
+        "until the chain fits, half the episodes), no PPO steps",
+        learned=True,
+        algo="ppo",
+        train_command="agri train --env robot_chain_v1 --algo ppo --hyperparams "
+        "agri_training/hyperparams/dagger_chain_long.yml --seed 2 --out runs/chain-long-s2",
+    )
+)
+
+register_policy(
+    PolicySpec(
         name="sac-her-grape-reach-strict",
         env_id="agri_envs/GrapeHarvest-v1",
         entry_point="agri_training.learned.zoo:load_zoo_policy",
