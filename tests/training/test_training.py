@@ -18,8 +18,21 @@ import agri_training.learned.zoo as zoo
 from agri_baselines import list_policies
 from agri_training.evaluation.evaluate import evaluate
 from agri_training.evaluation.policies import EvalRequest, load_policy
-from agri_training.learned.policy import LearnedPolicy, UnsafeCheckpointError, load_weights, resolve_policy_kwargs
-from agri_training.train import TrainRequest, load_hyperparams, resolve_config, train
+from agri_training.learned.policy import (
+    ALGORITHMS,
+    LearnedPolicy,
+    UnsafeCheckpointError,
+    load_weights,
+    resolve_policy_kwargs,
+)
+from agri_training.train import (
+    HYPERPARAMS_DIR,
+    TrainRequest,
+    check_same_spaces,
+    load_hyperparams,
+    resolve_config,
+    train,
+)
 
 ENV_ID = "agri_envs/GreenhouseNav-v2"
 
@@ -109,6 +122,19 @@ def test_pickled_code_in_a_checkpoint_never_runs(tiny_run, tmp_path):
     assert not marker.exists()
     with pytest.raises(UnsafeCheckpointError, match="unpickling"):
         load_policy(str(tmp_path / "model.pkl"), env)
+
+
+@pytest.mark.parametrize("path", sorted(HYPERPARAMS_DIR.glob("*.yml")), ids=lambda p: p.name)
+def test_every_recipe_file_resolves_for_each_env_it_names(path, tmp_path):
+    # A recipe a docstring or a zoo command.txt points at must still resolve (keys, wrappers, env arguments as
+    # train() checks them before it writes anything), not only the configs the shipped policies froze.
+    algo = path.stem if path.stem in ALGORITHMS else "ppo"
+    env_ids = [key for key in yaml.safe_load(path.read_text()) if key != "default"]
+    assert env_ids, f"{path.name} names no env"
+    for env_id in env_ids:
+        config = resolve_config(TrainRequest(env_id, algo, tmp_path / "run", hyperparams_file=path))
+        assert config["env_id"] == env_id and config["algo"] == algo
+        check_same_spaces(config)
 
 
 def test_hyperparameters_resolve_and_stay_strict(tmp_path):
