@@ -270,6 +270,14 @@ def resolve_config(request: TrainRequest) -> dict[str, Any]:
                 "action itself (a frame_skip argument), and this env has none; train with vec_env: dummy or subproc"
             )
     timesteps = int(request.timesteps if request.timesteps is not None else hp.get("n_timesteps", 100_000))
+    if int(hp.get("action_repeat", 1)) > 1 and timesteps > 0:
+        for item in hp.get("wrappers", []) or []:
+            if isinstance(item, dict) and (item.get("SlamWaypoint") or {}).get("every_scan"):
+                raise ValueError(
+                    "SlamWaypoint every_scan with action_repeat > 1 needs an imitation-only run (n_timesteps 0): "
+                    "PPO's rollouts hold actions inside the env (ActionRepeat), so its SLAM would see one scan per "
+                    "decision there and every scan wherever the weights act"
+                )
     if timesteps < 0 or (timesteps < 1 and not hp.get("pretrain")):
         raise ValueError(f"timesteps must be >= 1, or 0 with a pretrain block (imitation only), got {timesteps}")
     if hp.get("pretrain"):

@@ -92,12 +92,15 @@ class HeldActions:
         self.repeat = repeat
         self._count = 0
         self._held: tuple[np.ndarray, Any] | None = None
+        self.decided = False
 
     def __call__(self, decide: Any, episode_start: Any) -> tuple[np.ndarray, Any]:
         """The held action, or ``decide()`` when it is time for a new one."""
         if episode_start is not None and bool(np.asarray(episode_start).any()):
             self._count = 0
-        if self._held is None or self._count % self.repeat == 0:
+        #: Whether this call asked the network (False: the action was held).
+        self.decided = self._held is None or self._count % self.repeat == 0
+        if self.decided:
             self._held = decide()
         self._count += 1
         assert self._held is not None
@@ -456,6 +459,12 @@ class ObservationReplay:
             observation = self.normalization.normalize(observation)
         return observation
 
+    def see(self, observation: Any) -> None:
+        """A raw observation of a step whose action is held, for the wrappers that read every scan."""
+        for w in self.chain:
+            if isinstance(w, SlamWaypoint):
+                w.see(observation)
+
 
 def find_run_dir(path: Path) -> Path:
     """The run directory whose ``config.yaml`` applies to ``path`` (the folder itself or a parent)."""
@@ -607,11 +616,15 @@ def decide_held(
 ) -> tuple[Any, Any]:
     """One step of a single-agent learned policy: the held action, or the network's on a decision step.
 
-    The observation goes through ``replay`` only on decision steps, as it did once per decision in training.
+    The observation goes through ``replay`` only on decision steps, as it did once per decision in training;
+    on the others the wrappers that read every scan see it (:meth:`ObservationReplay.see`).
     """
     new_episode = episode_start is not None and bool(np.asarray(episode_start).any())
 
     def decide() -> tuple[Any, Any]:
         return model.predict(replay(observation, new_episode), state, episode_start, deterministic)
 
-    return hold(decide, episode_start)
+    result = hold(decide, episode_start)
+    if not hold.decided:
+        replay.see(observation)
+    return result

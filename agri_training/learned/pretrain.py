@@ -228,10 +228,15 @@ class _Decisions:
         self.ends: list[bool] = []
 
     def decide(self, step: int, shown: Any, action: Any) -> bool:
-        """Record a decision at ``step`` (one every ``action_repeat`` steps): True when it is one."""
-        if step % self.repeat:
-            return False
+        """Record a decision at ``step`` (one every ``action_repeat`` steps): True when it is one.
+
+        On the other steps the wrappers that read every scan see the observation (``SlamWaypoint``'s
+        ``every_scan``), as they do where the weights act (:func:`~agri_training.learned.policy.decide_held`).
+        """
         seen = {k: shown[k] for k in self.keys} if self.keys is not None else shown
+        if step % self.repeat:
+            self.replay.see(seen)
+            return False
         self.observations.append(self.replay(seen, new_episode=step == 0))
         self.actions.append(np.clip(np.asarray(action, dtype=np.float32), -1.0, 1.0))
         self.rewards.append(0.0)

@@ -111,3 +111,70 @@ def test_aim_inside_adds_its_margin_to_the_distance_only():
         b, *_ = aimed.step(_act(k))
     with pytest.raises(ValueError, match="aim_inside must be in"):
         SlamWaypoint(gym.make(ENV_ID, **BLIND), aim_inside=-0.1)
+
+
+def test_every_scan_feeds_the_held_steps_scans_to_the_slam_wherever_the_weights_act_or_learn():
+    """Oracle: the wrapper on an env stepped every control period (its SLAM sees every scan), read at the
+    decisions. Both the evaluation path (decide_held) and imitation's recording (pretrain) must match it, and
+    differ from the once-per-decision SLAM."""
+    from agri_training.learned.pretrain import _Decisions
+
+    repeat, steps, seed = 4, 160, 21
+    every = [{"SlamWaypoint": {"every_scan": True}}, *WRAPPERS[1:]]
+    oracle_env = apply_wrappers(gym.make(ENV_ID, **BLIND), WRAPPERS)
+    obs, _ = oracle_env.reset(seed=seed)
+    oracle = []
+    for step in range(steps):
+        if step % repeat == 0:
+            oracle.append(obs)
+        obs, *_ = oracle_env.step(_act(step // repeat))
+
+    def decisions_seen(wrappers):
+        env = gym.make(ENV_ID, **BLIND)
+        replay, hold = ObservationReplay(observation_chain(env, wrappers)[1]), HeldActions(repeat)
+        seen = []
+
+        class Recorder:
+            def predict(self, observation, state=None, episode_start=None, deterministic=True):
+                seen.append(np.array(observation))
+                return _act(len(seen) - 1), state
+
+        obs, _ = env.reset(seed=seed)
+        for step in range(steps):
+            action, _ = decide_held(hold, replay, Recorder(), obs, None, np.array([step == 0]), True)
+            obs, *_ = env.step(action)
+        return seen
+
+    def recorded_by_imitation(wrappers):
+        env = gym.make(ENV_ID, **BLIND)
+        decisions = _Decisions(env, {"wrappers": wrappers, "action_repeat": repeat})
+        obs, _ = env.reset(seed=seed)
+        for step in range(steps):
+            decisions.decide(step, obs, _act(step // repeat))
+            obs, *_ = env.step(_act(step // repeat))
+        return decisions.observations
+
+    for seen in (decisions_seen(every), recorded_by_imitation(every)):
+        assert len(seen) == len(oracle) == steps // repeat
+        for k, (a, b) in enumerate(zip(oracle, seen, strict=True)):
+            np.testing.assert_allclose(a, b, rtol=1e-6, atol=1e-6, err_msg=f"decision {k}")
+    once = decisions_seen(WRAPPERS)
+    assert max(np.abs(a - b).max() for a, b in zip(oracle, once, strict=True)) > 1e-4  # half the scans: another pose
+
+
+def test_every_scan_is_a_bool_and_ppo_rollouts_refuse_it(tmp_path):
+    from agri_training.train import TrainRequest, resolve_config
+
+    with pytest.raises(ValueError, match="every_scan must be true or false"):
+        SlamWaypoint(gym.make(ENV_ID, **BLIND), every_scan="yes")
+    recipe = tmp_path / "slam.yml"
+    recipe.write_text(
+        "default:\n  policy: MultiInputPolicy\n  action_repeat: 2\n  n_timesteps: 4096\n"
+        "  env_kwargs: {localization: none, full_scan: true}\n"
+        "  wrappers: [{SlamWaypoint: {every_scan: true}}]\n"
+        "  pretrain: {policy: harik-apf-gt, episodes: 2}\n"
+    )
+    with pytest.raises(ValueError, match="imitation-only run"):
+        resolve_config(TrainRequest(ENV_ID, "ppo", tmp_path / "r", hyperparams_file=recipe))
+    imitation = resolve_config(TrainRequest(ENV_ID, "ppo", tmp_path / "r", hyperparams_file=recipe, timesteps=0))
+    assert imitation["wrappers"][0] == {"SlamWaypoint": {"every_scan": True}}
