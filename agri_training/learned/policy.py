@@ -92,13 +92,13 @@ class HeldActions:
         self.repeat = repeat
         self._count = 0
         self._held: tuple[np.ndarray, Any] | None = None
+        #: Whether the last call asked the network (False: it held the action).
         self.decided = False
 
     def __call__(self, decide: Any, episode_start: Any) -> tuple[np.ndarray, Any]:
         """The held action, or ``decide()`` when it is time for a new one."""
         if episode_start is not None and bool(np.asarray(episode_start).any()):
             self._count = 0
-        #: Whether this call asked the network (False: the action was held).
         self.decided = self._held is None or self._count % self.repeat == 0
         if self.decided:
             self._held = decide()

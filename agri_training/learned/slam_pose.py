@@ -18,9 +18,9 @@ one and ships with ``aim_inside: 0.1`` (its ``config.yaml`` differs from its run
 
 The wrapper sees one observation per decision (the policy's rate: every ``action_repeat``-th scan), in
 training and in evaluation alike (:class:`~agri_training.learned.policy.ObservationReplay`), so the SLAM
-the network learned with is the SLAM it drives with. ``every_scan`` (default off) is a deployment setting like
-``aim_inside``: a policy that decides every ``action_repeat``-th scan still feeds every scan to its SLAM
-(:meth:`SlamWaypoint.see` on the steps whose action it holds), as ``harik-apf`` updates its map on every scan.
+the network learned with is the SLAM it drives with. With ``every_scan`` (default off) a policy that decides every
+``action_repeat``-th scan still feeds every scan to its SLAM (:meth:`SlamWaypoint.see` on the steps whose action
+it holds), as ``harik-apf`` updates its map on every scan.
 Half the scans leave twice the motion between two matches, and in long featureless corridors Hector SLAM then
 loses itself: ``dagger-greenhouse-nav-slam-shielded`` in the 12x24 m greenhouse finished 3 of 10 validation
 episodes on SLAM at its decisions, 9 of 10 with every scan. Imitation (``pretrain``: demonstrations and DAgger
@@ -45,8 +45,8 @@ class SlamWaypoint(gym.ObservationWrapper[dict[str, Any], Any, dict[str, Any]]):
 
     Needs the env made with ``localization="none"`` and ``full_scan=True`` (keys ``target`` and ``scan``). The
     SLAM map starts afresh with each episode (:meth:`clear`, which a reset calls and the replay of a learned
-    policy calls when an episode starts). In a config: ``SlamWaypoint`` or ``{SlamWaypoint: {aim_inside: 0.1}}``,
-    at deployment also ``every_scan: true`` (see the module doc; put it before ``FlattenObservation``).
+    policy calls when an episode starts). In a config: ``SlamWaypoint`` or ``{SlamWaypoint: {aim_inside: 0.1,
+    every_scan: true}}`` (see the module doc; put it before ``FlattenObservation``).
 
     Raises:
         ValueError: For an observation without ``target`` or ``scan``, ``aim_inside`` outside [0, 1) m, or an
