@@ -183,6 +183,24 @@ register_policy(
 
 register_policy(
     PolicySpec(
+        name="dagger-greenhouse-nav-slam-every-scan-shielded",
+        env_id="agri_envs/GreenhouseNav-v2",
+        entry_point="agri_training.learned.zoo:load_zoo_policy",
+        env_kwargs={"localization": "none", "full_scan": True},
+        description="The SLAM recipe with its Hector SLAM fed every LIDAR scan, not only the scans it decides on "
+        "(dagger_slam_every_scan.yml, seed 0), behind the safety layer harik-passive-safety; nothing privileged. "
+        "The line 'safety_layer: harik-passive-safety' was added to the run's config after training (the layer "
+        "does not act in imitation; agri_training/learned/safety.py)",
+        privileged=False,
+        learned=True,
+        algo="ppo",
+        train_command="agri train --env agri_envs/GreenhouseNav-v2 --algo ppo --hyperparams "
+        "agri_training/hyperparams/dagger_slam_every_scan.yml --seed 0 --out runs/nav-slam-every-s0",
+    )
+)
+
+register_policy(
+    PolicySpec(
         name="dagger-greenhouse-nav-slam-shielded",
         env_id="agri_envs/GreenhouseNav-v2",
         entry_point="agri_training.learned.zoo:load_zoo_policy",
