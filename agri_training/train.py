@@ -31,7 +31,7 @@ evaluated. The keys:
 | ``safety_layer`` | a fixed rule between the network and the robot wherever the weights act (evaluation, |
 | | validation, leaderboard; not PPO's rollouts), its interventions counted (``learned.safety``); null: none |
 
-A run directory holds ``policy.pt`` (the final weights, a ``state_dict``), ``normalize.json`` (the
+A run directory holds ``policy.pt`` (the final weights: the acting layers' ``state_dict``), ``normalize.json`` (the
 observation statistics), ``config.yaml`` (the resolved config), ``meta.json`` (exact command, package
 versions, git commit, wall time, machine load), ``curve.csv`` (the learning curve of the periodic
 evaluation), ``best/`` (the weights of the best periodic evaluation), ``checkpoints/step_N/`` and ``tb/``
@@ -76,7 +76,7 @@ from agri_training.learned.curricula import (
     apply_vector_train_wrappers,
     check_wrapper_names,
 )
-from agri_training.learned.inference import PolicyNetwork
+from agri_training.learned.inference import PolicyNetwork, acting_state
 from agri_training.learned.parameter_sharing import make_shared_vec_env, predict_shared
 from agri_training.learned.policy import (
     ALGORITHMS,
@@ -564,11 +564,16 @@ class _LivePolicy:
 
 
 def save_weights(model: Any, folder: Path) -> None:
-    """Write the policy's ``state_dict`` (tensors only) and the observation statistics into ``folder``."""
+    """Write the policy's acting layers (tensors only) and the observation statistics into ``folder``.
+
+    The value network or critics stay out (:func:`~agri_training.learned.inference.acting_state`): nothing reads
+    them back, and they are half of a PPO policy's bytes and most of a SAC policy's.
+    """
     import torch
 
     folder.mkdir(parents=True, exist_ok=True)
-    state = {k: v.detach().cpu().clone() for k, v in model.policy.state_dict().items()}
+    full = model.policy.state_dict()
+    state = {k: v.detach().cpu().clone() for k, v in acting_state(full, type(model).__name__.lower()).items()}
     torch.save(state, folder / WEIGHTS_FILE)
     venv = model.get_vec_normalize_env()
     stats = ObsNormalization.from_vec_normalize(venv) if venv is not None else None

@@ -58,6 +58,26 @@ ACTOR_LAYERS = {
     "td3": ("actor.mu", None),
 }
 
+#: What each algorithm's ``state_dict`` holds only to learn, never to act: the value network or the critics and
+#: target networks. :func:`acting_state` leaves them out of the weights a run writes.
+LEARNING_ONLY = {
+    "ppo": ("mlp_extractor.value_net.", "value_net.", "vf_features_extractor."),
+    "sac": ("critic.", "critic_target."),
+    "tqc": ("critic.", "critic_target."),
+    "td3": ("critic.", "critic_target.", "actor_target."),
+}
+
+
+def acting_state(state: Mapping[str, Any], algo: str) -> dict[str, Any]:
+    """``state`` without what only learning reads (:data:`LEARNING_ONLY`; an unknown algorithm keeps everything).
+
+    The acting layers (:data:`ACTOR_LAYERS`), a PPO policy's ``log_std`` and SAC's ``actor.log_std`` stay, so
+    :meth:`PolicyNetwork.from_state_dict` exports the same network from it as from the whole ``state_dict``.
+    """
+    dropped = LEARNING_ONLY.get(algo, ())
+    return {k: v for k, v in state.items() if not k.startswith(dropped)}
+
+
 _LN2_HI = 6.93147180369123816490e-01  # ln 2 split so that k * _LN2_HI is exact for |k| < 2**20 (fdlibm)
 _LN2_LO = 1.90821492927058770002e-10
 _INV_LN2 = 1.44269504088896338700e00

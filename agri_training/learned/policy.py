@@ -6,7 +6,7 @@ rebuild a policy without unpickling anything:
 | file | content |
 |---|---|
 | ``config.yaml`` | the resolved training config: env id and arguments, algorithm, policy, wrappers |
-| ``policy.pt`` | the policy's ``state_dict`` (tensors only), read with ``torch.load(weights_only=True)`` |
+| ``policy.pt`` | the acting layers' ``state_dict`` (older runs: all), read with ``torch.load(weights_only=True)`` |
 | ``normalize.json`` | the ``VecNormalize`` observation statistics (mean, variance, clip), when used |
 
 :class:`LearnedPolicy` exports the acting layers of the weights to :class:`~agri_training.inference.

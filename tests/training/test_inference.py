@@ -19,7 +19,9 @@ from agri_training.learned.inference import (
     _LN2_LO,
     ACTIVATION_CODES,
     ACTIVATION_FUNCTIONS,
+    LEARNING_ONLY,
     PolicyNetwork,
+    acting_state,
     dense_layer,
     exp,
     fold_sum,
@@ -275,6 +277,22 @@ def test_actions_match_torch_within_float32_and_the_reference_exactly(algo, acti
     )
     together, _ = net.predict(stacked)
     np.testing.assert_array_equal(together, np.stack([net.predict(o)[0] for o in batch]))
+
+
+@pytest.mark.parametrize(("algo", "obs_space"), [("ppo", BOX), ("sac", DICT), ("td3", BOX)])
+def test_the_weights_a_run_writes_hold_what_acting_needs_and_no_critic(algo, obs_space):
+    """acting_state drops the value network or critics, and the network exported from what is left is the one
+    exported from the whole state_dict (the oracle), so a run's smaller policy.pt acts the same."""
+    model, whole = _toy_network(algo, "ReLU", obs_space, ACT, seed=11)
+    state = model.policy.state_dict()
+    kept = acting_state(state, algo)
+    assert any(k.startswith(LEARNING_ONLY[algo]) for k in state)  # there was something to drop
+    assert kept and not any(k.startswith(LEARNING_ONLY[algo]) for k in kept)
+    part = PolicyNetwork.from_state_dict(kept, algo, {"activation_fn": "ReLU"}, obs_space, ACT)
+    obs_space.seed(2)
+    for obs in [obs_space.sample() for _ in range(5)]:
+        np.testing.assert_array_equal(part.predict(obs)[0], whole.predict(obs)[0])
+    assert acting_state(state, "unknown") == dict(state)
 
 
 def test_what_the_path_cannot_compute_is_refused():

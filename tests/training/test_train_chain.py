@@ -105,6 +105,8 @@ def test_the_reloaded_shared_policy_acts_like_the_model_in_memory(tmp_path):
     model.learn(64)  # moves both the weights and the normalisation statistics off their initial values
     run = tmp_path / "run"
     save_weights(model, run)
+    written = torch.load(run / "policy.pt", weights_only=True)  # the acting layers only: no value network
+    assert "action_net.weight" in written and not any("value_net" in k for k in written)
     (run / "config.yaml").write_text(yaml.safe_dump({**config, "algo_kwargs": {}, "policy_kwargs": {}}))
     env = agri_envs.make(ENV_ID, **TINY_ENV)
     policy = load_policy(str(run), env)
