@@ -4,6 +4,12 @@ Each lives in ``agri_training/zoo/NAME/``: the run directory of the ``agri train
 ``train_command`` (weights, observation statistics, config, curve). Importing this module registers them
 in :mod:`agri_baselines`' policy registry, so ``agri evaluate --policy NAME``, the leaderboard and the
 report treat them like baselines; :mod:`agri_training.evaluation` imports it.
+
+Only the acting layers are ever read (:data:`agri_training.learned.inference.ACTOR_LAYERS`), so a folder may keep
+just those, as every run now writes (:func:`agri_training.train.save_weights`). ``ppo-greenhouse-nav``,
+``ppo-greenhouse-nav-general-shielded`` and ``dagger-greenhouse-nav-slam-every-scan-shielded`` dropped their value
+networks to keep the repository small (``tests/data/inference_golden.json`` stayed bit for bit the same; their
+entries and validation documents were re-made on the smaller files, every episode record as before).
 """
 
 from __future__ import annotations
