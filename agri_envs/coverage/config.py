@@ -60,6 +60,11 @@ class GreenhouseCoverageConfig(StrictConfig):
         0.01, "per-episode scale error std of each track encoder (drift)", low=0.0, high=0.1
     )
     localization: str = param("odometry", "source of the 'pose' observation", choices=LOCALIZATION_MODES)
+    route_observation: bool = param(
+        False,
+        "PRIVILEGED: add the 'route' observation (the covering serpentine ahead, from the true pose)",
+        adds_observation=True,
+    )
     # Task and reward
     bin_length: float = param(0.25, "length of a coverage bin along a corridor", unit="m", low=0.05, high=2.0)
     terminate_on_contact: bool = param(True, "end the episode on touching the crop or anything else")

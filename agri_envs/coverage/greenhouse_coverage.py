@@ -12,7 +12,7 @@ from gymnasium import spaces
 
 from agri_envs.coverage import robot as fito
 from agri_envs.coverage.config import GreenhouseCoverageConfig
-from agri_envs.coverage.task import CoverageTask
+from agri_envs.coverage.task import CoverageTask, serpentine_path
 from agri_envs.scenes.distribution import largest_scenes
 from agri_envs.scenes.greenhouse import generate_layout
 from agri_envs.scenes.layout import Layout, LayoutCache
@@ -20,6 +20,7 @@ from agri_envs.sim2d.egomap import EgoMap
 from agri_envs.sim2d.geometry import Kind, enclosing_bounds
 from agri_envs.sim2d.gridmap import rasterize
 from agri_envs.sim2d.odometry import Compass, TrackOdometry
+from agri_envs.sim2d.polyline import PathProgress, Polyline
 from agri_envs.sim2d.raycast import footprint_clearance
 from agri_envs.sim2d.render import TopDownRenderer
 from agri_envs.sim2d.sensors import SonarArray, SonarSpec
@@ -28,6 +29,10 @@ from agri_envs.sim2d.world import World2D
 
 __all__ = ["GreenhouseCoverageConfig", "GreenhouseCoverageEnv"]
 _CROP = (int(Kind.PLANT), int(Kind.LEAF), int(Kind.TREE))
+#: Where the ``route`` observation samples the serpentine: metres beyond the robot's point on it.
+ROUTE_AHEAD = (0.0, 0.5, 1.0, 1.5, 2.0, 3.0, 4.0)
+#: The ``route`` observation's points are normalised by this distance (m) and clipped.
+ROUTE_RANGE = 4.0
 
 
 class GreenhouseCoverageEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
@@ -60,6 +65,7 @@ class GreenhouseCoverageEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
     | ``velocity`` | (2,) | ``(1 + v / max_speed) / 2, (1 + w / max_turn_rate) / 2`` measured by the track encoders |
     | ``pose`` | (4,) | ``x / pose_scale[0], y / pose_scale[1], (1 + sin), (1 + cos) / 2`` of the pose estimate (1) |
     | ``memory`` | (512,) | the robot's own map around it (2), flat: cells it drove over; cells its sonars echoed from |
+    | ``route`` | (16,) | PRIVILEGED, only with ``route_observation=True`` (3): the covering serpentine ahead |
 
     (1) ``localization="odometry"``: the encoders' distance integrated along the compass heading (it
     drifts, and it is rotated by the compass bias); ``"ground_truth"``: the true pose (privileged).
@@ -71,6 +77,14 @@ class GreenhouseCoverageEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
     ``a`` lies ``(a - 7.5) * 0.5`` m ahead, column ``b`` as far to the left. The key holds that
     ``(channel, a, b)`` grid flattened in C order: ``obs["memory"].reshape(2, 16, 16)`` gives it back. It is
     built from the robot's own readings only, so it drifts with the odometry, as a real robot's would.
+    (3) What a robot that knew the greenhouse's map and its own pose would know of its route; no sensor gives
+    it. The serpentine is the corridors' centre lines in covering order, each extended ``headland / 2`` past
+    its ends and joined across the headland (:func:`~agri_envs.coverage.task.serpentine_path`: the polyline
+    through the reward's subgoals). The robot's point on it follows the true pose (the nearest point within
+    0.5 m back and 3 m ahead of the last one, :class:`~agri_envs.sim2d.polyline.PathProgress`); the key holds
+    the points 0, 0.5, 1, 1.5, 2, 3 and 4 m beyond it as ``(ahead, left)`` of the true robot pose, each
+    ``(1 + d / 4 m) / 2`` clipped to [0, 1], then the true ``(1 + v / max_speed) / 2, (1 + w / max_turn_rate) /
+    2``. It only adds the key: every other key, the dynamics and the random draws are those of the env without it.
 
     ## Sensors
 
@@ -232,7 +246,9 @@ class GreenhouseCoverageEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
       are unchanged): the sensors take the episode's drawn arguments (sonar slip probability, compass noise and
       bias, encoder noise and scale error); before, the sonars kept the config's ``vegetation_echo_prob``, so
       ``scene_distribution="training"`` episodes change (their drawn echoes now apply; ``"off"`` gives the same
-      episodes). New value ``scene_distribution="robust"``.
+      episodes). New value ``scene_distribution="robust"``. The privileged argument ``route_observation``
+      (default off: the ``route`` key, for learners that may read the true pose, as ``localization=
+      "ground_truth"`` lets them).
 
     ## References
 
@@ -304,16 +320,18 @@ class GreenhouseCoverageEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
         self.n_corridors = cfg.n_rows + 1
         self.max_steps = int(math.ceil(cfg.mission_time() / cfg.control_period))
         box = spaces.Box
-        self.observation_space = spaces.Dict(  # type: ignore[assignment]
-            {
-                "sonar": box(0.0, 1.0, (len(self.sonars),), np.float32),
-                "compass": box(0.0, 1.0, (2,), np.float32),
-                "velocity": box(0.0, 1.0, (2,), np.float32),
-                "pose": box(0.0, 1.0, (4,), np.float32),
-                # Flat (the (2, 16, 16) view in C order): a float image would make SB3 want uint8 (v2).
-                "memory": box(0.0, 1.0, (math.prod(self.memory.shape),), np.float32),
-            }
-        )
+        keys: dict[str, spaces.Space[Any]] = {
+            "sonar": box(0.0, 1.0, (len(self.sonars),), np.float32),
+            "compass": box(0.0, 1.0, (2,), np.float32),
+            "velocity": box(0.0, 1.0, (2,), np.float32),
+            "pose": box(0.0, 1.0, (4,), np.float32),
+            # Flat (the (2, 16, 16) view in C order): a float image would make SB3 want uint8 (v2).
+            "memory": box(0.0, 1.0, (math.prod(self.memory.shape),), np.float32),
+        }
+        if cfg.route_observation:  # privileged: the serpentine from the true pose, and the true velocity
+            keys["route"] = box(0.0, 1.0, (2 * len(ROUTE_AHEAD) + 2,), np.float32)
+        self.observation_space = spaces.Dict(keys)  # type: ignore[assignment]
+        self._route: PathProgress | None = None
         self.action_space = spaces.Box(-1.0, 1.0, (2,), np.float32)
         self.layout: Layout | None = None
         self.world: World2D | None = None
@@ -365,6 +383,9 @@ class GreenhouseCoverageEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
             subgoal_radius=0.3,
         )
         self.task.reset(start)
+        if cfg.route_observation:
+            self._route = PathProgress(Polyline(serpentine_path(self.layout.corridors, 0.5 * cfg.headland)))
+            self._route.reset(self.robot.pose)
         self.memory.reset(geo.bounds)
         self.encoders.draw_scale(rng)
         self.encoders.reset(start)
@@ -452,11 +473,9 @@ class GreenhouseCoverageEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
         else:
             px, py, ph = float(enc.estimate[0]), float(enc.estimate[1]), h
         estimate = np.array([px, py, ph])
-        self.memory.update(
-            estimate, self.sonars.poses_in_world(estimate), self._last_sonar, self.sonars.spec.max_range
-        )
+        self.memory.update(estimate, self.sonars.poses_in_world(estimate), self._last_sonar, self.sonars.spec.max_range)
         half = np.float32(0.5)
-        return {
+        obs = {
             "sonar": (self._last_sonar / self.sonars.spec.max_range).astype(np.float32),
             "compass": np.array([0.5 + 0.5 * math.sin(h), 0.5 + 0.5 * math.cos(h)], np.float32),
             "velocity": np.clip(
@@ -479,6 +498,19 @@ class GreenhouseCoverageEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
             ),
             "memory": self.memory.view(estimate).reshape(-1),
         }
+        if self._route is not None:
+            obs["route"] = self._route_observation()
+        return obs
+
+    def _route_observation(self) -> np.ndarray:
+        """PRIVILEGED: the serpentine's points ahead in the true robot frame, and the true velocity (``route``)."""
+        assert self._route is not None
+        pose = self.robot.pose
+        self._route.update(pose)
+        points = self._route.ahead(pose, np.array(ROUTE_AHEAD)).reshape(-1) / ROUTE_RANGE
+        spec = self.robot_spec
+        velocity = np.array([self.robot.v / spec.max_speed, self.robot.w / spec.max_turn_rate])
+        return np.clip(0.5 + 0.5 * np.concatenate([points, velocity]), 0.0, 1.0).astype(np.float32)
 
     def _info(self, outcome: dict[str, Any]) -> dict[str, Any]:
         pose = self.robot.pose

@@ -60,6 +60,23 @@ def serpentine_subgoals(corridors: tuple[np.ndarray, ...], offset: float) -> np.
     return np.array(pts[1:], dtype=np.float64)
 
 
+def serpentine_path(corridors: tuple[np.ndarray, ...], offset: float) -> np.ndarray:
+    """The covering serpentine as one polyline: every centre line, ``offset`` metres past its ends, joined in order.
+
+    Corridor ``k`` runs toward high x when ``k`` is even and back when it is odd; from the point ``offset``
+    metres past one corridor's far end the path crosses the headland to the point as far past the next
+    corridor's end on the same side. The subgoals of :func:`serpentine_subgoals` are its corners.
+
+    Returns:
+        ``(m, 2)`` vertices (m), from the point ``offset`` metres before corridor 0's low-x end.
+    """
+    pts: list[np.ndarray] = []
+    for k, c in enumerate(corridors):
+        line = np.vstack([c[:1] - (offset, 0.0), c, c[-1:] + (offset, 0.0)])
+        pts.append(line if k % 2 == 0 else line[::-1])
+    return np.vstack(pts)
+
+
 class CoverageTask:
     """Which corridor the robot is in, how far off its centre line, and how much of each corridor is covered.
 

@@ -398,6 +398,16 @@ class GreenhouseCoverageVectorEnv(BatchedEnv):
     metadata = {"render_modes": ["rgb_array"], "render_fps": 10, "autoreset_mode": AutoresetMode.NEXT_STEP}
     INFO_KEYS = _INFO
 
+    @classmethod
+    def refusal(cls, kwargs: dict[str, Any]) -> str | None:
+        """The privileged ``route`` observation: the kernel does not compute it."""
+        if not kwargs.get("route_observation", False):
+            return None
+        return (
+            "GreenhouseCoverage's batched form has no route observation (route_observation=True): use single envs "
+            "(gym.make, or gym.make_vec(..., vectorization_mode='sync'))."
+        )
+
     def __init__(
         self,
         num_envs: int = 1,
@@ -407,6 +417,9 @@ class GreenhouseCoverageVectorEnv(BatchedEnv):
         render_mode: str | None = None,
         **kwargs: Any,
     ) -> None:
+        refused = self.refusal(kwargs)
+        if refused:
+            raise ValueError(refused)
         super().__init__(GreenhouseCoverageEnv, num_envs, autoreset_mode, max_episode_steps, render_mode, kwargs)
         self.envs: list[GreenhouseCoverageEnv] = self.envs  # type: ignore[assignment]
         first = self.envs[0]

@@ -99,3 +99,42 @@ class Polyline:
             return min(max(s_from, 0.0), self.length)
         s = _project(self.points, self.cumulative, float(xy[0]), float(xy[1]), k0, k1, s_from, s_to)
         return min(max(s, s_from), s_to)
+
+
+class PathProgress:
+    """How far along a path the robot is, and the path ahead of it in the robot's frame.
+
+    Each :meth:`update` projects the robot centre on the path no more than ``back`` metres behind and
+    ``forward`` metres ahead of its last arc length, so a path that folds back on itself (a serpentine's next
+    corridor, a few metres to the side) is never mistaken for the stretch the robot is on.
+
+    Args:
+        path: The path.
+        back: How far back along the path a projection may move (m).
+        forward: How far ahead along the path a projection may move (m).
+    """
+
+    def __init__(self, path: Polyline, back: float = 0.5, forward: float = 3.0) -> None:
+        self.path = path
+        self.back = back
+        self.forward = forward
+        self.s = 0.0
+
+    def reset(self, pose: np.ndarray) -> float:
+        """Start at the path point nearest ``pose`` within ``forward`` of the path's start; its arc length."""
+        self.s = self.path.project(np.asarray(pose[:2]), 0.0, self.forward)
+        return self.s
+
+    def update(self, pose: np.ndarray) -> float:
+        """Move to the path point nearest ``pose`` within the window around the last one; its arc length."""
+        self.s = self.path.project(np.asarray(pose[:2]), max(0.0, self.s - self.back), self.s + self.forward)
+        return self.s
+
+    def ahead(self, pose: np.ndarray, distances: np.ndarray) -> np.ndarray:
+        """Path points ``distances`` metres beyond the current arc length (clamped to the end), ``(k, 2)``.
+
+        Each row is ``(ahead, left)`` of the robot at ``pose = (x, y, yaw)`` (m).
+        """
+        points = self.path.at_many(self.s + np.asarray(distances, dtype=np.float64)) - np.asarray(pose[:2])
+        c, s = math.cos(float(pose[2])), math.sin(float(pose[2]))
+        return np.stack([c * points[:, 0] + s * points[:, 1], -s * points[:, 0] + c * points[:, 1]], -1)

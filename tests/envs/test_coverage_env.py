@@ -258,8 +258,78 @@ def test_the_robot_turns_clear_of_the_row_ends_where_the_subgoal_is_passed():
         _, _, term, _, info = env.step(np.array([0.5, 1.0], np.float32))
         assert not term and info["crop_contacts"] == 0 and info["other_contacts"] == 0
     assert info["yaw"] > 1.4
+
+
 def test_episodes_equal_the_digests_recorded_before_resets_were_made_fast():
     """Seeded rollouts over 8 argument sets (shaped rows, limits, noise, echoes, localization)."""
     from greenhouse_reference import COVERAGE_ID, digests, recorded
 
     assert digests(COVERAGE_ID) == recorded(COVERAGE_ID)
+
+
+def _serpentine_oracle(corridors, offset, step=0.005):
+    """The serpentine sampled every ``step`` m with its arc lengths, built point by point (not with numpy's interp)."""
+    corners = []
+    for k, c in enumerate(corridors):
+        line = [(c[0, 0] - offset, c[0, 1]), *map(tuple, c), (c[-1, 0] + offset, c[-1, 1])]
+        corners.extend(line if k % 2 == 0 else line[::-1])
+    samples, arcs, s = [], [], 0.0
+    for (ax, ay), (bx, by) in zip(corners[:-1], corners[1:], strict=True):
+        length = math.hypot(bx - ax, by - ay)
+        n = max(1, int(length / step))
+        for i in range(n):
+            samples.append((ax + (bx - ax) * i / n, ay + (by - ay) * i / n))
+            arcs.append(s + length * i / n)
+        s += length
+    samples.append(corners[-1])
+    arcs.append(s)
+    return np.array(samples), np.array(arcs)
+
+
+def test_route_observation_is_the_serpentine_ahead_in_the_true_robot_frame():
+    kw = {"n_rows": 2, "row_length": 5.0, "localization": "ground_truth"}
+    env = gym.make(ENV_ID, route_observation=True, **kw)
+    plain = gym.make(ENV_ID, **kw)
+    obs, _ = env.reset(seed=4)
+    plain_obs, _ = plain.reset(seed=4)
+    e = env.unwrapped
+    samples, arcs = _serpentine_oracle(e.corridor_lines(), 0.5 * e.episode_config.headland)
+    from agri_envs.coverage.greenhouse_coverage import ROUTE_AHEAD
+
+    assert env.observation_space["route"].shape == (2 * len(ROUTE_AHEAD) + 2,)
+    assert "route" not in plain.observation_space.spaces
+    policy = __import__("agri_baselines").make_policy("gonzalez-deliberative", env)
+    s_oracle, checked = 0.0, 0
+    for t in range(3000):
+        # The key only adds itself: the other keys, the reward and the episode are the plain env's.
+        assert all(np.array_equal(obs[k], plain_obs[k]) for k in plain_obs)
+        x, y, yaw = e.robot.pose
+        # The robot's point on the route: the nearest sample within the tracker's window (0.5 m back, 3 m ahead).
+        window = (arcs >= s_oracle - 0.5) & (arcs <= s_oracle + 3.0)
+        nearest = np.flatnonzero(window)[np.argmin(np.hypot(*(samples[window] - (x, y)).T))]
+        s_oracle = arcs[nearest]
+        route = (2.0 * obs["route"].astype(np.float64) - 1.0)[:-2].reshape(-1, 2) * 4.0
+        for d, (ahead, left) in zip(ROUTE_AHEAD, route, strict=True):
+            k = min(np.searchsorted(arcs, s_oracle + d), len(arcs) - 1)
+            px, py = samples[k]
+            dx, dy = px - x, py - y
+            want = (math.cos(yaw) * dx + math.sin(yaw) * dy, -math.sin(yaw) * dx + math.cos(yaw) * dy)
+            if max(abs(want[0]), abs(want[1])) < 4.0:  # inside the clipped range
+                assert abs(ahead - want[0]) < 0.02 and abs(left - want[1]) < 0.02, (t, d, (ahead, left), want)
+                checked += 1
+        v_true = 2.0 * obs["route"][-2] - 1.0
+        assert abs(v_true * e.robot_spec.max_speed - e.robot.v) < 1e-5
+        action, _ = policy.predict(obs)
+        obs, reward, terminated, truncated, info = env.step(action)
+        plain_obs, plain_reward, *_ = plain.step(action)
+        assert reward == plain_reward
+        if terminated or truncated:
+            break
+    assert info["is_success"] and checked > 1000
+    assert s_oracle > arcs[-1] - 2.0  # the route was followed to its end, through both U-turns
+
+
+def test_route_observation_is_refused_by_the_batched_form():
+    with pytest.raises(ValueError, match="route observation"):
+        gym.make_vec(ENV_ID, num_envs=2, route_observation=True)
+    check_env(gym.make(ENV_ID, **SMALL, route_observation=True).unwrapped)
