@@ -275,6 +275,24 @@ register_policy(
 
 register_policy(
     PolicySpec(
+        name="dagger-greenhouse-coverage-route",
+        env_id="agri_envs/GreenhouseCoverage-v2",
+        entry_point="agri_training.learned.zoo:load_zoo_policy",
+        env_kwargs={"localization": "ground_truth", "route_observation": True},
+        description="Learned by imitation (agri_training/zoo/dagger-greenhouse-coverage-route): the env's privileged "
+        "route (the covering serpentine ahead of the true pose, and the true velocity) and the sonars read as "
+        "dagger-greenhouse-coverage reads them; gonzalez-deliberative cloned on the env's robust distribution with 8 "
+        "DAgger rounds, no PPO steps",
+        privileged=True,
+        learned=True,
+        algo="ppo",
+        train_command="agri train --env agri_envs/GreenhouseCoverage-v2 --algo ppo --hyperparams "
+        "agri_training/hyperparams/dagger_coverage_route_sonar.yml --seed 0 --out runs/cov-routes-s0",
+    )
+)
+
+register_policy(
+    PolicySpec(
         name="ppo-chain",
         env_id="robot_chain_v1",
         entry_point="agri_training.learned.zoo:load_zoo_policy",
