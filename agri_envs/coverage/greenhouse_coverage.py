@@ -507,7 +507,7 @@ class GreenhouseCoverageEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
         assert self._route is not None
         pose = self.robot.pose
         self._route.update(pose)
-        points = self._route.ahead(pose, np.array(ROUTE_AHEAD)).reshape(-1) / ROUTE_RANGE
+        points = self._route.ahead(pose, ROUTE_AHEAD).reshape(-1) / ROUTE_RANGE
         spec = self.robot_spec
         velocity = np.array([self.robot.v / spec.max_speed, self.robot.w / spec.max_turn_rate])
         return np.clip(0.5 + 0.5 * np.concatenate([points, velocity]), 0.0, 1.0).astype(np.float32)
