@@ -37,12 +37,24 @@ class CoverageWeights:
     progress: float = 0.0
 
 
+def _covering_legs(corridors: tuple[np.ndarray, ...], offset: float) -> list[np.ndarray]:
+    """Each centre line extended ``offset`` metres past both ends, in the direction the serpentine drives it.
+
+    Corridor ``k`` is driven toward high x when ``k`` is even and back when it is odd.
+    """
+    legs = []
+    for k, c in enumerate(corridors):
+        line = np.vstack([c[:1] - (offset, 0.0), c, c[-1:] + (offset, 0.0)])
+        legs.append(line if k % 2 == 0 else line[::-1])
+    return legs
+
+
 def serpentine_subgoals(corridors: tuple[np.ndarray, ...], offset: float) -> np.ndarray:
     """The points the covering serpentine passes, after its start at the first corridor's low-x mouth.
 
-    Corridor ``k`` is driven toward high x when ``k`` is even and back when it is odd; each corridor
-    contributes its mouth and its far end, ``offset`` metres past the ends of its centre line. The first
-    point (the mouth of corridor 0, where the robot starts) is left out.
+    Each corridor contributes its mouth and its far end, ``offset`` metres past the ends of its centre line, in
+    the order the serpentine drives them (:func:`_covering_legs`). The first point (the mouth of corridor 0,
+    where the robot starts) is left out.
 
     Args:
         corridors: Centre lines, ``(k, 2)`` polylines with increasing x, one per corridor, in order across
@@ -52,29 +64,21 @@ def serpentine_subgoals(corridors: tuple[np.ndarray, ...], offset: float) -> np.
     Returns:
         ``(2 * len(corridors) - 1, 2)`` points (m).
     """
-    pts: list[tuple[float, float]] = []
-    for k, c in enumerate(corridors):
-        low = (float(c[0, 0]) - offset, float(c[0, 1]))
-        high = (float(c[-1, 0]) + offset, float(c[-1, 1]))
-        pts.extend((low, high) if k % 2 == 0 else (high, low))
-    return np.array(pts[1:], dtype=np.float64)
+    ends = [p for leg in _covering_legs(corridors, offset) for p in (leg[0], leg[-1])]
+    return np.array(ends[1:], dtype=np.float64)
 
 
 def serpentine_path(corridors: tuple[np.ndarray, ...], offset: float) -> np.ndarray:
     """The covering serpentine as one polyline: every centre line, ``offset`` metres past its ends, joined in order.
 
-    Corridor ``k`` runs toward high x when ``k`` is even and back when it is odd; from the point ``offset``
-    metres past one corridor's far end the path crosses the headland to the point as far past the next
-    corridor's end on the same side. The subgoals of :func:`serpentine_subgoals` are its corners.
+    From the point ``offset`` metres past one corridor's far end the path crosses the headland to the point as
+    far past the next corridor's end on the same side. The subgoals of :func:`serpentine_subgoals` are its
+    corners.
 
     Returns:
         ``(m, 2)`` vertices (m), from the point ``offset`` metres before corridor 0's low-x end.
     """
-    pts: list[np.ndarray] = []
-    for k, c in enumerate(corridors):
-        line = np.vstack([c[:1] - (offset, 0.0), c, c[-1:] + (offset, 0.0)])
-        pts.append(line if k % 2 == 0 else line[::-1])
-    return np.vstack(pts)
+    return np.vstack(_covering_legs(corridors, offset))
 
 
 class CoverageTask:
