@@ -6,10 +6,10 @@ in :mod:`agri_baselines`' policy registry, so ``agri evaluate --policy NAME``, t
 report treat them like baselines; :mod:`agri_training.evaluation` imports it.
 
 Only the acting layers are ever read (:data:`agri_training.learned.inference.ACTOR_LAYERS`), so a folder may keep
-just those, as every run now writes (:func:`agri_training.train.save_weights`). ``ppo-greenhouse-nav``,
-``ppo-greenhouse-nav-general-shielded`` and ``dagger-greenhouse-nav-slam-every-scan-shielded`` dropped their value
-networks to keep the repository small (``tests/data/inference_golden.json`` stayed bit for bit the same; their
-entries and validation documents were re-made on the smaller files, every episode record as before).
+just those, as every run now writes (:func:`agri_training.train.save_weights`); older folders may hold the whole
+``state_dict``, and both act alike. Folders trimmed after their entries were made had those entries and their
+validation documents re-made on the smaller files (every episode record as before), since entries record the
+weights' sha256.
 """
 
 from __future__ import annotations

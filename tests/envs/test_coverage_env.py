@@ -11,7 +11,9 @@ from gymnasium.utils.env_checker import check_env
 from rollouts import assert_same, rollout
 
 import agri_envs  # noqa: F401
+from agri_baselines import make_policy
 from agri_envs.coverage.config import GreenhouseCoverageConfig
+from agri_envs.coverage.greenhouse_coverage import ROUTE_AHEAD
 from agri_envs.coverage.task import CoverageTask, CoverageWeights, serpentine_subgoals
 from agri_envs.scenarios import list_scenarios
 
@@ -19,7 +21,9 @@ ENV_ID = "agri_envs/GreenhouseCoverage-v2"
 SMALL = {"n_rows": 1, "row_length": 4.0}
 
 
-@pytest.mark.parametrize("kwargs", [SMALL, {**SMALL, "localization": "ground_truth"}])
+@pytest.mark.parametrize(
+    "kwargs", [SMALL, {**SMALL, "localization": "ground_truth"}, {**SMALL, "route_observation": True}]
+)
 def test_gymnasium_and_sb3_checkers(kwargs):
     from stable_baselines3.common.env_checker import check_env as sb3_check_env
 
@@ -294,11 +298,9 @@ def test_route_observation_is_the_serpentine_ahead_in_the_true_robot_frame():
     plain_obs, _ = plain.reset(seed=4)
     e = env.unwrapped
     samples, arcs = _serpentine_oracle(e.corridor_lines(), 0.5 * e.episode_config.headland)
-    from agri_envs.coverage.greenhouse_coverage import ROUTE_AHEAD
-
     assert env.observation_space["route"].shape == (2 * len(ROUTE_AHEAD) + 2,)
     assert "route" not in plain.observation_space.spaces
-    policy = __import__("agri_baselines").make_policy("gonzalez-deliberative", env)
+    policy = make_policy("gonzalez-deliberative", env)
     s_oracle, checked = 0.0, 0
     for t in range(3000):
         # The key only adds itself: the other keys, the reward and the episode are the plain env's.
@@ -332,4 +334,3 @@ def test_route_observation_is_the_serpentine_ahead_in_the_true_robot_frame():
 def test_route_observation_is_refused_by_the_batched_form():
     with pytest.raises(ValueError, match="route observation"):
         gym.make_vec(ENV_ID, num_envs=2, route_observation=True)
-    check_env(gym.make(ENV_ID, **SMALL, route_observation=True).unwrapped)
