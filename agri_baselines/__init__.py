@@ -55,6 +55,10 @@ class PolicySpec:
         observation_only: Once built, the policy acts on its observations alone: it reads nothing of the
             env during an episode. The evaluator may then step several of its episodes together in the env's
             batched form (``gym.make_vec``), whose sub-envs it could not read (learned policies always may).
+        teacher: A training teacher, not a baseline: a scripted controller that is no paper's, written to label
+            demonstrations (``pretrain: {policy: NAME}``). ``make_policy`` builds it and ``agri evaluate`` runs
+            it, but :func:`list_policies` leaves it out unless asked, so it has no leaderboard entries: the
+            leaderboard compares learned policies with the papers' controllers. A policy cloned from it says so.
     """
 
     name: str
@@ -67,6 +71,7 @@ class PolicySpec:
     algo: str = ""
     train_command: str = ""
     observation_only: bool = False
+    teacher: bool = False
 
 
 _REGISTRY: dict[str, PolicySpec] = {}
@@ -91,9 +96,12 @@ def policy_spec(name: str) -> PolicySpec:
         raise ValueError(f"unknown policy {name!r}; registered: {', '.join(sorted(_REGISTRY))}") from None
 
 
-def list_policies(env_id: str | None = None) -> list[PolicySpec]:
-    """Registered baselines, optionally only those for one env id."""
-    return [s for s in _REGISTRY.values() if env_id is None or s.env_id == env_id]
+def list_policies(env_id: str | None = None, teachers: bool = False) -> list[PolicySpec]:
+    """Registered baselines and learned policies, optionally those of one env id only.
+
+    Training teachers (``PolicySpec.teacher``) only with ``teachers=True``.
+    """
+    return [s for s in _REGISTRY.values() if (env_id is None or s.env_id == env_id) and (teachers or not s.teacher)]
 
 
 def make_policy(name: str, env: gym.Env[Any, Any]) -> Any:
@@ -155,6 +163,7 @@ register_policy(
         description="Ablation of luo-apf: attraction only (eta = 0, no repulsion of eq. 15); collisions still rejected",
     )
 )
+
 
 def astar(occupancy: np.ndarray, start: tuple[int, int], goal: tuple[int, int]) -> list[tuple[int, int]] | None:
     """8-connected grid A* (Apoorva 2018, Alg. 1); see :func:`agri_envs.sim2d.astar.astar`.
@@ -234,5 +243,16 @@ register_policy(
         entry_point="agri_baselines.gonzalez_policies:make_gonzalez_hybrid",
         env_kwargs={"localization": "odometry"},
         description="González 2009, Fig. 2: first run pseudo-reactive, later runs deliberative on its sensory map",
+    )
+)
+register_policy(
+    PolicySpec(
+        name="coverage-half-circle",
+        env_id="agri_envs/GreenhouseCoverage-v2",
+        entry_point="agri_baselines.coverage_teacher:make_half_circle_teacher",
+        env_kwargs={"localization": "ground_truth"},
+        privileged=True,
+        description="Training teacher, no paper's: true corridor lines, half circles at the row ends, Pure Pursuit",
+        teacher=True,
     )
 )

@@ -87,8 +87,8 @@ TRACKING_SPEED = 0.5
 TRACKING_TURN_RATE = 0.6
 
 
-class _CoveragePolicyBase:
-    """Observation decoding and action scaling shared by the three policies."""
+class CoveragePolicyBase:
+    """Observation decoding and action scaling shared by the coverage policies (the three of the paper, the teacher)."""
 
     def __init__(self, env: Any) -> None:
         e = env.unwrapped
@@ -221,7 +221,7 @@ class _RowEnd:
     done: bool = False
 
 
-class GonzalezDeliberativePolicy(_CoveragePolicyBase):
+class GonzalezDeliberativePolicy(CoveragePolicyBase):
     """``gonzalez-deliberative`` (PRIVILEGED: the true map via ``env.unwrapped.true_map()``, the true pose).
 
     Args:
@@ -278,7 +278,7 @@ class GonzalezDeliberativePolicy(_CoveragePolicyBase):
         }
 
 
-class GonzalezPseudoReactivePolicy(_CoveragePolicyBase):
+class GonzalezPseudoReactivePolicy(CoveragePolicyBase):
     """``gonzalez-pseudo-reactive``: sonars, compass and encoder odometry; no map, nothing privileged.
 
     Args:

@@ -344,6 +344,10 @@ def _cmd_list(args: argparse.Namespace) -> int:
         flag = " (privileged)" if p.privileged else ""
         flag += f" (learned: {zoo_training(p.name)})" if p.learned else ""
         print(f"  {p.name} [{p.env_id}]{flag}: {p.description}")
+    print("training teachers (pretrain may clone them; no leaderboard entries):")
+    for p in list_policies(teachers=True):
+        if p.teacher:
+            print(f"  {p.name} [{p.env_id}]{' (privileged)' if p.privileged else ''}: {p.description}")
     return 0
 
 

@@ -5,11 +5,12 @@ every suite of the env that is not a stress suite, at 1.00 success without conta
 room the envs leave, on the suites' own held-out seeds and arguments, against the committed entries (the best
 scripted entry as the leaderboard's "Where learning beats the papers" picks it):
 
-* GreenhouseCoverage: an oracle that knows the true corridor centre lines (``env.unwrapped.corridor_lines()``)
-  drives them end to end and turns into the next corridor on a half circle that starts right at the corridor's
-  end, with Pure Pursuit at the Fitorobot's limits (``gonzalez-deliberative``'s tracker, the same speed, turn
-  rate and acceleration). The straights at the speed limit take most of the time; only the headland turns
-  can get shorter. ``--extend`` moves the turns out into the headland (m).
+* GreenhouseCoverage: the training teacher ``coverage-half-circle`` (``agri_baselines.coverage_teacher``), an
+  oracle that knows the true corridor centre lines (``env.unwrapped.corridor_lines()``), drives them end to end
+  and turns into the next corridor on a half circle that starts right at the corridor's end, with Pure Pursuit
+  at the Fitorobot's limits (``gonzalez-deliberative``'s tracker, the same speed, turn rate and acceleration).
+  The straights at the speed limit take most of the time; only the headland turns can get shorter.
+  ``--extend`` moves the turns out into the headland (m).
 * robot_chain: ``apoorva-chain`` with the ghost (the env's pace setter along the A* path, 0.35 m/s, which is
   all the leader sees of its path) run at the robots' top speed 0.4 m/s and beyond (the leader then runs at
   its limit the whole way). A leader that ignores the ghost has no path ahead of it: only the goal's direction
@@ -23,7 +24,6 @@ The time it prints is the mean episode time (s); ``oracle / best`` below 0.90 le
 from __future__ import annotations
 
 import argparse
-import math
 from collections.abc import Sequence
 from typing import Any
 
@@ -32,9 +32,7 @@ import numpy as np
 
 import agri_envs
 from agri_baselines import make_policy
-from agri_baselines.gonzalez import PurePursuit
-from agri_baselines.gonzalez_policies import MIN_LOOKAHEAD, TRACKING_SPEED, TRACKING_TURN_RATE
-from agri_envs.sim2d.polyline import Polyline
+from agri_baselines.coverage_teacher import HalfCircleTeacher
 from agri_training.evaluation.episode import run_episode
 from agri_training.leaderboard.entries import load_entries
 from agri_training.leaderboard.gains import best_scripted
@@ -44,47 +42,13 @@ COVERAGE = "agri_envs/GreenhouseCoverage-v2"
 CHAIN = "robot_chain_v1"
 
 
-def serpentine_with_half_circles(corridors: Sequence[np.ndarray], start: np.ndarray, extend: float) -> np.ndarray:
-    """Points every 10 cm: the corridor centre lines in serpentine order, half circles ``extend`` m past their ends."""
-    points: list[np.ndarray] = [np.asarray(start, dtype=np.float64)]
-    for k, line in enumerate(corridors):
-        forward = k % 2 == 0
-        line = np.asarray(line, dtype=np.float64)[:: 1 if forward else -1]
-        out = 1.0 if forward else -1.0
-        points.extend(line)
-        end = line[-1] + (out * extend, 0.0)
-        points.append(end)
-        if k + 1 == len(corridors):
-            break
-        following = np.asarray(corridors[k + 1], dtype=np.float64)
-        mouth = (following[0] if (k + 1) % 2 == 0 else following[-1]) + (out * extend, 0.0)
-        centre, radius = (end + mouth) / 2.0, abs(mouth[1] - end[1]) / 2.0
-        side = math.copysign(1.0, end[1] - centre[1])
-        for t in np.linspace(0.0, math.pi, 24)[1:-1]:
-            points.append(centre + (out * radius * math.sin(t), side * radius * math.cos(t)))
-        points.append(mouth)
-    path = Polyline(np.array(points))
-    return path.at_many(np.append(np.arange(0.0, path.length, 0.1), path.length))
-
-
 def coverage_oracle_times(suite: Suite, extend: float, episodes: int) -> list[tuple[float, bool, bool]]:
-    """``(episode time, success, contact)`` of the half-circle oracle on the suite's first ``episodes`` seeds."""
+    """``(episode time, success, contact)`` of the half-circle teacher on the suite's first ``episodes`` seeds."""
     env = gym.make(COVERAGE, **{**suite.env_kwargs, "localization": "ground_truth"})
-    e: Any = env.unwrapped
-    robot = e.robot_spec
     out = []
     for seed in suite.seeds[:episodes]:
-        env.reset(seed=seed)
-        path = serpentine_with_half_circles(e.corridor_lines(), e.robot.pose[:2], extend)
-        tracker = PurePursuit(path, lookahead=1.0, min_lookahead=MIN_LOOKAHEAD)
-        limits = (min(robot.max_speed, TRACKING_SPEED), min(robot.max_turn_rate, TRACKING_TURN_RATE), robot.max_accel)
-        while True:
-            v, w = tracker.command(np.asarray(e.robot.pose, dtype=np.float64), *limits)
-            action = np.clip([v / robot.max_speed, w / robot.max_turn_rate], -1.0, 1.0).astype(np.float32)
-            _, _, terminated, truncated, info = env.step(action)
-            if terminated or truncated:
-                break
-        out.append((float(info["episode_time"]), bool(info["is_success"]), bool(info["collision"])))
+        record = run_episode(env, HalfCircleTeacher(env, extend=extend), seed, None)["record"]
+        out.append((float(record["episode_time"]), bool(record["is_success"]), bool(record["collision"])))
     env.close()
     return out
 

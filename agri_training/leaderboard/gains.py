@@ -21,6 +21,7 @@ from typing import Any
 
 from agri_training.leaderboard.pairing import compare_entries, episode_values
 from agri_training.leaderboard.suites import Suite
+from agri_training.learned.zoo import training_teacher
 
 #: The efficiency keys a suite may rank by, in order of preference (the first one the suite ranks by is used).
 EFFICIENCY_METRICS = ("mean_episode_time", "mean_path_length")
@@ -204,9 +205,16 @@ def gains_lines(env_ids: Sequence[str], suites: Sequence[Suite], entries: Sequen
         for name in faster:
             mine = [g for g in rows if g.policy == name]
             won = [g.suite for g in mine if g.beats]
+            teacher = training_teacher(name)
             lines.append(
                 f"- `{name}` beats the best scripted policy at equal safety on {len(won)} of its {len(mine)} suites"
                 + (f" ({', '.join(won)})." if 0 < len(won) < len(mine) else ".")
+                + (
+                    f" It was cloned from `{teacher}`, a training teacher that is no paper's controller: the time "
+                    "it gains is its teacher's."
+                    if teacher
+                    else ""
+                )
             )
         lines.append("")
     return lines

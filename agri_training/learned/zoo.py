@@ -48,12 +48,28 @@ def how_trained(config: Mapping[str, Any]) -> str:
     if not isinstance(pretrain, Mapping):
         return algo + layer
     teacher = pretrain.get("policy") or pretrain.get("dataset", "a baseline")
-    parts = [f"imitation of {teacher}"]
+    parts = [f"imitation of {teacher}" + (" (a training teacher, no paper's)" if _is_teacher(teacher) else "")]
     rounds = int(pretrain.get("dagger_rounds") or 0)
     if rounds:
         parts.append(f"{rounds} DAgger rounds")
     text = ", ".join(parts)
     return (text if not config.get("timesteps") else f"{text}, then {algo}") + layer
+
+
+def _is_teacher(name: str) -> bool:
+    try:
+        return policy_spec(name).teacher
+    except ValueError:  # a dataset's id, or a policy registered elsewhere
+        return False
+
+
+def training_teacher(name: str) -> str | None:
+    """The training teacher (``PolicySpec.teacher``) a committed trained policy was cloned from, or None."""
+    if not (zoo_path(name) / "config.yaml").is_file():
+        return None
+    pretrain = read_config(zoo_path(name)).get("pretrain")
+    teacher = pretrain.get("policy") if isinstance(pretrain, Mapping) else None
+    return str(teacher) if teacher and _is_teacher(str(teacher)) else None
 
 
 def zoo_training(name: str) -> str:
@@ -288,6 +304,24 @@ register_policy(
         algo="ppo",
         train_command="agri train --env agri_envs/GreenhouseCoverage-v2 --algo ppo --hyperparams "
         "agri_training/hyperparams/dagger_coverage_route_sonar.yml --seed 0 --out runs/cov-routes-s0",
+    )
+)
+
+register_policy(
+    PolicySpec(
+        name="dagger-greenhouse-coverage-half-circle",
+        env_id="agri_envs/GreenhouseCoverage-v2",
+        entry_point="agri_training.learned.zoo:load_zoo_policy",
+        env_kwargs={"localization": "ground_truth", "route_observation": True},
+        description="Learned by imitation (agri_training/zoo/dagger-greenhouse-coverage-half-circle): the inputs of "
+        "dagger-greenhouse-coverage-route (the privileged route and the sonars); cloned from the training teacher "
+        "coverage-half-circle (no paper's controller: half-circle turns at the row ends) on the env's robust "
+        "distribution with 8 DAgger rounds, the fit free past the speed limit, no PPO steps",
+        privileged=True,
+        learned=True,
+        algo="ppo",
+        train_command="agri train --env agri_envs/GreenhouseCoverage-v2 --algo ppo --hyperparams "
+        "agri_training/hyperparams/dagger_coverage_half_circle.yml --seed 2 --out runs/cov-half-s2",
     )
 )
 

@@ -127,3 +127,11 @@ def test_train_refuses_bad_input_before_writing_the_run_folder(tmp_path, capsys)
                    "--hp", *hp])
         assert rc == 2, capsys.readouterr().err
         assert not out.exists()
+
+
+def test_list_shows_training_teachers_apart_from_the_baselines(capsys):
+    assert main(["list"]) == 0
+    policies, teachers = capsys.readouterr().out.split("policies:")[1].split("training teachers")
+    assert "\n  coverage-half-circle [" not in policies and "\n  gonzalez-deliberative [" in policies
+    assert "\n  coverage-half-circle [agri_envs/GreenhouseCoverage-v2] (privileged)" in teachers
+    assert "gonzalez-deliberative" not in teachers

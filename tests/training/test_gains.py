@@ -75,3 +75,23 @@ def test_stress_suites_and_envs_without_a_faster_policy():
     slow = _entry("slowpoke", "learned", _times(130, seed=5))
     text = lb.gains_lines([NAV], [SUITE], [_entry("fast-scripted", "baseline", _times(110, seed=1)), slow])
     assert any("No learned policy is faster" in line for line in text)
+
+
+def test_a_policy_cloned_from_a_training_teacher_says_whose_time_it_gains():
+    from agri_training.learned.zoo import training_teacher, zoo_training
+
+    taught = "dagger-greenhouse-coverage-half-circle"
+    assert training_teacher(taught) == "coverage-half-circle"
+    assert training_teacher("dagger-greenhouse-coverage-route") is None  # cloned from a paper's controller
+    assert training_teacher("not-in-the-zoo") is None
+    assert zoo_training(taught).startswith("imitation of coverage-half-circle (a training teacher, no paper's)")
+    scripted = _entry("fast-scripted", "baseline", _times(110, seed=1))
+    text = "\n".join(
+        lb.gains_lines(
+            [NAV], [SUITE], [scripted, _entry(taught, "learned", _times(85)), _entry("quick", "learned", _times(85))]
+        )
+    )
+    assert (
+        f"`{taught}` beats the best scripted policy at equal safety on 1 of its 1 suites. It was cloned from " in text
+    )
+    assert "`quick` beats the best scripted policy at equal safety on 1 of its 1 suites.\n" in text

@@ -507,3 +507,22 @@ def test_zero_timesteps_with_pretrain_ships_the_clone(tmp_path):
         resolve_config(TrainRequest(ENV_ID, "ppo", tmp_path / "z", overrides={**hp, "n_timesteps": -8}))
     with pytest.raises(ValueError, match="timesteps must be >= 0"):
         TrainRequest(ENV_ID, "ppo", tmp_path / "y", timesteps=-1)
+
+
+def test_fit_clipped_lets_a_mean_past_the_bound_of_its_label_go_free_and_nothing_else():
+    from agri_training.learned.pretrain import PretrainSpec, action_loss_of
+
+    assert PretrainSpec.from_config({"policy": "harik-apf-gt", "fit_clipped": True}).fit_clipped
+    bounds = (torch.tensor([-1.0, -1.0]), torch.tensor([1.0, 1.0]))
+    target = torch.tensor([[1.0, 0.2], [1.0, -1.0], [0.5, -1.0], [-1.0, 1.0]])
+    mean = torch.tensor([[1.3, 0.2], [0.9, -1.4], [1.2, -0.8], [-1.0, 1.0]], requires_grad=True)
+    # oracle, by hand: (1.3 past label 1 -> 0), (0.9 short of 1 -> 0.01), (-1.4 past -1 -> 0), (1.2 vs 0.5 -> 0.49,
+    # the label is inside: clipping would hide it), (-0.8 short of -1 -> 0.04)
+    loss = action_loss_of(mean, target, None, bounds)
+    assert float(loss) == pytest.approx((0.01 + 0.49 + 0.04) / 8)
+    loss.backward()
+    assert mean.grad is not None
+    assert float(mean.grad[0, 0]) == 0.0 and float(mean.grad[1, 1]) == 0.0  # past the bound of its label: free
+    assert float(mean.grad[1, 0]) < 0 and float(mean.grad[2, 0]) > 0  # pulled up to 1, down to 0.5
+    plain = action_loss_of(mean.detach(), target)
+    assert float(plain) == pytest.approx((0.09 + 0.01 + 0.16 + 0.49 + 0.04) / 8)
