@@ -90,8 +90,9 @@ class PretrainSpec:
         dataset: Minari id of an ``agri dataset`` dataset to clone from instead of driving the baseline.
         fit_clipped: Where the baseline's action lies on a bound of the action space, a mean action past that
             bound costs nothing in the action loss: the env clips it to the same action. Without it such labels
-            pull the mean back to the bound from both sides, and a clone of a baseline that drives at its speed
-            limit most of the way drives at about 0.97 of it (half its means fall short).
+            pull the mean back to the bound from both sides and about half the means fall short of it: cloned
+            without it, ``dagger-greenhouse-coverage-route`` asked for its full speed in 44 % of its control
+            periods of one greenhouse, where its teacher did in 90 %.
     """
 
     policy: str = ""
