@@ -35,6 +35,7 @@ import yaml
 import agri_envs
 from agri_training.core.filecache import FileCache
 from agri_training.learned.arm_observation import NearestBoxes
+from agri_training.learned.goal_zoom import GoalZoom
 from agri_training.learned.inference import PolicyNetwork
 from agri_training.learned.parameter_sharing import predict_shared
 from agri_training.learned.range_features import Differences, Ramp
@@ -532,13 +533,15 @@ class LearnedPolicy:
         path: A run directory, its ``best/`` folder or one of its ``checkpoints/step_N`` folders.
         env: The env the policy will drive (made with the run's env arguments); used for its spaces. A
             PettingZoo parallel env (the robot chain) gets the parameter-shared policy of the run.
+        goal_zoom: A goal-conditioned arm policy's :class:`~agri_training.learned.goal_zoom.GoalZoom`, between
+            the env and the network (one env at a time, decisions every step), or None.
 
     Raises:
         ValueError: When the folder or the config is not a run's, or the env's spaces do not match.
         UnsafeCheckpointError: When the weights need unpickling.
     """
 
-    def __init__(self, path: str | Path, env: Any) -> None:
+    def __init__(self, path: str | Path, env: Any, goal_zoom: GoalZoom | None = None) -> None:
         folder = Path(path)
         self.config = read_config(folder)
         self.folder = folder
@@ -563,6 +566,10 @@ class LearnedPolicy:
         self._hold = HeldActions(int(self.config.get("action_repeat", 1)))
         #: The run's safety layer (``safety_layer`` in its config), between the network and the robot, or None.
         self.safety = make_safety_layer(self.config.get("safety_layer"), env, self.config["env_id"])
+        if goal_zoom is not None and (self.multiagent or self._hold.repeat != 1):
+            raise ValueError(f"{folder}: a goal zoom needs a single-agent run deciding every step")
+        #: The goal zoom between the env and the network, or None.
+        self.zoom = goal_zoom
 
     def transform(self, observation: Any, new_episode: bool = False) -> Any:
         """The raw env observation as the network saw it in training (wrappers, then normalisation)."""
@@ -582,14 +589,27 @@ class LearnedPolicy:
         """
         if self.multiagent:
             return predict_shared(self.network, observation, self.transform, deterministic), state
-        action, state = decide_held(
-            self._hold, self._replay, self.network, observation, state, episode_start, deterministic
-        )
+        if self.zoom is None:
+            action, state = decide_held(
+                self._hold, self._replay, self.network, observation, state, episode_start, deterministic
+            )
+        else:
+            if np.ndim(observation["desired_goal"]) != 1:
+                raise ValueError(f"a goal zoom acts on one env at a time, got {np.shape(observation['desired_goal'])}")
+            start = episode_start is not None and bool(np.asarray(episode_start).any())
+            seen, factors = self.zoom.observe(observation, start)
+            action, state = decide_held(
+                self._hold, self._replay, self.network, seen, state, episode_start, deterministic
+            )
+            action = self.zoom.act(action, factors)
         return guarded(self.safety, observation, action, episode_start), state
 
     def episode_metrics(self, index: int = 0) -> dict[str, float]:
-        """The safety layer's counts of the episode (none without a layer)."""
-        return {} if self.safety is None else self.safety.episode_metrics()
+        """The safety layer's and the goal zoom's counts of the episode (none without either)."""
+        return {
+            **({} if self.safety is None else self.safety.episode_metrics()),
+            **({} if self.zoom is None else self.zoom.episode_metrics()),
+        }
 
 
 def guarded(safety: Any, observation: Any, action: Any, episode_start: Any) -> Any:

@@ -20,6 +20,7 @@ from typing import Any
 
 from agri_baselines import PolicySpec, policy_spec, register_policy
 from agri_envs.arm.presets import REACH_PRESET
+from agri_training.learned.goal_zoom import GoalZoom
 from agri_training.learned.policy import LearnedPolicy, read_config
 
 #: Where the committed trained policies live (one folder per registered name).
@@ -27,7 +28,10 @@ ZOO_DIR = Path(__file__).resolve().parent.parent / "zoo"
 
 
 #: Registered names whose weights live in another policy's folder: one network, used two ways.
-SHARED_FOLDERS = {"sac-her-grape-vine-eq11": "sac-her-grape-vine"}
+SHARED_FOLDERS = {
+    "sac-her-grape-vine-eq11": "sac-her-grape-vine",
+    "sac-her-grape-vine-shielded-zoom": "sac-her-grape-vine-shielded",
+}
 
 
 def zoo_path(name: str) -> Path:
@@ -85,6 +89,11 @@ def zoo_training(name: str) -> str:
 def load_zoo_policy(env: Any, name: str) -> LearnedPolicy:
     """Entry point of the registered trained policies: the committed run folder ``zoo/NAME``."""
     return LearnedPolicy(zoo_path(name), env)
+
+
+def load_zoo_zoomed(env: Any, name: str) -> LearnedPolicy:
+    """Entry point of a registered arm policy behind a goal zoom (the default :class:`GoalZoom`), on its folder."""
+    return LearnedPolicy(zoo_path(name), env, goal_zoom=GoalZoom())
 
 
 register_policy(
@@ -424,6 +433,21 @@ register_policy(
         "luo-box-check: the joints each action leads to are tested against the observed boxes with Luo's point set, "
         "and an action that would touch one is replaced (a shorter step, a step back, standing still); the line "
         "'safety_layer: luo-box-check' was added to the run's config after training (agri_training/learned/safety.py)",
+        learned=True,
+        algo="sac",
+        train_command=_grape_vine_command(2),
+    )
+)
+
+register_policy(
+    PolicySpec(
+        name="sac-her-grape-vine-shielded-zoom",
+        env_id="agri_envs/GrapeHarvest-v1",
+        entry_point="agri_training.learned.zoo:load_zoo_zoomed",
+        env_kwargs=dict(_GRAPE_EE),
+        description="sac-her-grape-vine-shielded (the same weights and safety layer) behind a goal zoom: within 2 cm "
+        "and 0.2 rad of its goal the network is shown the error magnified to that size (up to 20x) and its step is "
+        "shrunk by the same factor, so that it cuts to 1 mm and 0.01 rad (agri_training/learned/goal_zoom.py)",
         learned=True,
         algo="sac",
         train_command=_grape_vine_command(2),
