@@ -49,7 +49,8 @@ class GoalZoom:
     position: float = 0.02
     angle: float = 0.2
     max_factor: float = 20.0
-    zoomed_steps: int = 0
+    #: Steps of the current episode in which an error was magnified.
+    zoomed_steps: int = dataclasses.field(default=0, init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
         if not (self.position > 0 and self.angle > 0 and self.max_factor >= 1):

@@ -566,6 +566,8 @@ class LearnedPolicy:
         self._hold = HeldActions(int(self.config.get("action_repeat", 1)))
         #: The run's safety layer (``safety_layer`` in its config), between the network and the robot, or None.
         self.safety = make_safety_layer(self.config.get("safety_layer"), env, self.config["env_id"])
+        if goal_zoom is not None and not _has_goals(env):
+            raise ValueError(f"{folder}: a goal zoom needs an env that observes achieved_goal and desired_goal")
         if goal_zoom is not None and (self.multiagent or self._hold.repeat != 1):
             raise ValueError(f"{folder}: a goal zoom needs a single-agent run deciding every step")
         #: The goal zoom between the env and the network, or None.
@@ -610,6 +612,12 @@ class LearnedPolicy:
             **({} if self.safety is None else self.safety.episode_metrics()),
             **({} if self.zoom is None else self.zoom.episode_metrics()),
         }
+
+
+def _has_goals(env: Any) -> bool:
+    """The env observes ``achieved_goal`` and ``desired_goal`` (a goal-conditioned env, as HER needs)."""
+    spaces = getattr(env.observation_space, "spaces", {})
+    return "achieved_goal" in spaces and "desired_goal" in spaces
 
 
 def guarded(safety: Any, observation: Any, action: Any, episode_start: Any) -> Any:

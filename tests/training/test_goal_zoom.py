@@ -72,3 +72,12 @@ def test_the_zoom_lets_the_vine_policy_cut_to_a_millimetre_where_it_stopped_shor
     zoomed = run_episode(env, make_policy("sac-her-grape-vine-shielded-zoom", env), 20000, None)["record"]
     assert not plain["is_success"] and plain["truncated"] and plain["harvested"] == 0  # stops 3 mm short of the first
     assert zoomed["is_success"] and not zoomed["collision"] and zoomed["zoomed_steps"] > 0
+
+
+def test_a_zoom_on_an_env_without_goals_is_refused():
+    from agri_training.learned.policy import LearnedPolicy
+    from agri_training.learned.zoo import zoo_path
+
+    env = gym.make("agri_envs/GreenhouseCoverage-v2", localization="ground_truth", route_observation=True)
+    with pytest.raises(ValueError, match="observes achieved_goal and desired_goal"):
+        LearnedPolicy(zoo_path("dagger-greenhouse-coverage-half-circle"), env, goal_zoom=GoalZoom())
