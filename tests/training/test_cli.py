@@ -135,3 +135,9 @@ def test_list_shows_training_teachers_apart_from_the_baselines(capsys):
     assert "\n  coverage-half-circle [" not in policies and "\n  gonzalez-deliberative [" in policies
     assert "\n  coverage-half-circle [agri_envs/GreenhouseCoverage-v2] (privileged)" in teachers
     assert "gonzalez-deliberative" not in teachers
+
+
+def test_a_training_teacher_cannot_enter_the_leaderboard(capsys, tmp_path):
+    board = ["--entries", str(tmp_path / "entries"), "--markdown", str(tmp_path / "LEADERBOARD.md")]
+    rc = main(["leaderboard", *board, "submit", "--policy", "coverage-half-circle", "--suite", "coverage-almeria"])
+    assert rc != 0 and "coverage-half-circle is a training teacher, not a baseline" in capsys.readouterr().err
