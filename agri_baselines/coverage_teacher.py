@@ -27,33 +27,28 @@ import numpy as np
 
 from agri_baselines.gonzalez import PurePursuit
 from agri_baselines.gonzalez_policies import MIN_LOOKAHEAD, CoveragePolicyBase
+from agri_envs.coverage.task import covering_legs
 from agri_envs.sim2d.polyline import Polyline
 
 
 def serpentine_with_half_circles(corridors: Sequence[np.ndarray], start: np.ndarray, extend: float) -> np.ndarray:
     """Points every 10 cm from ``start``: the corridor centre lines in serpentine order, joined by half circles.
 
-    Each half circle starts ``extend`` m past the end of the corridor just driven (0: at its end) and ends as far
-    past the mouth of the next one. The corridors are taken in the given order, the first driven along its
-    points, the next against them, and so on.
+    The legs are the covering serpentine's (:func:`agri_envs.coverage.task.covering_legs`: corridor 0 driven
+    along its points, the next against them, and so on, each extended ``extend`` m past its ends); each half circle
+    runs from one leg's last point to the next leg's first, across the headland. The first leg starts at its
+    corridor's end, not ``extend`` m before it.
     """
-    points: list[np.ndarray] = [np.asarray(start, dtype=np.float64)]
-    for k, line in enumerate(corridors):
-        forward = k % 2 == 0
-        line = np.asarray(line, dtype=np.float64)[:: 1 if forward else -1]
-        out = 1.0 if forward else -1.0
-        points.extend(line)
-        end = line[-1] + (out * extend, 0.0)
-        points.append(end)
-        if k + 1 == len(corridors):
-            break
-        following = np.asarray(corridors[k + 1], dtype=np.float64)
-        mouth = (following[0] if (k + 1) % 2 == 0 else following[-1]) + (out * extend, 0.0)
+    legs = covering_legs(tuple(np.asarray(c, dtype=np.float64) for c in corridors), extend)
+    points: list[np.ndarray] = [np.asarray(start, dtype=np.float64), *legs[0][1:]]
+    for k, leg in enumerate(legs[1:]):
+        end, mouth = points[-1], leg[0]
+        out = 1.0 if k % 2 == 0 else -1.0  # the turn bulges past the far end of leg k: high x after an even leg
         centre, radius = (end + mouth) / 2.0, abs(mouth[1] - end[1]) / 2.0
         side = math.copysign(1.0, end[1] - centre[1])
         for t in np.linspace(0.0, math.pi, 24)[1:-1]:
             points.append(centre + (out * radius * math.sin(t), side * radius * math.cos(t)))
-        points.append(mouth)
+        points.extend(leg)
     path = Polyline(np.array(points))
     return path.at_many(np.append(np.arange(0.0, path.length, 0.1), path.length))
 

@@ -37,10 +37,12 @@ class CoverageWeights:
     progress: float = 0.0
 
 
-def _covering_legs(corridors: tuple[np.ndarray, ...], offset: float) -> list[np.ndarray]:
+def covering_legs(corridors: tuple[np.ndarray, ...], offset: float) -> list[np.ndarray]:
     """Each centre line extended ``offset`` metres past both ends, in the direction the serpentine drives it.
 
-    Corridor ``k`` is driven toward high x when ``k`` is even and back when it is odd.
+    Corridor ``k`` is driven toward high x when ``k`` is even and back when it is odd. The legs of the reward's
+    subgoals and of the route observation (:func:`serpentine_subgoals`, :func:`serpentine_path`), and of the
+    training teacher ``coverage-half-circle`` (:mod:`agri_baselines.coverage_teacher`).
     """
     legs = []
     for k, c in enumerate(corridors):
@@ -53,7 +55,7 @@ def serpentine_subgoals(corridors: tuple[np.ndarray, ...], offset: float) -> np.
     """The points the covering serpentine passes, after its start at the first corridor's low-x mouth.
 
     Each corridor contributes its mouth and its far end, ``offset`` metres past the ends of its centre line, in
-    the order the serpentine drives them (:func:`_covering_legs`). The first point (the mouth of corridor 0,
+    the order the serpentine drives them (:func:`covering_legs`). The first point (the mouth of corridor 0,
     where the robot starts) is left out.
 
     Args:
@@ -64,7 +66,7 @@ def serpentine_subgoals(corridors: tuple[np.ndarray, ...], offset: float) -> np.
     Returns:
         ``(2 * len(corridors) - 1, 2)`` points (m).
     """
-    ends = [p for leg in _covering_legs(corridors, offset) for p in (leg[0], leg[-1])]
+    ends = [p for leg in covering_legs(corridors, offset) for p in (leg[0], leg[-1])]
     return np.array(ends[1:], dtype=np.float64)
 
 
@@ -78,7 +80,7 @@ def serpentine_path(corridors: tuple[np.ndarray, ...], offset: float) -> np.ndar
     Returns:
         ``(m, 2)`` vertices (m), from the point ``offset`` metres before corridor 0's low-x end.
     """
-    return np.vstack(_covering_legs(corridors, offset))
+    return np.vstack(covering_legs(corridors, offset))
 
 
 class CoverageTask:
