@@ -280,11 +280,6 @@ def _cmd_leaderboard(args: argparse.Namespace) -> int:
         else:
             if not args.suite or not args.policy:
                 raise ValueError("submit needs --suite and --policy (or --all for every baseline on every suite)")
-            if args.policy in {p.name for p in list_policies(teachers=True) if p.teacher}:
-                raise ValueError(
-                    f"{args.policy} is a training teacher, not a baseline: the leaderboard compares learned policies "
-                    f"with the papers' controllers (run it with agri evaluate --policy {args.policy})"
-                )
             names = args.suite
             chosen = [lb.find_suite(n, suites_dir) for n in names] if names != ["all"] else suites
             policy = resolve_policy(args.policy, args.name, lb.ROOT)  # resolved once, here

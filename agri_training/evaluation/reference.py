@@ -99,8 +99,17 @@ class PolicyRef:
         return f"{self.kind}|{self.spec}|{self.sha256}|{self.sidecar_sha256}{own}"
 
     def to_entry(self) -> dict[str, Any]:
-        """What a leaderboard entry records about the policy (the format of existing entries for old kinds)."""
+        """What a leaderboard entry records about the policy (the format of existing entries for old kinds).
+
+        Raises:
+            ValueError: For a training teacher (``PolicySpec.teacher``): it has no entries.
+        """
         if self.kind == "baseline":
+            if policy_spec(self.spec).teacher:
+                raise ValueError(
+                    f"{self.spec} is a training teacher, not a baseline: the leaderboard compares learned policies "
+                    f"with the papers' controllers (run it with agri evaluate --policy {self.spec})"
+                )
             return {"kind": "baseline", "name": self.name, "privileged": self.privileged}
         if self.kind == "zoo":
             ref: dict[str, Any] = {"kind": "learned", "name": self.name, "privileged": self.privileged}

@@ -8,6 +8,7 @@ import agri_envs  # noqa: F401
 from agri_baselines import list_policies, make_policy, policy_spec
 from agri_baselines.coverage_teacher import serpentine_with_half_circles
 from agri_training.evaluation.episode import run_episode
+from agri_training.leaderboard.entries import policy_reference
 
 ENV_ID = "agri_envs/GreenhouseCoverage-v2"
 
@@ -42,6 +43,9 @@ def test_the_teacher_is_built_by_name_but_listed_only_when_asked():
     assert "coverage-half-circle" in [s.name for s in list_policies(ENV_ID, teachers=True)]
     with pytest.raises(ValueError, match="ground_truth"):
         make_policy("coverage-half-circle", gym.make(ENV_ID, localization="odometry"))
+    with pytest.raises(ValueError, match="is a training teacher, not a baseline"):
+        policy_reference("coverage-half-circle")  # what an entry records: a teacher has none
+    assert policy_reference("gonzalez-deliberative")["kind"] == "baseline"
 
 
 @pytest.mark.parametrize(
