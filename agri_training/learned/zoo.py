@@ -447,7 +447,7 @@ register_policy(
         env_kwargs=dict(_GRAPE_EE),
         description="sac-her-grape-vine-shielded (the same weights and safety layer) behind a goal zoom: within 2 cm "
         "and 0.2 rad of its goal the network is shown the error magnified to that size (up to 20x) and its step is "
-        "shrunk by the same factor, so that it cuts to 1 mm and 0.01 rad (agri_training/learned/goal_zoom.py)",
+        "shrunk by the same factor, so that it cuts finer than it was trained to (agri_training/learned/goal_zoom.py)",
         learned=True,
         algo="sac",
         train_command=_grape_vine_command(2),
