@@ -36,6 +36,7 @@ import agri_envs
 from agri_training.core.filecache import FileCache
 from agri_training.learned.arm_observation import NearestBoxes
 from agri_training.learned.goal_zoom import GoalZoom
+from agri_training.learned.homing import JointHoming
 from agri_training.learned.inference import PolicyNetwork
 from agri_training.learned.parameter_sharing import predict_shared
 from agri_training.learned.range_features import Differences, Ramp
@@ -535,13 +536,16 @@ class LearnedPolicy:
             PettingZoo parallel env (the robot chain) gets the parameter-shared policy of the run.
         goal_zoom: A goal-conditioned arm policy's :class:`~agri_training.learned.goal_zoom.GoalZoom`, between
             the env and the network (one env at a time, decisions every step), or None.
+        homing: Whether the arm drives its last stretch home along the joint line
+            (:class:`~agri_training.learned.homing.JointHoming`, replacing the network's action there; needs a
+            goal zoom's conditions and an env under end-effector control).
 
     Raises:
         ValueError: When the folder or the config is not a run's, or the env's spaces do not match.
         UnsafeCheckpointError: When the weights need unpickling.
     """
 
-    def __init__(self, path: str | Path, env: Any, goal_zoom: GoalZoom | None = None) -> None:
+    def __init__(self, path: str | Path, env: Any, goal_zoom: GoalZoom | None = None, homing: bool = False) -> None:
         folder = Path(path)
         self.config = read_config(folder)
         self.folder = folder
@@ -566,12 +570,15 @@ class LearnedPolicy:
         self._hold = HeldActions(int(self.config.get("action_repeat", 1)))
         #: The run's safety layer (``safety_layer`` in its config), between the network and the robot, or None.
         self.safety = make_safety_layer(self.config.get("safety_layer"), env, self.config["env_id"])
-        if goal_zoom is not None and not _has_goals(env):
-            raise ValueError(f"{folder}: a goal zoom needs an env that observes achieved_goal and desired_goal")
-        if goal_zoom is not None and (self.multiagent or self._hold.repeat != 1):
-            raise ValueError(f"{folder}: a goal zoom needs a single-agent run deciding every step")
+        layers = "a goal zoom or joint homing"
+        if (goal_zoom is not None or homing) and not _has_goals(env):
+            raise ValueError(f"{folder}: {layers} needs an env that observes achieved_goal and desired_goal")
+        if (goal_zoom is not None or homing) and (self.multiagent or self._hold.repeat != 1):
+            raise ValueError(f"{folder}: {layers} needs a single-agent run deciding every step")
         #: The goal zoom between the env and the network, or None.
         self.zoom = goal_zoom
+        #: The joint homing that replaces the network's action on the last stretch home, or None.
+        self.homing = JointHoming.for_env(env) if homing else None
 
     def transform(self, observation: Any, new_episode: bool = False) -> Any:
         """The raw env observation as the network saw it in training (wrappers, then normalisation)."""
@@ -591,26 +598,29 @@ class LearnedPolicy:
         """
         if self.multiagent:
             return predict_shared(self.network, observation, self.transform, deterministic), state
-        if self.zoom is None:
+        if self.zoom is None and self.homing is None:
             action, state = decide_held(
                 self._hold, self._replay, self.network, observation, state, episode_start, deterministic
             )
-        else:
-            if np.ndim(observation["desired_goal"]) != 1:
-                raise ValueError(f"a goal zoom acts on one env at a time, got {np.shape(observation['desired_goal'])}")
-            start = episode_start is not None and bool(np.asarray(episode_start).any())
-            seen, factors = self.zoom.observe(observation, start)
-            action, state = decide_held(
-                self._hold, self._replay, self.network, seen, state, episode_start, deterministic
-            )
+            return guarded(self.safety, observation, action, episode_start), state
+        if np.ndim(observation["desired_goal"]) != 1:
+            shape = np.shape(observation["desired_goal"])
+            raise ValueError(f"a goal zoom or joint homing acts on one env at a time, got {shape}")
+        start = episode_start is not None and bool(np.asarray(episode_start).any())
+        seen, factors = (observation, (1.0, 1.0)) if self.zoom is None else self.zoom.observe(observation, start)
+        action, state = decide_held(self._hold, self._replay, self.network, seen, state, episode_start, deterministic)
+        if self.zoom is not None:
             action = self.zoom.act(action, factors)
+        if self.homing is not None:
+            action = self.homing.decide(observation, action, start)
         return guarded(self.safety, observation, action, episode_start), state
 
     def episode_metrics(self, index: int = 0) -> dict[str, float]:
-        """The safety layer's and the goal zoom's counts of the episode (none without either)."""
+        """The safety layer's, the goal zoom's and the joint homing's counts of the episode (none without them)."""
         return {
             **({} if self.safety is None else self.safety.episode_metrics()),
             **({} if self.zoom is None else self.zoom.episode_metrics()),
+            **({} if self.homing is None else self.homing.episode_metrics()),
         }
 
 

@@ -31,6 +31,7 @@ ZOO_DIR = Path(__file__).resolve().parent.parent / "zoo"
 SHARED_FOLDERS = {
     "sac-her-grape-vine-eq11": "sac-her-grape-vine",
     "sac-her-grape-vine-shielded-zoom": "sac-her-grape-vine-shielded",
+    "sac-her-grape-vine-shielded-zoom-homing": "sac-her-grape-vine-shielded",
 }
 
 
@@ -94,6 +95,11 @@ def load_zoo_policy(env: Any, name: str) -> LearnedPolicy:
 def load_zoo_zoomed(env: Any, name: str) -> LearnedPolicy:
     """Entry point of a registered arm policy behind a goal zoom (the default :class:`GoalZoom`), on its folder."""
     return LearnedPolicy(zoo_path(name), env, goal_zoom=GoalZoom())
+
+
+def load_zoo_zoomed_homing(env: Any, name: str) -> LearnedPolicy:
+    """Entry point of a registered arm policy behind a goal zoom that drives its last stretch home in joint space."""
+    return LearnedPolicy(zoo_path(name), env, goal_zoom=GoalZoom(), homing=True)
 
 
 register_policy(
@@ -448,6 +454,21 @@ register_policy(
         description="sac-her-grape-vine-shielded (the same weights and safety layer) behind a goal zoom: within 2 cm "
         "and 0.2 rad of its goal the network is shown the error magnified to that size (up to 20x) and its step is "
         "shrunk by the same factor, so that it cuts finer than it was trained to (agri_training/learned/goal_zoom.py)",
+        learned=True,
+        algo="sac",
+        train_command=_grape_vine_command(2),
+    )
+)
+
+register_policy(
+    PolicySpec(
+        name="sac-her-grape-vine-shielded-zoom-homing",
+        env_id="agri_envs/GrapeHarvest-v1",
+        entry_point="agri_training.learned.zoo:load_zoo_zoomed_homing",
+        env_kwargs=dict(_GRAPE_EE),
+        description="sac-her-grape-vine-shielded-zoom (the same weights, safety layer and goal zoom) that drives its "
+        "last 2 cm home along the straight joint line to the home configuration, where the clamp's straight line "
+        "would push joint 2 past its limit and stall (agri_training/learned/homing.py)",
         learned=True,
         algo="sac",
         train_command=_grape_vine_command(2),
