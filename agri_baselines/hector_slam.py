@@ -598,11 +598,15 @@ class HectorSlam:
         self._last_map_pose = pose.copy()
         self.map_updates += 1
 
-    def update(self, ranges: np.ndarray) -> np.ndarray:
+    def update(self, ranges: np.ndarray, odometry: tuple[float, float, float] | None = None) -> np.ndarray:
         """Process one scan: match it against the map (after the first), update the map when due.
 
         Args:
             ranges: One range per beam (m), ordered like ``beam_angles``.
+            odometry: The robot's motion since the previous scan as its odometry measured it, ``(forward,
+                left, turn)`` in the robot's frame at that scan (m, m, rad); the matching then starts from
+                the previous pose moved on by it (hector_mapping's odometry guess) instead of the
+                configured prediction. None: no odometry.
 
         Returns:
             The new pose estimate ``(x, y, yaw)`` (a copy).
@@ -615,7 +619,12 @@ class HectorSlam:
             return self.pose
         if len(points) >= 3:
             before = self._pose
-            guess = before + self._motion if self.config.constant_velocity else before
+            if odometry is not None:
+                c, s = math.cos(before[2]), math.sin(before[2])
+                forward, left, turn = odometry
+                guess = before + np.array([c * forward - s * left, s * forward + c * left, turn])
+            else:
+                guess = before + self._motion if self.config.constant_velocity else before
             self._pose = self.match(points, guess)
             step = self._pose - before
             step[2] = math.atan2(math.sin(step[2]), math.cos(step[2]))

@@ -481,6 +481,25 @@ def read_config(path: Path) -> dict[str, Any]:
     return dict(yaml.safe_load((find_run_dir(path) / CONFIG_FILE).read_text()))
 
 
+def with_wrapper_settings(
+    wrappers: Sequence[str | Mapping[str, Any]], settings: Mapping[str, Mapping[str, Any]]
+) -> list[str | dict[str, Any]]:
+    """A config's ``wrappers`` with some wrappers' arguments changed: ``{name: {argument: value}}``.
+
+    Raises:
+        ValueError: For a name that is not among the wrappers.
+    """
+    names = [w if isinstance(w, str) else next(iter(w)) for w in wrappers]
+    unknown = sorted(set(settings) - set(names))
+    if unknown:
+        raise ValueError(f"wrapper settings for {unknown}, which the run does not use (its wrappers: {names})")
+    out: list[str | dict[str, Any]] = []
+    for name, entry in zip(names, wrappers, strict=True):
+        arguments = {} if isinstance(entry, str) else dict(entry[name] or {})
+        out.append({name: {**arguments, **settings[name]}} if name in settings else entry)  # type: ignore[arg-type]
+    return out
+
+
 def is_run_path(name_or_path: str) -> bool:
     """True when ``name_or_path`` names a folder holding (or inside) a run directory."""
     p = Path(name_or_path)
@@ -539,15 +558,27 @@ class LearnedPolicy:
         homing: Whether the arm drives its last stretch home along the joint line
             (:class:`~agri_training.learned.homing.JointHoming`, replacing the network's action there; needs a
             goal zoom's conditions and an env under end-effector control).
+        wrapper_settings: Deployment settings that change some of the run's observation wrappers' arguments,
+            ``{name: {argument: value}}`` (:func:`with_wrapper_settings`), such as ``{"SlamWaypoint": {"odometry":
+            True}}``; the network is the run's.
 
     Raises:
         ValueError: When the folder or the config is not a run's, or the env's spaces do not match.
         UnsafeCheckpointError: When the weights need unpickling.
     """
 
-    def __init__(self, path: str | Path, env: Any, goal_zoom: GoalZoom | None = None, homing: bool = False) -> None:
+    def __init__(
+        self,
+        path: str | Path,
+        env: Any,
+        goal_zoom: GoalZoom | None = None,
+        homing: bool = False,
+        wrapper_settings: Mapping[str, Mapping[str, Any]] | None = None,
+    ) -> None:
         folder = Path(path)
         self.config = read_config(folder)
+        if wrapper_settings:
+            self.config["wrappers"] = with_wrapper_settings(self.config.get("wrappers", []), wrapper_settings)
         self.folder = folder
         #: True on a PettingZoo parallel env: one shared network acts for every agent (per-agent dicts).
         self.multiagent = agri_envs.is_parallel_env(env)

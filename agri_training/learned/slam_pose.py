@@ -53,13 +53,19 @@ class SlamWaypoint(gym.ObservationWrapper[dict[str, Any], Any, dict[str, Any]]):
             ``every_scan`` that is not a bool.
     """
 
-    def __init__(self, env: gym.Env[Any, Any], aim_inside: float = 0.0, every_scan: bool = False) -> None:
+    def __init__(
+        self, env: gym.Env[Any, Any], aim_inside: float = 0.0, every_scan: bool = False, odometry: bool = False
+    ) -> None:
         if not 0.0 <= float(aim_inside) < 1.0:
             raise ValueError(f"SlamWaypoint aim_inside must be in [0, 1) m, got {aim_inside}")
-        if not isinstance(every_scan, bool):
-            raise ValueError(f"SlamWaypoint every_scan must be true or false, got {every_scan!r}")
+        for name, value in (("every_scan", every_scan), ("odometry", odometry)):
+            if not isinstance(value, bool):
+                raise ValueError(f"SlamWaypoint {name} must be true or false, got {value!r}")
+        if odometry and not every_scan:
+            raise ValueError("SlamWaypoint odometry needs every_scan: true (one control period between two scans)")
         self.aim_inside = float(aim_inside)
         self.every_scan = every_scan
+        self.odometry = odometry
         space = env.observation_space
         if not isinstance(space, gym.spaces.Dict) or not {"target", "scan"} <= set(space.spaces):
             raise ValueError(
@@ -91,14 +97,28 @@ class SlamWaypoint(gym.ObservationWrapper[dict[str, Any], Any, dict[str, Any]]):
         is left alone: the episode's first decision starts it.
         """
         if self.every_scan and not self._fresh:
-            self.slam.update(np.asarray(observation["scan"], dtype=np.float64) * self.max_range)
+            scan = np.asarray(observation["scan"], dtype=np.float64) * self.max_range
+            self.slam.update(scan, self._odometry(observation))
+
+    def _odometry(self, observation: Mapping[str, Any]) -> tuple[float, float, float] | None:
+        """With ``odometry``, the motion of the last control period from the observation's ``velocity``."""
+        if not self.odometry:
+            return None
+        robot: Any = self.env.unwrapped
+        spec, dt = robot.robot_spec, float(robot.config.control_period)
+        u, r = np.asarray(observation["velocity"], dtype=np.float64)
+        v, w = u * spec.max_speed * dt, r * spec.max_turn_rate * dt
+        return v * math.cos(0.5 * w), v * math.sin(0.5 * w), w
 
     def observation(self, observation: dict[str, Any]) -> dict[str, Any]:
         """The observation with ``waypoint`` measured from the SLAM pose after this scan."""
         if self._fresh:
             self.slam.reset((0.0, 0.0, 0.0))
             self._fresh = False
-        x, y, yaw = self.slam.update(np.asarray(observation["scan"], dtype=np.float64) * self.max_range)
+            x, y, yaw = self.slam.update(np.asarray(observation["scan"], dtype=np.float64) * self.max_range)
+        else:
+            scan = np.asarray(observation["scan"], dtype=np.float64) * self.max_range
+            x, y, yaw = self.slam.update(scan, self._odometry(observation))
         unwrapped: Any = self.env.unwrapped
         diagonal = float(unwrapped.diagonal)
         tx, ty = np.asarray(observation["target"], dtype=np.float64) * diagonal

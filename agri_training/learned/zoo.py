@@ -32,6 +32,13 @@ SHARED_FOLDERS = {
     "sac-her-grape-vine-eq11": "sac-her-grape-vine",
     "sac-her-grape-vine-shielded-zoom": "sac-her-grape-vine-shielded",
     "sac-her-grape-vine-shielded-zoom-homing": "sac-her-grape-vine-shielded",
+    "dagger-greenhouse-nav-slam-odometry-shielded": "dagger-greenhouse-nav-slam-every-scan-shielded",
+}
+
+#: Deployment settings of a registered name on its shared folder: the arguments of the folder's observation
+#: wrappers that it changes (:func:`agri_training.learned.policy.with_wrapper_settings`); the network is the folder's.
+WRAPPER_SETTINGS: dict[str, dict[str, dict[str, Any]]] = {
+    "dagger-greenhouse-nav-slam-odometry-shielded": {"SlamWaypoint": {"odometry": True}},
 }
 
 
@@ -88,8 +95,11 @@ def zoo_training(name: str) -> str:
 
 
 def load_zoo_policy(env: Any, name: str) -> LearnedPolicy:
-    """Entry point of the registered trained policies: the committed run folder ``zoo/NAME``."""
-    return LearnedPolicy(zoo_path(name), env)
+    """Entry point of the registered trained policies: the run folder ``zoo/NAME``, or the one it shares.
+
+    A name with :data:`WRAPPER_SETTINGS` acts with them on its shared folder.
+    """
+    return LearnedPolicy(zoo_path(name), env, wrapper_settings=WRAPPER_SETTINGS.get(name))
 
 
 def load_zoo_zoomed(env: Any, name: str) -> LearnedPolicy:
@@ -228,6 +238,24 @@ register_policy(
         "(dagger_slam_every_scan.yml, seed 0), behind the safety layer harik-passive-safety; nothing privileged. "
         "The line 'safety_layer: harik-passive-safety' was added to the run's config after training (the layer "
         "does not act in imitation; agri_training/learned/safety.py)",
+        privileged=False,
+        learned=True,
+        algo="ppo",
+        train_command="agri train --env agri_envs/GreenhouseNav-v2 --algo ppo --hyperparams "
+        "agri_training/hyperparams/dagger_slam_every_scan.yml --seed 0 --out runs/nav-slam-every-s0",
+    )
+)
+
+register_policy(
+    PolicySpec(
+        name="dagger-greenhouse-nav-slam-odometry-shielded",
+        env_id="agri_envs/GreenhouseNav-v2",
+        entry_point="agri_training.learned.zoo:load_zoo_policy",
+        env_kwargs={"localization": "none", "full_scan": True},
+        description="dagger-greenhouse-nav-slam-every-scan-shielded (the same network and safety layer) whose Hector "
+        "SLAM starts each scan match from the motion the robot's wheel odometry measured since the last scan (the "
+        "observation's velocity) instead of its own constant-velocity prediction; no training, nothing privileged "
+        "(agri_training/learned/slam_pose.py)",
         privileged=False,
         learned=True,
         algo="ppo",

@@ -228,6 +228,33 @@ def test_constant_velocity_prediction_follows_a_fast_turn_on_the_spot(scene, con
     assert (worst < 0.05) == constant_velocity, worst
 
 
+@pytest.mark.parametrize("odometry", [True, False])
+def test_an_odometry_guess_follows_the_turn_that_matching_from_the_last_pose_loses(scene, odometry):
+    """The same turn, matched from the last pose moved on by the measured motion (no prediction of its own)."""
+    start = scene.robot.pose.copy()
+    slam = make_slam(scene, constant_velocity=False)
+    heading, worst = 0.0, 0.0
+    for k in range(40):
+        turn = min(0.04 * k, 0.4)
+        heading += turn
+        scan = exact_scan(scene, compose(start, (0.0, 0.0, heading)))
+        pose = slam.update(scan, (0.0, 0.0, turn) if odometry else None)
+        error = abs(math.atan2(math.sin(pose[2] - heading), math.cos(pose[2] - heading))) + math.hypot(*pose[:2])
+        worst = max(worst, error)
+    assert (worst < 0.05) == odometry, worst
+
+
+def test_the_odometry_guess_is_taken_in_the_robot_frame(scene):
+    """Driving sideways in the map frame while facing +y: the guess (forward, left) turns with the heading."""
+    start = scene.robot.pose.copy()
+    slam = make_slam(scene, constant_velocity=False, iterations_fine=1, iterations_coarse=0)
+    slam.reset((0.0, 0.0, math.pi / 2))
+    slam.update(exact_scan(scene, compose(start, (0.0, 0.0, math.pi / 2))))
+    truth = compose(start, (0.0, 0.3, math.pi / 2))  # 0.3 m along the start frame's y: the robot's forward
+    pose = slam.update(exact_scan(scene, truth), (0.3, 0.0, 0.0))
+    assert abs(pose[1] - 0.3) < 0.03 and abs(pose[0]) < 0.03, pose
+
+
 def _recorded_scans(kwargs: dict, seed: int, steps: int) -> tuple[list[np.ndarray], dict]:
     """The full scans harik-apf-gt's drive gives (m), and the env's LIDAR geometry."""
     env = gym.make(ENV_ID, full_scan=True, localization="ground_truth", **kwargs)

@@ -15,6 +15,7 @@ from agri_training.learned.policy import (
     apply_wrappers,
     decide_held,
     observation_chain,
+    with_wrapper_settings,
 )
 from agri_training.learned.slam_pose import SlamWaypoint
 
@@ -178,3 +179,51 @@ def test_every_scan_is_a_bool_and_ppo_rollouts_refuse_it(tmp_path):
         resolve_config(TrainRequest(ENV_ID, "ppo", tmp_path / "r", hyperparams_file=recipe))
     imitation = resolve_config(TrainRequest(ENV_ID, "ppo", tmp_path / "r", hyperparams_file=recipe, timesteps=0))
     assert imitation["wrappers"][0] == {"SlamWaypoint": {"every_scan": True}}
+
+
+def test_the_odometry_is_the_motion_of_the_last_control_period():
+    """Oracle: the true pose's change over each step, in the robot's frame (the env's info)."""
+    env = SlamWaypoint(gym.make(ENV_ID, **BLIND), every_scan=True, odometry=True)
+    obs, info = env.reset(seed=7)
+    worst = np.zeros(3)
+    for k in range(60):
+        before = np.array([info["x"], info["y"], info["yaw"]])
+        obs, _, terminated, truncated, info = env.step(_act(k))
+        c, s = math.cos(before[2]), math.sin(before[2])
+        dx, dy = info["x"] - before[0], info["y"] - before[1]
+        turn = math.atan2(math.sin(info["yaw"] - before[2]), math.cos(info["yaw"] - before[2]))
+        truth = np.array([c * dx + s * dy, -s * dx + c * dy, turn])
+        worst = np.maximum(worst, np.abs(np.array(env._odometry(obs)) - truth))
+        assert not (terminated or truncated)
+    assert worst[0] < 0.005 and worst[1] < 0.002 and worst[2] < 0.01, worst  # m, m, rad per 1/15 s
+
+
+def test_odometry_is_a_bool_and_needs_every_scan():
+    blind = gym.make(ENV_ID, **BLIND)
+    with pytest.raises(ValueError, match="odometry must be true or false"):
+        SlamWaypoint(blind, every_scan=True, odometry=1)
+    with pytest.raises(ValueError, match="odometry needs every_scan"):
+        SlamWaypoint(blind, odometry=True)
+    assert SlamWaypoint(blind, every_scan=True)._odometry({"velocity": np.ones(2, np.float32)}) is None
+
+
+def test_wrapper_settings_change_only_the_named_wrappers_arguments():
+    wrappers = [{"SlamWaypoint": {"every_scan": True}}, "RobotLimits", {"ObservationHistory": {"frames": 3}}]
+    changed = with_wrapper_settings(wrappers, {"SlamWaypoint": {"odometry": True}, "RobotLimits": {}})
+    assert changed == [{"SlamWaypoint": {"every_scan": True, "odometry": True}}, {"RobotLimits": {}}, wrappers[2]]
+    assert wrappers[0] == {"SlamWaypoint": {"every_scan": True}}  # the run's config is left as it was
+    with pytest.raises(ValueError, match="does not use"):
+        with_wrapper_settings(wrappers, {"Proximity": {"lidar": 0.1}})
+
+
+def test_the_odometry_policy_is_the_every_scan_network_with_odometry_in_its_slam():
+    from agri_training.learned import zoo
+
+    env = gym.make(ENV_ID, **BLIND)
+    every = make_policy("dagger-greenhouse-nav-slam-every-scan-shielded", env)
+    odometry = make_policy("dagger-greenhouse-nav-slam-odometry-shielded", env)
+    assert zoo.zoo_path("dagger-greenhouse-nav-slam-odometry-shielded") == every.folder
+    slams = [next(w for w in p._replay.chain if isinstance(w, SlamWaypoint)) for p in (every, odometry)]
+    assert [s.odometry for s in slams] == [False, True] and all(s.every_scan for s in slams)
+    for a, b in zip(odometry.network.hidden, every.network.hidden, strict=True):  # one set of weights
+        np.testing.assert_array_equal(a[0], b[0])
