@@ -5,7 +5,8 @@ Evaluation never sees them.
 They are declared in a hyperparameter block's ``train_wrappers`` (by name, like ``wrappers``) and wrap
 only the training envs: periodic evaluation, ``agri evaluate`` and the leaderboard run the plain env.
 Gymnasium envs take the names of :data:`TRAIN_WRAPPERS`, PettingZoo parallel envs (the robot chain) those of
-:data:`PARALLEL_TRAIN_WRAPPERS`. Each Gymnasium curriculum but :class:`ExpertStart` has a vector form
+:data:`PARALLEL_TRAIN_WRAPPERS`. Each Gymnasium curriculum but :class:`ExpertStart` and the arm's
+(:class:`HarvestLegs`, :class:`RobustVines`: the arm has no batched form) has a vector form
 (:data:`VECTOR_TRAIN_WRAPPERS`, the same names) for the vector envs ``agri train`` drives through
 :class:`~agri_training.learned.vec_env.VectorVecEnv`: it acts per sub-env and draws the same numbers as the
 single-env wrapper on each sub-env would. ExpertStart lets a baseline drive one env alone before the
@@ -14,6 +15,7 @@ learner's episode starts, which a batched env (its sub-envs stepped together) ca
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Mapping, Sequence
 from typing import Any
 
@@ -23,6 +25,7 @@ from gymnasium.vector import VectorEnv, VectorWrapper
 from pettingzoo.utils.wrappers import BaseParallelWrapper
 
 from agri_baselines import make_policy
+from agri_envs.arm.scene import sample_scene_and_configurations
 from agri_training.learned.harvest import HarvestLegs
 from agri_training.learned.policy import wrap_by_name
 from agri_training.learned.vector import per_env_seeds, reset_rows
@@ -186,6 +189,60 @@ class ExpertStart(gym.Wrapper[Any, Any, Any, Any]):
         return obs, info
 
 
+class RobustVines(gym.Wrapper[Any, Any, Any, Any]):
+    """Draw each GrapeHarvest training vine from wider ranges than the env's arguments (a training distribution).
+
+    On each reset the episode's Generator draws the largest lean of the clusters' hanging axes from
+    ``cluster_tilt`` (a uniform range, rad) and the fewest clusters from ``min_clusters`` (an integer range, both
+    ends included; the count is then drawn up to the env's ``max_clusters`` as the env draws it), and the env
+    places a vine drawn with them (``reset(options={"scene": ...})``); its other scene arguments (leaves, canes,
+    ``feasible_scenes``) stay the env's. A reset that places a scene of its own is left alone. The observation
+    does not change (the lean is not observed; the cluster slots are ``max_clusters``'). Evaluation runs the plain
+    env, so the suites' levels beyond the ranges stay outside training.
+
+    Args:
+        env: A GrapeHarvest env.
+        cluster_tilt: ``[low, high]`` of the largest lean (rad), within the env's range [0, 0.5].
+        min_clusters: ``[low, high]`` of the fewest clusters, within 1 .. the env's ``max_clusters``.
+    """
+
+    def __init__(
+        self,
+        env: gym.Env[Any, Any],
+        cluster_tilt: Sequence[float] = (0.17, 0.4),
+        min_clusters: Sequence[int] = (2, 5),
+    ) -> None:
+        raw: Any = env.unwrapped
+        if not hasattr(raw, "config") or not hasattr(raw.config, "scene_params"):
+            raise ValueError("RobustVines needs a GrapeHarvest env")
+        tilt = tuple(float(t) for t in cluster_tilt)
+        if len(tilt) != 2 or not 0.0 <= tilt[0] <= tilt[1] <= 0.5:
+            raise ValueError(f"RobustVines: cluster_tilt must be [low, high] within [0, 0.5] rad, got {cluster_tilt!r}")
+        fewest = tuple(int(n) for n in min_clusters)
+        most = int(raw.config.max_clusters)
+        if len(fewest) != 2 or not 1 <= fewest[0] <= fewest[1] <= most:
+            raise ValueError(
+                f"RobustVines: min_clusters must be [low, high] within 1 .. max_clusters={most}, got {min_clusters!r}"
+            )
+        super().__init__(env)
+        self.cluster_tilt, self.min_clusters = tilt, fewest
+
+    def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None) -> tuple[Any, dict[str, Any]]:
+        """Reset, then place a vine drawn from the ranges with the episode's Generator."""
+        obs, info = self.env.reset(seed=seed, options=options)
+        if options and options.get("scene") is not None:
+            return obs, info
+        raw: Any = self.env.unwrapped
+        rng = raw.np_random
+        params = dataclasses.replace(
+            raw.config.scene_params(),
+            cluster_tilt=float(rng.uniform(*self.cluster_tilt)),
+            min_clusters=int(rng.integers(self.min_clusters[0], self.min_clusters[1] + 1)),
+        )
+        scene, _ = sample_scene_and_configurations(rng, params)
+        return self.env.reset(options={"scene": scene})
+
+
 class ShortMissions(BaseParallelWrapper):  # type: ignore[misc]
     """Start a share of robot_chain's training episodes near the goal; the share shrinks as training goes on.
 
@@ -255,6 +312,7 @@ TRAIN_WRAPPERS: dict[str, type[gym.Wrapper[Any, Any, Any, Any]]] = {
     "CrashCostRamp": CrashCostRamp,
     "ExpertStart": ExpertStart,
     "HarvestLegs": HarvestLegs,
+    "RobustVines": RobustVines,
 }
 
 

@@ -1,5 +1,7 @@
 """Training curricula: GreenhouseNav's start_waypoint reset option and the RandomStartWaypoint wrapper."""
 
+import math
+
 import gymnasium as gym
 import numpy as np
 import pytest
@@ -199,3 +201,35 @@ def test_expert_start_hands_over_where_the_baseline_left_off():
     assert all(np.array_equal(obs0[k], obs1[k]) for k in obs0) and info1["corridors_covered"] == 0
     with pytest.raises(ValueError, match="prob"):
         ExpertStart(gym.make(cover, **small), "gonzalez-pseudo-reactive", prob=1.5)
+
+
+def test_robust_vines_draw_each_episode_from_their_ranges_and_are_seeded():
+    from agri_training.learned.curricula import RobustVines
+
+    def draws(seed):
+        env = RobustVines(gym.make("agri_envs/GrapeHarvest-v1"), cluster_tilt=[0.3, 0.4], min_clusters=[5, 5])
+        env.reset(seed=seed)
+        scenes = [env.unwrapped.scene]
+        for _ in range(4):
+            env.reset()
+            scenes.append(env.unwrapped.scene)
+        return scenes
+
+    scenes = draws(11)
+    assert all(len(s.clusters) == 5 for s in scenes)  # the env alone draws 2-5
+    # Oracle: a cluster's lean is the angle between its hanging axis and the vertical, at most the drawn limit.
+    leans = [math.acos(min(1.0, abs(float(c.down[2])))) for s in scenes for c in s.clusters]
+    assert max(leans) <= 0.4 + 1e-9 and max(leans) > 0.17  # past the env's default 0.17 rad
+    again = draws(11)
+    assert all(
+        np.array_equal(a.clusters[i].cut_point, b.clusters[i].cut_point)
+        for a, b in zip(scenes, again, strict=True)
+        for i in range(5)
+    )
+    plain = gym.make("agri_envs/GrapeHarvest-v1")
+    with pytest.raises(ValueError, match="cluster_tilt"):
+        RobustVines(plain, cluster_tilt=[0.3, 0.6])
+    with pytest.raises(ValueError, match="min_clusters"):
+        RobustVines(plain, min_clusters=[2, 6])
+    with pytest.raises(ValueError, match="GrapeHarvest"):
+        RobustVines(gym.make("agri_envs/GreenhouseNav-v2"))
