@@ -28,6 +28,10 @@ time) now and then slid the estimate sideways until the map took in a wrong scan
 (2 of 20 repeatability missions on validation seeds, ATE 1.5 m and 0.4 m; replayed from their recorded
 scans, both stay under 0.15 m with the prediction).
 
+A caller with wheel odometry may pass the motion it measured since the previous scan to :meth:`HectorSlam.update`
+(``odometry``): the match then starts from the previous pose moved on by it, as hector_mapping does with an odometry
+frame, instead of from the prediction. ``harik-apf`` passes none (the paper's SLAM runs on the LIDAR alone).
+
 Grid conventions: level ``l`` has cells of ``resolution * 2**l`` metres and ``map_size >> l`` cells per
 side; the value of cell ``(i, j)`` (row ``i`` along y, column ``j`` along x) sits at the *integer*
 map coordinate ``(j, i)``, and the start pose (the map frame's origin) is the centre of the grid. This

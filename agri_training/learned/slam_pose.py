@@ -26,6 +26,14 @@ loses itself: ``dagger-greenhouse-nav-slam-shielded`` in the 12x24 m greenhouse 
 episodes on SLAM at its decisions, 9 of 10 with every scan. Imitation (``pretrain``: demonstrations and DAgger
 rounds) feeds the held steps' scans too, so a recipe can learn with it; PPO's rollouts hold actions inside the
 env and cannot, so ``agri train`` refuses it with ``action_repeat`` > 1 and PPO steps.
+
+With ``odometry`` (default off; needs ``every_scan``) the SLAM is given the robot's wheel odometry: each scan is
+matched from the previous pose moved on by the motion the observation's ``velocity`` (the achieved speeds, as wheel
+encoders measure them, scaled by the robot's own limits) gives over the step, hector_mapping's odometry guess,
+instead of its own constant-velocity prediction. The env adds no slip or noise to that key. Among 20 people, in the
+last corridor of the default greenhouse, the prediction let ``dagger-greenhouse-nav-slam-every-scan-shielded``'s
+SLAM lose itself in 5 of 60 validation missions (seeds 20020-20079); with odometry, the same network finished all
+60. It is a deployment setting: ``dagger-greenhouse-nav-slam-odometry-shielded`` is that network with it.
 """
 
 from __future__ import annotations
@@ -46,11 +54,11 @@ class SlamWaypoint(gym.ObservationWrapper[dict[str, Any], Any, dict[str, Any]]):
     Needs the env made with ``localization="none"`` and ``full_scan=True`` (keys ``target`` and ``scan``). The
     SLAM map starts afresh with each episode (:meth:`clear`, which a reset calls and the replay of a learned
     policy calls when an episode starts). In a config: ``SlamWaypoint`` or ``{SlamWaypoint: {aim_inside: 0.1,
-    every_scan: true}}`` (see the module doc; put it before ``FlattenObservation``).
+    every_scan: true, odometry: true}}`` (see the module doc; put it before ``FlattenObservation``).
 
     Raises:
-        ValueError: For an observation without ``target`` or ``scan``, ``aim_inside`` outside [0, 1) m, or an
-            ``every_scan`` that is not a bool.
+        ValueError: For an observation without ``target`` or ``scan``, ``aim_inside`` outside [0, 1) m, an
+            ``every_scan`` or ``odometry`` that is not a bool, or ``odometry`` without ``every_scan``.
     """
 
     def __init__(
@@ -101,11 +109,14 @@ class SlamWaypoint(gym.ObservationWrapper[dict[str, Any], Any, dict[str, Any]]):
             self.slam.update(scan, self._odometry(observation))
 
     def _odometry(self, observation: Mapping[str, Any]) -> tuple[float, float, float] | None:
-        """With ``odometry``, the motion of the last control period from the observation's ``velocity``."""
+        """With ``odometry``, the motion of the last env step from the observation's ``velocity``.
+
+        The robot's own limits scale the velocity; a step lasts ``frame_skip`` control periods.
+        """
         if not self.odometry:
             return None
         robot: Any = self.env.unwrapped
-        spec, dt = robot.robot_spec, float(robot.config.control_period)
+        spec, dt = robot.robot_spec, float(robot.config.control_period) * int(robot.config.frame_skip)
         u, r = np.asarray(observation["velocity"], dtype=np.float64)
         v, w = u * spec.max_speed * dt, r * spec.max_turn_rate * dt
         return v * math.cos(0.5 * w), v * math.sin(0.5 * w), w
