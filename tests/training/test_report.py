@@ -69,14 +69,15 @@ def test_report_from_entries_and_fresh_runs(tmp_path, capsys):
     fresh = (
         "Evaluated for this report (no current leaderboard entry): `dagger-greenhouse-nav`, "
         "`dagger-greenhouse-nav-robust`, `dagger-greenhouse-nav-robust-shielded`, `dagger-greenhouse-nav-slam`, "
-        "`dagger-greenhouse-nav-slam-every-scan-shielded`, `dagger-greenhouse-nav-slam-shielded`, `harik-apf`, "
-        "`harik-apf-hector-plain`"
+        "`dagger-greenhouse-nav-slam-every-scan-shielded`, `dagger-greenhouse-nav-slam-odometry-shielded`, "
+        "`dagger-greenhouse-nav-slam-shielded`, `harik-apf`, `harik-apf-hector-plain`"
     )
     assert fresh in md
     assert sorted(p.name for p in (out / "results" / "tiny-rover").glob("*.json")) == [
         "dagger-greenhouse-nav-robust-shielded.json",
         "dagger-greenhouse-nav-robust.json",
         "dagger-greenhouse-nav-slam-every-scan-shielded.json",
+        "dagger-greenhouse-nav-slam-odometry-shielded.json",
         "dagger-greenhouse-nav-slam-shielded.json",
         "dagger-greenhouse-nav-slam.json",
         "dagger-greenhouse-nav.json",
