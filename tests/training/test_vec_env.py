@@ -278,11 +278,12 @@ def test_split_info_keeps_masks_and_gives_python_scalars():
 
 
 def test_wrappers_without_a_vector_form_are_refused_on_the_vector_path(tmp_path):
-    # the arm's wrappers serve GrapeHarvest, which has no batched form; ExpertStart lets a baseline drive one env
+    # the arm's wrappers (RobustVines, HarvestLegs, NearestBoxes) serve GrapeHarvest, which has no batched form;
+    # ExpertStart lets a baseline drive one env
     # alone before the episode; SlamWaypoint and RobotLimits read their single env (its scan geometry and scene,
     # its robot). None has a vector form, and the vector path refuses each up front.
     assert set(VECTOR_WRAPPERS) == set(WRAPPERS) - {"NearestBoxes", "SlamWaypoint", "RobotLimits"}
-    assert set(VECTOR_TRAIN_WRAPPERS) == set(TRAIN_WRAPPERS) - {"ExpertStart", "HarvestLegs"}
+    assert set(VECTOR_TRAIN_WRAPPERS) == set(TRAIN_WRAPPERS) - {"ExpertStart", "HarvestLegs", "RobustVines"}
     vector = {"vec_env": "vector"}
     grape = TrainRequest("agri_envs/GrapeHarvest-v1", "sac", tmp_path, scenario="table2", her=True, overrides=vector)
     with pytest.raises(ValueError, match="wrappers: NearestBoxes has no vector form"):
