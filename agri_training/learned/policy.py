@@ -556,8 +556,8 @@ class LearnedPolicy:
         goal_zoom: A goal-conditioned arm policy's :class:`~agri_training.learned.goal_zoom.GoalZoom`, between
             the env and the network (one env at a time, decisions every step), or None.
         homing: Whether the arm drives its last stretch home along the joint line
-            (:class:`~agri_training.learned.homing.JointHoming`, replacing the network's action there; needs a
-            goal zoom's conditions and an env under end-effector control).
+            (:class:`~agri_training.learned.homing.JointHoming`, replacing the network's action there); it needs
+            what a goal zoom needs (one goal-conditioned env, a decision every step) and end-effector control.
         wrapper_settings: Deployment settings that change some of the run's observation wrappers' arguments,
             ``{name: {argument: value}}`` (:func:`with_wrapper_settings`), such as ``{"SlamWaypoint": {"odometry":
             True}}``; the network is the run's.
