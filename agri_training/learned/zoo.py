@@ -505,6 +505,22 @@ register_policy(
 
 register_policy(
     PolicySpec(
+        name="sac-her-grape-vine-robust-shielded",
+        env_id="agri_envs/GrapeHarvest-v1",
+        entry_point="agri_training.learned.zoo:load_zoo_policy",
+        env_kwargs=dict(_GRAPE_EE),
+        description="The whole-vine reach trained on a robust distribution of vines (sac_grape_robust.yml, seed 2, "
+        "its final 120k-step weights): each training vine's largest cluster lean drawn from 0.17-0.4 rad and its "
+        "fewest clusters from 2-5 (RobustVines), behind the safety layer luo-box-check from the start of training",
+        learned=True,
+        algo="sac",
+        train_command="agri train --env agri_envs/GrapeHarvest-v1 --scenario table2 --algo sac --her --hyperparams "
+        "agri_training/hyperparams/sac_grape_robust.yml --seed 2 --out runs/grape-robust-tf2-s2",
+    )
+)
+
+register_policy(
+    PolicySpec(
         name="sac-her-grape-vine-eq11",
         env_id="agri_envs/GrapeHarvest-v1",
         entry_point="agri_training.learned.harvest:load_zoo_harvester",
