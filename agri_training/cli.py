@@ -88,7 +88,8 @@ def _cmd_dataset(args: argparse.Namespace) -> int:
 
 def _cmd_validate(args: argparse.Namespace) -> int:
     paths = [c for run in args.runs for c in (candidates(Path(run)) if args.checkpoints else [Path(run)])]
-    doc = validate(paths, args.episodes, args.seed, args.workers, not args.quiet, ray=args.ray)
+    given = parse_env_kwargs(args.env_kwargs or [])
+    doc = validate(paths, args.episodes, args.seed, args.workers, not args.quiet, ray=args.ray, env_kwargs=given)
     out = Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text(json.dumps(doc, indent=1))
@@ -471,6 +472,14 @@ def build_parser() -> argparse.ArgumentParser:
         type=int,
         default=VALIDATION_SEED,
         help=f"first validation seed (default {VALIDATION_SEED}: above training's, below the held-out 100000)",
+    )
+    va.add_argument(
+        "--env-kwargs",
+        nargs="*",
+        action="extend",
+        metavar="KEY=VALUE",
+        help="env arguments over the runs' periodic evaluation's (e.g. their training distribution: "
+        "n_robots=16 scene_distribution=robust); never one a run's weights need changed",
     )
     va.add_argument("--out", required=True, help="output JSON file (e.g. agri_training/zoo/NAME/validation.json)")
     va.add_argument("--quiet", action="store_true", help="no progress bar")

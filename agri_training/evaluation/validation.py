@@ -4,7 +4,9 @@ Training uses seeds below :data:`VALIDATION_SEED` for its envs (``seed .. seed +
 periodic evaluation (``eval_seed``, 10000 by default); held-out suites start at 100000. Validation runs
 every candidate (a run's final weights, its ``best/`` and its ``checkpoints/step_N``) on the env of the
 run's periodic evaluation (``env_kwargs`` with ``eval_env_kwargs`` over them: its training distribution
-when the YAML draws scenes, ``scene_distribution: training``) at seeds ``VALIDATION_SEED ..``, and picks:
+when the YAML draws scenes, ``scene_distribution: training``; arguments given to :func:`validate` go over
+them, e.g. the training distribution of a run whose periodic evaluation ran the env's defaults) at seeds
+``VALIDATION_SEED ..``, and picks:
 
 * per training run, its best candidate (the run's score for the recipe's spread across seeds);
 * over all runs, the chosen weights, which are then evaluated once on the held-out suites.
@@ -65,6 +67,7 @@ def validate(
     progress: bool = True,
     command: str | None = None,
     ray: str | None = None,
+    env_kwargs: Mapping[str, Any] | None = None,
 ) -> dict[str, Any]:
     """Evaluate candidate weights on validation seeds and choose among them.
 
@@ -77,15 +80,19 @@ def validate(
         progress: Show the progress bar.
         command: The command recorded in the document (default: this process's).
         ray: Run the episodes as Ray tasks (see :func:`~agri_training.evaluation.evaluate.evaluate_many`).
+        env_kwargs: Env arguments over the periodic evaluation's (e.g. ``{"n_robots": 16, "scene_distribution":
+            "robust"}``: a recipe's training distribution). They may add arguments or change
+            ``eval_env_kwargs``, never change a run's ``env_kwargs`` (what its weights need).
 
     Returns:
-        The validation document: ``env_id``, ``env_kwargs``, ``seeds``, every candidate (``path``, ``run``,
+        The validation document: ``env_id``, ``env_kwargs`` (every argument the episodes ran with),
+        ``env_kwargs_given`` (those of ``env_kwargs`` here), ``seeds``, every candidate (``path``, ``run``,
         training ``seed``, ``timesteps``, ``weights_sha256``, ``summary``), ``best_per_run`` (run -> path),
         ``chosen`` (path), and ``episodes`` (path -> records) for each run's best candidate.
 
     Raises:
-        ValueError: For no candidates, seeds outside the validation range, or candidates of different envs
-            or validation arguments.
+        ValueError: For no candidates, seeds outside the validation range, candidates of different envs
+            or validation arguments, or ``env_kwargs`` that change an argument a run's weights need.
     """
     if not paths:
         raise ValueError("validate needs at least one run or checkpoint folder")
@@ -93,6 +100,7 @@ def validate(
         raise ValueError(f"validation seeds must lie in [{VALIDATION_SEED}, 100000), got {seed}..{seed + episodes - 1}")
     configs = [read_config(Path(p)) for p in paths]
     env_id = configs[0]["env_id"]
+    given = dict(env_kwargs or {})
     kwargs = validation_env_kwargs(configs[0])
     for p, c in zip(paths, configs, strict=True):
         if c["env_id"] != env_id or validation_env_kwargs(c) != kwargs:
@@ -107,7 +115,11 @@ def validate(
         for what, (lo, hi) in used.items():
             if lo < seed + episodes and seed < hi:
                 raise ValueError(f"{p}: {what} used seeds {lo}..{hi - 1}, which overlap the validation seeds")
-    extra = dict(configs[0].get("eval_env_kwargs") or {})  # the run's own env_kwargs come with it
+        needed = {k: c["env_kwargs"][k] for k, v in given.items() if k in c["env_kwargs"] and c["env_kwargs"][k] != v}
+        if needed:
+            raise ValueError(f"{p}: its weights need {needed}; validation env_kwargs {given} may not change them")
+    extra = {**(configs[0].get("eval_env_kwargs") or {}), **given}  # the run's own env_kwargs come with it
+    kwargs = {**kwargs, **given}
     requests = [
         EvalRequest(env_id, str(p), episodes, seed, env_kwargs=extra, record_traces=0, label=str(p)) for p in paths
     ]
@@ -137,6 +149,7 @@ def validate(
             "format": VALIDATION_FORMAT,
             "env_id": env_id,
             "env_kwargs": kwargs,
+            "env_kwargs_given": given,
             "seeds": {"start": seed, "episodes": episodes},
             "command": command or " ".join(shlex.quote(a) for a in ["agri", *sys.argv[1:]]),
             "git_commit": git_commit(),

@@ -11,6 +11,9 @@ written by ``agri validate``), the section puts side by side:
 * the worst 10 % of episodes (:func:`~agri_training.core.stats.lower_tail_mean`) of each: how far they
   got (waypoints reached, corridors covered) and their return;
 * the spread across training seeds: each run of the recipe with its best weights on validation seeds.
+
+An env without a declared training distribution (the chain, the arm) gets the last part alone
+(:func:`seed_spread_section`): its recipes' runs were validated on their own scenes.
 """
 
 from __future__ import annotations
@@ -50,6 +53,11 @@ of that difference: an interval below zero means the policy does worse there tha
 finished (waypoints reached, corridor bins covered), *return* the env's reward summed over the episode.
 """
 
+SEED_SPREAD_INTRO = """\
+How much each shipped learned policy owes to its training seed: every run of its recipe at its best weights on
+validation seeds (20000 and up, used by no training episode and no periodic evaluation), which the shipped
+weights were chosen among; held-out suites never took part in the choice.
+"""
 
 def episode_progress(record: Mapping[str, Any]) -> float:
     """How much of its mission an episode finished, in [0, 1]: coverage, waypoints reached, or success."""
@@ -150,6 +158,37 @@ def trained_on_distribution(name: str, zoo_dir: Path = ZOO_DIR) -> bool:
     config = read_config(folder)
     kwargs = {**config.get("env_kwargs", {}), **(config.get("train_env_kwargs") or {})}
     return kwargs.get("scene_distribution") not in (None, "off")
+
+
+def seed_spread_section(
+    env_id: str, entries: Sequence[tuple[lb.Suite, Mapping[str, Any]]], zoo_dir: Path = ZOO_DIR
+) -> list[str]:
+    """Markdown: per learned policy of ``env_id`` with a validation document, the spread across its training seeds.
+
+    For an env that declares no training distribution (:func:`generalization_section` covers the others): each
+    document says what its runs were validated on (its env arguments and seeds).
+
+    Args:
+        env_id: The env.
+        entries: ``(suite, entry)`` for every entry the report shows (entries of other envs are ignored).
+        zoo_dir: Where the shipped policies and their validation documents live.
+    """
+    names = dict.fromkeys(
+        e["policy"]["name"] for s, e in entries if s.env_id == env_id and e["policy"]["kind"] == "learned"
+    )
+    out: list[str] = []
+    for name in names:
+        doc = load_validation(name, zoo_dir)
+        if doc is None:
+            continue
+        first, count = doc["seeds"]["start"], doc["seeds"]["episodes"]
+        arguments = ", ".join(f"{k}={v}" for k, v in sorted(doc.get("env_kwargs", {}).items())) or "the defaults"
+        seeds = f"seeds {first}-{first + count - 1}"
+        out += [f"#### `{name}`", "", f"{count} validation episodes per candidate ({seeds}; {arguments}):", ""]
+        if not _weights_match(doc, name, zoo_dir):
+            out += [f"**`{VALIDATION_FILE}` chose other weights than the ones shipped in `zoo/{name}`.**", ""]
+        out += [*seed_spread(doc), ""]
+    return out or ["No learned policy of this env has a validation document."]
 
 
 def generalization_section(

@@ -43,7 +43,7 @@ from agri_training.evaluation.evaluate import INTERVALS_NOTE
 from agri_training.evaluation.reference import PolicyRef, build_policy
 from agri_training.evaluation.video import shrink_frame, write_clip
 from agri_training.learned.zoo import ZOO_DIR
-from agri_training.report.generalization import generalization_section
+from agri_training.report.generalization import SEED_SPREAD_INTRO, generalization_section, seed_spread_section
 from agri_training.report.robustness import glance_table, own_sensors_section, robustness_section
 
 #: Per-env report sections: env id -> ``"module:function"`` (see the module docstring).
@@ -889,9 +889,11 @@ def build_report(
                     "",
                     *clips,
                 ]
+        shown = [(r.suite, r.entry) for r in rows]
         if agri_envs.training_distribution(env_id) is not None:
-            shown = [(r.suite, r.entry) for r in rows]
             parts += ["### How the learned policies generalize", "", *generalization_section(env_id, shown), ""]
+        else:
+            parts += ["### Spread across training seeds", "", SEED_SPREAD_INTRO, *seed_spread_section(env_id, shown)]
         parts += ["### Learning curves", "", *learning_curves(env_id, runs, rows, out_dir), ""]
         hook = SECTION_HOOKS.get(env_id)
         if hook:

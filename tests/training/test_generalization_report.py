@@ -7,7 +7,12 @@ import pytest
 
 from agri_training import leaderboard as lb
 from agri_training.core.stats import newcombe_interval
-from agri_training.report.generalization import episode_progress, generalization_section, scenes_verdict
+from agri_training.report.generalization import (
+    episode_progress,
+    generalization_section,
+    scenes_verdict,
+    seed_spread_section,
+)
 
 NAV = "agri_envs/GreenhouseNav-v2"
 
@@ -96,6 +101,22 @@ def test_without_validation_the_suites_still_show(tmp_path):
     none = generalization_section(NAV, [], zoo_dir=tmp_path)
     assert none == ["No learned policy of this env has leaderboard entries."]
 
+
+
+def test_an_env_without_a_training_distribution_still_shows_each_recipes_seeds(zoo):
+    table2, loop = lb.find_suite("grape-table2"), lb.find_suite("greenhouse-sim-loop")
+    entries = [(table2, _entry("ppo-x", _records(20, 20))), (table2, _entry("ppo-y", _records(20, 20)))]
+    entries.append((loop, _entry("ppo-z", _records(20, 20))))  # another env's: left out
+    (zoo / "ppo-z").mkdir()
+    (zoo / "ppo-z" / "validation.json").write_text((zoo / "ppo-x" / "validation.json").read_text())
+    text = "\n".join(seed_spread_section(table2.env_id, entries, zoo_dir=zoo))
+    assert "#### `ppo-x`" in text and "10 validation episodes per candidate (seeds 20000-20009; the defaults)" in text
+    assert "| 0 (shipped) | `a` |" in text and "| 1 | `b` | 1000 (2) |" in text and "ranges from 0.60 to 0.80" in text
+    assert "ppo-y" not in text and "ppo-z" not in text and "chose other weights" not in text  # no document; other env
+    (zoo / "ppo-x" / "policy.pt").write_bytes(b"retrained")
+    assert "chose other weights than the ones shipped" in "\n".join(seed_spread_section(table2.env_id, entries, zoo))
+    alone = seed_spread_section(table2.env_id, entries[1:], zoo_dir=zoo)
+    assert alone == ["No learned policy of this env has a validation document."]
 
 def test_progress_and_scene_verdicts():
     assert episode_progress({"coverage": 0.4, "is_success": False}) == 0.4

@@ -292,6 +292,25 @@ def test_eval_env_kwargs_reach_the_periodic_evaluation_and_validation(tiny_run, 
         validate([out, tiny_run], episodes=2, progress=False)
 
 
+
+def test_validation_env_kwargs_go_over_the_periodic_evaluations_and_never_change_what_the_weights_need(tiny_run):
+    """A recipe whose periodic evaluation ran other scenes than its training distribution validates on that."""
+    from agri_training.evaluation.validation import validate
+
+    doc = validate([tiny_run], episodes=2, progress=False, command="test", env_kwargs={"growth": 0.5, "n_people": 0})
+    assert doc["env_kwargs_given"] == {"growth": 0.5, "n_people": 0}
+    plain = validate([tiny_run], episodes=2, progress=False, command="test")
+    assert "growth" not in plain["env_kwargs"] and plain["env_kwargs_given"] == {}
+    assert doc["env_kwargs"] == {**plain["env_kwargs"], "growth": 0.5}
+    # the episodes ran the grown plants: the records differ from the plain validation's on the same seeds
+    def returns(d):
+        return [r["return"] for r in d["episodes"][d["chosen"]]]
+
+    assert returns(doc) != returns(plain)
+    with pytest.raises(ValueError, match=r"its weights need \{'row_length': 3.0\}"):
+        validate([tiny_run], episodes=2, progress=False, env_kwargs={"row_length": 5.0})
+
+
 def test_pretrain_clones_a_baseline_before_ppo(tmp_path):
     import math
 
