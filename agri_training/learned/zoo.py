@@ -395,7 +395,7 @@ register_policy(
         learned=True,
         algo="ppo",
         train_command="agri train --env robot_chain_v1 --algo ppo --hyperparams "
-        "agri_training/hyperparams/dagger_chain_robust.yml --seed 1 --out runs/chain-robust-s1",
+        "agri_training/hyperparams/dagger_chain_robust.yml --seed 0 --out runs/chain-robust-s0",
     )
 )
 
