@@ -13,7 +13,7 @@ written by ``agri validate``), the section puts side by side:
 * the spread across training seeds: each run of the recipe with its best weights on validation seeds.
 
 An env without a declared training distribution (the chain, the arm) gets the last part alone
-(:func:`seed_spread_section`): its recipes' runs were validated on their own scenes.
+(:func:`seed_spread_section`), with the env arguments each validation document names.
 """
 
 from __future__ import annotations
@@ -58,6 +58,7 @@ How much each shipped learned policy owes to its training seed: every run of its
 validation seeds (20000 and up, used by no training episode and no periodic evaluation), which the shipped
 weights were chosen among; held-out suites never took part in the choice.
 """
+
 
 def episode_progress(record: Mapping[str, Any]) -> float:
     """How much of its mission an episode finished, in [0, 1]: coverage, waypoints reached, or success."""
