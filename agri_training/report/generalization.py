@@ -161,6 +161,19 @@ def trained_on_distribution(name: str, zoo_dir: Path = ZOO_DIR) -> bool:
     return kwargs.get("scene_distribution") not in (None, "off")
 
 
+def _learned_names(env_id: str, entries: Sequence[tuple[lb.Suite, Mapping[str, Any]]]) -> list[str]:
+    """The learned policies of ``env_id`` among the entries, in order of appearance."""
+    learned = (e["policy"]["name"] for s, e in entries if s.env_id == env_id and e["policy"]["kind"] == "learned")
+    return list(dict.fromkeys(learned))
+
+
+def _mismatch_warning(doc: Mapping[str, Any], name: str, zoo_dir: Path) -> list[str]:
+    """A bold line when the validation document chose other weights than the shipped ones, else nothing."""
+    if _weights_match(doc, name, zoo_dir):
+        return []
+    return [f"**`{VALIDATION_FILE}` chose other weights than the ones shipped in `zoo/{name}`.**", ""]
+
+
 def seed_spread_section(
     env_id: str, entries: Sequence[tuple[lb.Suite, Mapping[str, Any]]], zoo_dir: Path = ZOO_DIR
 ) -> list[str]:
@@ -174,11 +187,8 @@ def seed_spread_section(
         entries: ``(suite, entry)`` for every entry the report shows (entries of other envs are ignored).
         zoo_dir: Where the shipped policies and their validation documents live.
     """
-    names = dict.fromkeys(
-        e["policy"]["name"] for s, e in entries if s.env_id == env_id and e["policy"]["kind"] == "learned"
-    )
     out: list[str] = []
-    for name in names:
+    for name in _learned_names(env_id, entries):
         doc = load_validation(name, zoo_dir)
         if doc is None:
             continue
@@ -186,9 +196,7 @@ def seed_spread_section(
         arguments = ", ".join(f"{k}={v}" for k, v in sorted(doc.get("env_kwargs", {}).items())) or "the defaults"
         seeds = f"seeds {first}-{first + count - 1}"
         out += [f"#### `{name}`", "", f"{count} validation episodes per candidate ({seeds}; {arguments}):", ""]
-        if not _weights_match(doc, name, zoo_dir):
-            out += [f"**`{VALIDATION_FILE}` chose other weights than the ones shipped in `zoo/{name}`.**", ""]
-        out += [*seed_spread(doc), ""]
+        out += [*_mismatch_warning(doc, name, zoo_dir), *seed_spread(doc), ""]
     return out or ["No learned policy of this env has a validation document."]
 
 
@@ -203,7 +211,7 @@ def generalization_section(
         zoo_dir: Where the shipped policies and their validation documents live.
     """
     mine = [(s, e) for s, e in entries if s.env_id == env_id and e["policy"]["kind"] == "learned"]
-    names = list(dict.fromkeys(e["policy"]["name"] for _, e in mine))
+    names = _learned_names(env_id, entries)
     if not names:
         return ["No learned policy of this env has leaderboard entries."]
     out = [INTRO]
@@ -224,8 +232,7 @@ def generalization_section(
             reference = (sum(bool(r["is_success"]) for r in records), len(records))
             first, count = doc["seeds"]["start"], doc["seeds"]["episodes"]
             rows.append(_row(f"training distribution (seeds {first}-{first + count - 1})", "inside", records, None))
-            if not _weights_match(doc, name, zoo_dir):
-                out += [f"**`{VALIDATION_FILE}` chose other weights than the ones shipped in `zoo/{name}`.**", ""]
+            out += _mismatch_warning(doc, name, zoo_dir)
         on_distribution = trained_on_distribution(name, zoo_dir)
         if not on_distribution:
             out += [
